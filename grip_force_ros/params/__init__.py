@@ -1,0 +1,94 @@
+"""The one parameter schema of grip_force_ros.
+
+>>> from grip_force_ros.params import load_params_file
+>>> p = load_params_file('config/paper_needle_driver.yaml')   # doctest: +SKIP
+>>> p.drum_radius                                              # doctest: +SKIP
+0.004
+
+Groups: 'instrument' (model geometry and materials), 'limits' (hardware
+limits, read-only), 'controller', 'sim', 'effects' (optional unmodelled effects
+of the simulated instrument, all off by default).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+from grip_force_ros.params.controller import CONTROLLER
+from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
+from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, validate
+from grip_force_ros.params.sim import EFFECTS, SIM
+
+SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + SIM + EFFECTS)
+SPECS: dict[str, ParamSpec] = {s.name: s for s in SCHEMA}
+if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
+    raise RuntimeError('duplicate parameter name in the schema')
+
+__all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
+           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml']
+
+
+def specs_in(*groups: str) -> list[ParamSpec]:
+    """The specs of the given groups (all groups if none given)."""
+    return [s for s in SCHEMA if not groups or s.group in groups]
+
+
+def make_params(values: Mapping[str, Any] | None = None, *,
+                allow_unknown: bool = False) -> ParamSet:
+    """Validate ``values`` (defaults for what is missing) into a :class:`ParamSet`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the key, the value and the allowed range.
+    """
+    return ParamSet(validate(SCHEMA, values or {}, allow_unknown=allow_unknown))
+
+
+def read_params_yaml(path: str | Path) -> dict[str, Any]:
+    """Read the ``ros__parameters`` of a ROS parameter file without validating.
+
+    Accepts ``/**:`` or any single node name as the top-level key.
+    """
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ParameterError(f'{path}: cannot read parameter file: {exc}') from exc
+    if not isinstance(doc, dict) or not doc:
+        raise ParameterError(f'{path}: not a ROS parameter file (expected "/**: ros__parameters: ...")')
+    values: dict[str, Any] = {}
+    for node, body in doc.items():
+        if not isinstance(body, dict) or not isinstance(body.get('ros__parameters'), dict):
+            raise ParameterError(f'{path}: section {node!r} has no "ros__parameters" mapping')
+        values.update(body['ros__parameters'])
+    return values
+
+
+def load_params_file(path: str | Path, **overrides: Any) -> ParamSet:
+    """Load and validate an instrument YAML (ROS ``/**: ros__parameters:`` format).
+
+    Raises
+    ------
+    ParameterError
+        One clear message with the file, the key, the value and the range.
+    """
+    values = read_params_yaml(path)
+    values.update(overrides)
+    try:
+        return make_params(values)
+    except ParameterError as exc:
+        raise ParameterError(f'{path}: {exc}') from None
+
+
+def to_yaml(params: Mapping[str, Any], groups: Iterable[str] = ('instrument', 'limits'),
+            header: str = '') -> str:
+    """Render parameters as a ROS parameter file (``/**: ros__parameters:``)."""
+    body = {}
+    for spec in specs_in(*groups):
+        value = params.get(spec.name, spec.default)
+        body[spec.name] = list(value) if isinstance(value, tuple) else value
+    text = yaml.safe_dump({'/**': {'ros__parameters': body}}, sort_keys=False)
+    return (header + text) if header else text

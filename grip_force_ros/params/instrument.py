@@ -1,0 +1,90 @@
+"""Instrument parameters: geometry, materials, motor, and hardware limits.
+
+Defaults are the paper's Table 1 (``config/paper_needle_driver.yaml`` repeats
+them with their sources), converted once to SI. Where the paper is silent
+(cable radius, limits) the default is our stated assumption.
+"""
+import math
+
+from grip_force_ros.params.schema import ParamSpec
+
+_P = ParamSpec
+
+INSTRUMENT = [
+    _P('instrument_name', 'string', 'paper_needle_driver', '',
+       'Human-readable instrument identifier; appears in logs and /diagnostics.',
+       read_only=True),
+    _P('torque_constant', 'double', 1.44, 'N*m/A',
+       'Motor torque constant K (paper Table 1: 1.44 N*m/A). Motor torque M0 = K*I.',
+       min=1e-4, max=20.0, read_only=True),
+    _P('gear_ratio', 'double', 1.23, '',
+       'Reduction between motor and cable drum (paper: 1.23). Drum torque = gear_ratio*K*I.',
+       min=0.01, max=1000.0, read_only=True),
+    _P('drum_radius', 'double', 0.004, 'm',
+       'Cable drum radius r0 (Table 1: 4 mm).', min=1e-4, max=0.05, read_only=True),
+    _P('guide_pulley_radii', 'double_array', (0.003, 0.003, 0.003), 'm',
+       'Radii R of the guide pulleys between drum and jaw, in order from the drum (Table 1: 3, 3, 3 mm).',
+       min=1e-4, max=0.05, read_only=True),
+    _P('guide_pulley_wrap_angles', 'double_array', (math.pi / 2, math.pi / 4, math.pi / 4), 'rad',
+       'Cable wrap angle on each guide pulley, same order (Table 1: pi/2, pi/4, pi/4).',
+       min=0.0, max=2 * math.pi, read_only=True),
+    _P('wrist_wrap_gain', 'double', 0.0, 'rad/rad',
+       'Extra wrap on the last guide pulley per rad of |wrist pitch| (cables of the jaw pass over the '
+       'wrist axis). The paper reports a minimal wrist effect and gives no value: default 0.',
+       min=0.0, max=2.0, read_only=True),
+    _P('wrist_cable_wrap_angles', 'double_array', (math.pi / 4,), 'rad',
+       'Wrap angles of the wrist cable on its guide pulleys (paper: one pulley to the wrist).',
+       min=0.0, max=2 * math.pi, read_only=True),
+    _P('drive_pulley_radius', 'double', 0.0025, 'm',
+       'Jaw (end effector) drive pulley radius r_n (Table 1: r4 = 2.5 mm).',
+       min=1e-4, max=0.05, read_only=True),
+    _P('wrist_finger_coupling', 'double', 0.6, 'rad/rad',
+       'Jaw rotation induced per rad of wrist pitch (paper: 3/5).', min=-2.0, max=2.0, read_only=True),
+    _P('jaw_moment_arm_tip', 'double', 0.012, 'm',
+       'Distance l from the jaw pivot to the contact point (Table 1: l1 = 12 mm); needle and rigid contact.',
+       min=1e-4, max=0.1, read_only=True),
+    _P('jaw_moment_arm_inner', 'double', 0.0095, 'm',
+       'Inner end l\' of a distributed tissue contact (Table 1: l2 = 9.5 mm); tissue force acts at (l+l\')/2.',
+       min=1e-4, max=0.1, read_only=True),
+    _P('cable_modulus', 'double', 1.25e11, 'Pa',
+       'Elastic modulus E of the cable (Table 1: 1.25e5 MPa).', min=1e8, max=5e11, read_only=True),
+    _P('cable_radius', 'double', 0.0002, 'm',
+       'Cable radius r. NOT in the paper: assumed 0.2 mm (a 0.4 mm steel cable, usual in 8 mm '
+       'instruments). Sets the friction exponents via rho = (R - r)/r and the section A = pi r^2.',
+       min=1e-5, max=0.005, read_only=True),
+    _P('pulley_friction_coefficient', 'double', 0.15, '',
+       'Cable-pulley friction coefficient mu (Table 1: 0.15).', min=0.0, max=1.0, read_only=True),
+    _P('tension_friction_gain', 'double', 0.0, '1/N',
+       'Tension-dependent friction: mu(F) = mu*(1 + gain*F). 0 = the paper\'s constant-mu model.',
+       min=0.0, max=1.0, read_only=True),
+    _P('needle_friction_coefficient', 'double', 0.15, '',
+       "Jaw-needle friction coefficient mu' (Table 1: 0.15, stainless steel).", min=0.0, max=1.0,
+       read_only=True),
+    _P('needle_diameter', 'double', 0.0005, 'm',
+       'Suture needle diameter (paper: 0.5 mm).', min=1e-5, max=0.005, read_only=True),
+    _P('drum_mass', 'double', 0.0025, 'kg', 'Drum mass m0 (Table 1: 2.5 g).',
+       min=0.0, max=1.0, read_only=True),
+    _P('jaw_mass', 'double', 0.001, 'kg', 'End effector (jaw) mass m_n (Table 1: m4 = 1 g).',
+       min=0.0, max=1.0, read_only=True),
+]
+
+LIMITS = [
+    _P('max_current', 'double', 0.5, 'A',
+       'Hardware current limit. The paper sweeps 0..0.5 A.', min=0.0, max=20.0,
+       read_only=True, group='limits'),
+    _P('max_current_slew', 'double', 100.0, 'A/s',
+       'Hardware limit on the rate of change of the current command.', min=0.0, max=1e5,
+       read_only=True, group='limits'),
+    _P('max_grip_force', 'double', 12.0, 'N',
+       'Largest grip force the controller may ever target.', min=0.0, max=200.0,
+       read_only=True, group='limits'),
+    _P('jaw_angle_min', 'double', -0.1, 'rad',
+       'Smallest plausible measured jaw angle (0 = closed); below it the input is rejected.',
+       min=-math.pi, max=math.pi, read_only=True, group='limits'),
+    _P('jaw_angle_max', 'double', math.pi / 2, 'rad',
+       'Largest plausible measured jaw angle.', min=-math.pi, max=math.pi, read_only=True,
+       group='limits'),
+    _P('wrist_angle_limit', 'double', math.pi / 2, 'rad',
+       'Largest plausible |wrist pitch|; beyond it the input is rejected.', min=0.0, max=math.pi,
+       read_only=True, group='limits'),
+]

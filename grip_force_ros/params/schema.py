@@ -1,0 +1,185 @@
+"""The parameter schema mechanism: one declaration per parameter.
+
+Every parameter of the package is declared once, as a :class:`ParamSpec`
+(name, type, unit, default, range, description, read-only). From that one list
+come the ROS parameter descriptors of the nodes (``nodes/``), the validation of
+instrument YAML files, the CLI and the parameter table in the docs. Nothing
+else repeats a parameter list.
+
+Values are SI (REP 103): m, rad, N, A, s, kg, Pa.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable, Mapping, Sequence
+
+
+class ParameterError(ValueError):
+    """A parameter value is missing, of the wrong type or out of range."""
+
+
+#: Parameter types, named as in ROS (rcl_interfaces/ParameterType).
+TYPES = ('double', 'integer', 'bool', 'string', 'double_array')
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Declaration of one parameter.
+
+    Parameters
+    ----------
+    name : str
+        ROS parameter name (flat, snake_case).
+    type : str
+        One of :data:`TYPES`.
+    default : Any
+        Default value (SI units).
+    unit : str
+        Unit of the value, '' for dimensionless, e.g. 'm', 'N*m/A'.
+    description : str
+        What it is, and where its default comes from.
+    min, max : float, optional
+        Inclusive range for 'double', 'integer' and each element of
+        'double_array'.
+    read_only : bool
+        Hardware limits and geometry: refused at runtime by the nodes.
+    group : str
+        'instrument', 'limits', 'controller', 'sim' or 'effects'.
+    choices : tuple of str, optional
+        Allowed values of a 'string' parameter.
+    """
+
+    name: str
+    type: str
+    default: Any
+    unit: str
+    description: str
+    min: float | None = None
+    max: float | None = None
+    read_only: bool = False
+    group: str = 'instrument'
+    choices: tuple[str, ...] | None = None
+
+    def check(self, value: Any) -> Any:
+        """Return ``value`` normalised to this parameter's type.
+
+        Raises
+        ------
+        ParameterError
+            With the key, the value and the allowed range in the message.
+        """
+        where = f"parameter '{self.name}'"
+        if self.type == 'double':
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ParameterError(f'{where}: expected a number ({self.unit or "-"}), got {value!r}')
+            value = float(value)
+            self._check_range(value, where)
+            return value
+        if self.type == 'integer':
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ParameterError(f'{where}: expected an integer, got {value!r}')
+            self._check_range(value, where)
+            return value
+        if self.type == 'bool':
+            if not isinstance(value, bool):
+                raise ParameterError(f'{where}: expected true or false, got {value!r}')
+            return value
+        if self.type == 'string':
+            if not isinstance(value, str):
+                raise ParameterError(f'{where}: expected a string, got {value!r}')
+            if self.choices is not None and value not in self.choices:
+                raise ParameterError(f'{where}: {value!r} is not one of {list(self.choices)}')
+            return value
+        if self.type == 'double_array':
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+                raise ParameterError(f'{where}: expected a list of numbers, got {value!r}')
+            out = []
+            for i, v in enumerate(value):
+                if isinstance(v, bool) or not isinstance(v, (int, float)):
+                    raise ParameterError(f'{where}[{i}]: expected a number, got {v!r}')
+                self._check_range(float(v), f'{where}[{i}]')
+                out.append(float(v))
+            if not out:
+                raise ParameterError(f'{where}: the list is empty')
+            return tuple(out)
+        raise ParameterError(f'{where}: unknown type {self.type!r}')
+
+    def _check_range(self, value: float, where: str) -> None:
+        if not math.isfinite(value):
+            raise ParameterError(f'{where}: {value!r} is not finite')
+        if (self.min is not None and value < self.min) or (self.max is not None and value > self.max):
+            raise ParameterError(
+                f'{where}: {value!r} {self.unit} is outside the allowed range '
+                f'[{self.min}, {self.max}] {self.unit}')
+
+
+class ParamSet(Mapping):
+    """Validated parameter values with attribute access (``p.drum_radius``).
+
+    Immutable. Build one with :func:`grip_force_ros.params.make_params` or
+    :func:`grip_force_ros.params.load_params_file`; derive a changed copy with
+    :meth:`replace`.
+    """
+
+    __slots__ = ('_values',)
+
+    def __init__(self, values: Mapping[str, Any]):
+        object.__setattr__(self, '_values', dict(values))
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self._values[name]
+        except KeyError:
+            raise AttributeError(f'no parameter {name!r}') from None
+
+    def __setattr__(self, name, value):
+        raise AttributeError('ParamSet is immutable; use replace()')
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def replace(self, **changes: Any) -> 'ParamSet':
+        """Return a validated copy with ``changes`` applied."""
+        from grip_force_ros.params import make_params  # avoid an import cycle
+        return make_params({**self._values, **changes})
+
+    def __repr__(self) -> str:
+        return f'ParamSet({self._values!r})'
+
+
+def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
+             allow_unknown: bool = False) -> dict[str, Any]:
+    """Check ``values`` against ``specs`` and fill in defaults.
+
+    Parameters
+    ----------
+    specs : iterable of ParamSpec
+    values : mapping
+        Parameter name to value; missing names take their default.
+    allow_unknown : bool
+        If False (default), a key that no spec declares is an error
+        (catches typos such as ``drum_raduis``).
+
+    Returns
+    -------
+    dict
+        Every declared parameter with a checked value.
+
+    Raises
+    ------
+    ParameterError
+        The first problem found, naming the key, the value and the range.
+    """
+    by_name = {s.name: s for s in specs}
+    if not allow_unknown:
+        unknown = sorted(set(values) - set(by_name))
+        if unknown:
+            raise ParameterError(f'unknown parameter(s) {unknown}; known: see `grip-force params`')
+    return {name: spec.check(values.get(name, spec.default)) for name, spec in by_name.items()}
