@@ -97,8 +97,8 @@ class ParamSpec:
             out = []
             for i, v in enumerate(value):
                 if isinstance(v, bool) or not isinstance(v, (int, float)):
-                    raise ParameterError(f'{where}[{i}]: expected a number, got {v!r}')
-                self._check_range(float(v), f'{where}[{i}]')
+                    raise ParameterError(f"parameter '{self.name}[{i}]': expected a number, got {v!r}")
+                self._check_range(float(v), f"parameter '{self.name}[{i}]'")
                 out.append(float(v))
             if not out:
                 raise ParameterError(f'{where}: the list is empty')
