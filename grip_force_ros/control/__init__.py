@@ -1,1 +1,57 @@
-"""control"""
+"""Grip-force controller core: ROS-free, plain values in, plain values out (SI units).
+
+Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
+
+    from grip_force_ros.control import GripController, ControlInputs, ControlOutput
+
+    ctrl = GripController(params)            # params: ParamSet (instrument + limits + controller)
+    inputs = ctrl.new_inputs()               # ControlInputs, validated in one place
+    # in the subscription callbacks (receive_time = node clock now [s], stamp = header stamp [s],
+    # same clock; stamp=nan skips the stamp checks). Each returns None, or the reason (str) the
+    # sample was rejected (publish it on /diagnostics):
+    inputs.set_master(receive_time, master_angle)                      # [rad]
+    inputs.set_instrument(receive_time, wrist_angle, jaw_angle, jaw_velocity=0.0, stamp=nan)
+    inputs.set_actuator(receive_time, measured_current, motor_angle=0.0, motor_velocity=0.0,
+                        stamp=nan)                                     # [A], [rad], [rad/s]
+    inputs.set_force(receive_time, grip_force, stamp=nan)              # [N], load cell (optional)
+    inputs.reject(source, receive_time, reason)   # a malformed message (missing joint, bad length)
+    # in the 1 kHz timer:
+    out = ctrl.step(now, inputs)             # -> ControlOutput (a NamedTuple)
+    out.current_command    # [A]  motor current command, |.| <= max_current, slew-limited
+    out.target_force       # [N]  0 in free motion and in the safe state
+    out.estimated_force    # [N]  grip force used as feedback (sensor or model estimate)
+    out.pull_out_force     # [N]  needle pull-out force from the estimate (0 unless needle)
+    out.mode               # 'free' | 'grip' | 'safe'
+    out.limits_hit         # tuple of 'current_limit', 'slew_limit'
+    out.reasons            # tuple of str: why safe, what was clamped; () when all is well
+    out.target_jaw_angle   # [rad] jaw target in free motion (measured jaw angle otherwise)
+    out.feedforward_current  # [A]
+
+Sources are ``'master'``, ``'instrument'``, ``'actuator'`` and ``'force'`` (the last one
+only required when ``force_sensor_enabled``).
+
+Safe state (documented choice): the current command ramps to 0 A at the slew limit
+(``max_current_slew``); ``mode == 'safe'`` from the first ``step`` after a required input
+became stale (older than ``watchdog_timeout`` by its receive time), missing, or invalid
+(NaN/inf, out-of-range angle or current, stamp backwards or ahead of the receive time by
+more than ``stamp_future_tolerance``), with the reason in ``out.reasons``. A rejected sample
+is not stored (the last good value is kept) and its source stays faulted until a valid
+sample arrives. When all inputs are good again, control resumes bumplessly: the PID
+integrator is preset so the command continues from its last value (no current jump).
+A duplicate sample (same stamp as the last one) is ignored and does not refresh the
+watchdog. Master angles slightly outside [master_angle_min, master_angle_max] are clamped
+and flagged; beyond ``master_angle_tolerance`` they are invalid.
+
+Pieces (small classes, each usable alone): :class:`ForceMap` (master angle -> free jaw target
+or grip force target), :class:`PID` (back-calculation anti-windup, filtered derivative on the
+measurement, bumpless preset), :class:`CurrentLimiter` (current and slew limits, reports
+which hit). Loop design with python-control: :mod:`grip_force_ros.control.tune`.
+"""
+from grip_force_ros.control.controller import ControlOutput, GripController
+from grip_force_ros.control.force_map import ForceMap
+from grip_force_ros.control.inputs import SOURCES, ControlInputs
+from grip_force_ros.control.limits import CurrentLimiter
+from grip_force_ros.control.pid import PID
+
+__all__ = ['GripController', 'ControlInputs', 'ControlOutput', 'ForceMap', 'PID',
+           'CurrentLimiter', 'SOURCES']

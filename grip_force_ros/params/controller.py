@@ -1,4 +1,96 @@
-"""Controller parameters (group 'controller'). Owned by control/; see control/README."""
-from grip_force_ros.params.schema import ParamSpec  # noqa: F401
+"""Controller parameters (group 'controller'). Owned by control/; see docs/control.md.
 
-CONTROLLER: list = []
+Gains are per instrument: ``grip-force tune --config X.yaml`` designs them on a
+linear plant model and the instrument YAMLs carry the result. The defaults here
+are the design for the paper's needle driver (``config/paper_needle_driver.yaml``).
+"""
+from grip_force_ros.params.schema import ParamSpec
+
+_P = ParamSpec
+_G = 'controller'
+
+#: Object kinds the model knows (same tuple as grip_force_ros.model.OBJECTS; repeated
+#: here so that the schema does not import the model).
+OBJECT_KINDS = ('free', 'rigid', 'tissue', 'needle')
+
+CONTROLLER = [
+    # --- loop timing and watchdog -------------------------------------------------------
+    _P('control_rate', 'double', 1000.0, 'Hz',
+       'Control loop rate. The gains are designed for it, so it is fixed.',
+       min=100.0, max=10000.0, read_only=True, group=_G),
+    _P('watchdog_timeout', 'double', 0.03, 's',
+       'An input older than this (by its receive time) is stale and puts the output in the safe '
+       'state (current ramps to 0 at the slew limit). 30 ms as the dVRK uses.',
+       min=0.002, max=1.0, group=_G),
+    _P('stamp_future_tolerance', 'double', 0.1, 's',
+       'A message stamped more than this ahead of the controller clock is rejected as invalid.',
+       min=0.0, max=10.0, group=_G),
+    # --- what is held and how it is measured ------------------------------------------
+    _P('object_kind', 'string', 'needle', '',
+       'Object the jaw grips, for the contact model of the feedforward and the force estimate.',
+       choices=OBJECT_KINDS, group=_G),
+    _P('force_sensor_enabled', 'bool', False, '',
+       'Use the grip force sensor topic as force feedback; otherwise the model estimate from '
+       'the measured current.', group=_G),
+    _P('feedforward_enabled', 'bool', True, '',
+       'Add the inverse-model current for the target force at the measured wrist and jaw angles.',
+       group=_G),
+    # --- force map: master gripper angle -> jaw angle target or grip force target ------
+    _P('master_angle_min', 'double', 0.0, 'rad',
+       'Master gripper angle when fully closed; below it the angle is clamped and flagged.',
+       min=-1.0, max=3.0, group=_G),
+    _P('master_angle_max', 'double', 1.2, 'rad',
+       'Master gripper angle when fully open; above it the angle is clamped and flagged.',
+       min=-1.0, max=3.0, group=_G),
+    _P('master_angle_tolerance', 'double', 0.5, 'rad',
+       'A master angle further than this outside [master_angle_min, master_angle_max] is '
+       'rejected as invalid (safe state) rather than clamped.', min=0.0, max=3.0, group=_G),
+    _P('master_to_jaw_gain', 'double', 1.0, 'rad/rad',
+       'Jaw angle target per rad of master gripper angle in free motion.',
+       min=0.05, max=10.0, group=_G),
+    _P('master_contact_angle', 'double', 0.2, 'rad',
+       'Below this master angle the controller grips (force control) even if no contact was '
+       'detected; the grip force target rises from 0 here to grip_force_max at master_angle_min.',
+       min=-1.0, max=3.0, group=_G),
+    _P('grip_force_max', 'double', 4.0, 'N',
+       'Grip force target at the fully closed master (never above the read-only max_grip_force).',
+       min=0.0, max=200.0, group=_G),
+    _P('force_map_exponent', 'double', 1.0, '',
+       'Shape of the force map: target = grip_force_max * s**exponent, s in [0, 1] the share of '
+       'master travel closed past contact (1 = linear).', min=0.2, max=5.0, group=_G),
+    _P('contact_jaw_margin', 'double', 0.05, 'rad',
+       'Contact is detected when the measured jaw angle stays this far above its target '
+       '(the jaw is blocked by an object); the force then rises with further master closing.',
+       min=0.001, max=1.0, group=_G),
+    _P('contact_jaw_speed', 'double', 0.5, 'rad/s',
+       'Contact is only detected while the jaw moves slower than this (blocked, not lagging).',
+       min=0.0, max=100.0, group=_G),
+    _P('grip_release_hysteresis', 'double', 0.02, 'rad',
+       'The master must open this far past the contact angle to leave grip for free motion.',
+       min=0.0, max=0.5, group=_G),
+    # --- force loop (grip) -----------------------------------------------------------------
+    _P('force_kp', 'double', 0.004, 'A/N',
+       'Proportional gain of the force loop.', min=0.0, max=10.0, group=_G),
+    _P('force_ki', 'double', 1.0, 'A/(N*s)',
+       'Integral gain of the force loop.', min=0.0, max=1000.0, group=_G),
+    _P('force_kd', 'double', 0.0, 'A*s/N',
+       'Derivative gain of the force loop (on the filtered measurement).',
+       min=0.0, max=1.0, group=_G),
+    _P('force_derivative_filter_time', 'double', 0.002, 's',
+       'Time constant of the first-order filter of the force derivative.',
+       min=1e-4, max=1.0, group=_G),
+    # --- jaw angle loop (free motion) ------------------------------------------------------
+    _P('jaw_kp', 'double', 0.5, 'A/rad',
+       'Proportional gain of the jaw angle loop in free motion.', min=0.0, max=100.0, group=_G),
+    _P('jaw_ki', 'double', 5.0, 'A/(rad*s)',
+       'Integral gain of the jaw angle loop.', min=0.0, max=10000.0, group=_G),
+    _P('jaw_kd', 'double', 0.005, 'A*s/rad',
+       'Derivative gain of the jaw angle loop (on the filtered measurement).',
+       min=0.0, max=10.0, group=_G),
+    _P('jaw_derivative_filter_time', 'double', 0.002, 's',
+       'Time constant of the first-order filter of the jaw angle derivative.',
+       min=1e-4, max=1.0, group=_G),
+    _P('anti_windup_tracking_time', 'double', 0.01, 's',
+       'Back-calculation anti-windup: the integrator tracks the limited command with this '
+       'time constant (never below one control period).', min=1e-4, max=10.0, group=_G),
+]

@@ -1,0 +1,192 @@
+"""GripController: one control period from plain inputs to a current command."""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from grip_force_ros.control.force_map import ForceMap
+from grip_force_ros.control.inputs import ControlInputs
+from grip_force_ros.control.limits import CurrentLimiter
+from grip_force_ros.control.pid import PID
+
+#: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
+PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
+
+_isfinite = math.isfinite
+_NO_REASONS: tuple = ()
+
+
+class ControlOutput(NamedTuple):
+    """Result of one control period (SI units)."""
+
+    current_command: float      # A, motor current command (positive closes the jaw)
+    target_force: float         # N, grip force target (0 in free motion and safe state)
+    estimated_force: float      # N, grip force feedback (sensor or model estimate)
+    pull_out_force: float       # N, needle pull-out force from estimated_force (0 unless needle)
+    mode: str                   # 'free' | 'grip' | 'safe'
+    limits_hit: tuple           # of 'current_limit', 'slew_limit'
+    reasons: tuple              # of str: why safe, what was clamped or unavailable
+    target_jaw_angle: float     # rad, jaw target in free motion, else the measured jaw angle
+    feedforward_current: float  # A, inverse-model current for the target force
+
+
+class GripController:
+    """Grip-force controller of one instrument.
+
+    Parameters
+    ----------
+    params : ParamSet
+        Instrument, limits and controller parameters (``grip_force_ros.params``).
+    model : object, optional
+        Provides ``grip_force_scalar(current, wrist, jaw, obj)`` and
+        ``current_for_force_scalar(force, wrist, jaw, obj)``; default
+        ``GripForceModel(params)`` (with losses).
+
+    Notes
+    -----
+    One :meth:`step` per control period (``1 / control_rate`` s). The PID and the slew
+    limit assume that period; ``now`` is used for the watchdog only.
+    """
+
+    def __init__(self, params, model=None):
+        if model is None:
+            from grip_force_ros.model import GripForceModel
+            model = GripForceModel(params)
+        self.params = params
+        self.model = model
+        self.period = 1.0 / params.control_rate                       # s
+        self.watchdog_timeout = params.watchdog_timeout               # s
+        self.object_kind = params.object_kind
+        self.use_sensor = bool(params.force_sensor_enabled)
+        self.use_feedforward = bool(params.feedforward_enabled)
+        self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
+                                   if params.object_kind == 'needle' else 0.0)
+        self.force_map = ForceMap.from_params(params)
+        self.force_max = self.force_map.force_max                     # N
+        self.limiter = CurrentLimiter(params.max_current, params.max_current_slew, self.period)
+        bound = 2.0 * params.max_current + 1e-3                       # A, integrator guard
+        self.force_pid = PID(params.force_kp, params.force_ki, params.force_kd,
+                             params.force_derivative_filter_time, self.period,
+                             params.anti_windup_tracking_time, sign=1.0, integral_limit=bound)
+        self.jaw_pid = PID(params.jaw_kp, params.jaw_ki, params.jaw_kd,
+                           params.jaw_derivative_filter_time, self.period,
+                           params.anti_windup_tracking_time, sign=-1.0, integral_limit=bound)
+        self.command = 0.0              # A, last output
+        self.mode = 'safe'              # starts safe until every input has arrived
+        self.estimated_force = 0.0      # N, last good estimate
+        self.last_now = -math.inf
+        self.safe_steps = 0             # consecutive safe periods
+
+    def new_inputs(self) -> ControlInputs:
+        """An empty :class:`ControlInputs` with this instrument's plausibility ranges."""
+        return ControlInputs.from_params(self.params)
+
+    # ------------------------------------------------------------------ checks
+    def _input_faults(self, now: float, inputs: ControlInputs):
+        """Reasons the inputs cannot be used now (empty tuple when all are good)."""
+        if not _isfinite(now):
+            return (f'controller clock {now!r} not finite',)
+        timeout = self.watchdog_timeout
+        reasons = None
+        for source in ('master', 'instrument', 'actuator', 'force'):
+            if source == 'force' and not self.use_sensor:
+                continue
+            fault = getattr(inputs, source + '_fault')
+            received = getattr(inputs, source + '_time')
+            why = None
+            if fault is not None:
+                why = f'invalid input: {fault}'
+            elif received != received:
+                why = f'no {source} input yet'
+            else:
+                age = now - received
+                if age > timeout:
+                    why = f'stale {source} input: {age * 1e3:.1f} ms old > {timeout * 1e3:.1f} ms'
+                elif age < -timeout:
+                    why = f'{source} receive time {-age * 1e3:.1f} ms ahead of the controller clock'
+            if why is not None:
+                reasons = [why] if reasons is None else reasons + [why]
+        return _NO_REASONS if reasons is None else tuple(reasons)
+
+    # ------------------------------------------------------------------ step
+    def step(self, now: float, inputs: ControlInputs) -> ControlOutput:
+        """One control period.
+
+        Parameters
+        ----------
+        now : float
+            Controller clock (s), the clock of the inputs' receive times.
+        inputs : ControlInputs
+            Latest accepted samples.
+
+        Returns
+        -------
+        ControlOutput
+        """
+        faults = self._input_faults(now, inputs)
+        if _isfinite(now):
+            self.last_now = now
+        if faults:
+            return self._safe(faults, inputs)
+
+        wrist, jaw = inputs.wrist_angle, inputs.jaw_angle
+        obj = self.object_kind
+        reasons = _NO_REASONS
+        if inputs.master_clamped:
+            reasons = ('master angle clamped to its range',)
+
+        if self.use_sensor:
+            force = inputs.measured_force
+        else:
+            try:
+                force = self.model.grip_force_scalar(inputs.measured_current, wrist, jaw, obj)
+            except (ValueError, ArithmeticError) as exc:
+                return self._safe((f'force estimate failed: {exc}',), inputs)
+            if not _isfinite(force):
+                return self._safe(('force estimate not finite',), inputs)
+
+        gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity)
+        previous_mode = self.mode
+        feedforward = 0.0
+        if gripping:
+            mode = 'grip'
+            target_force = target if target < self.force_max else self.force_max
+            if self.use_feedforward and target_force > 0.0:
+                try:
+                    feedforward = self.model.current_for_force_scalar(target_force, wrist, jaw, obj)
+                except (ValueError, ArithmeticError) as exc:
+                    feedforward = 0.0
+                    reasons = reasons + (f'no feedforward: {exc}',)
+                if not _isfinite(feedforward):
+                    feedforward = 0.0
+                    reasons = reasons + ('no feedforward: not finite',)
+            pid, setpoint, measurement = self.force_pid, target_force, force
+            target_jaw = jaw
+        else:
+            mode = 'free'
+            target_force = 0.0
+            pid, setpoint, measurement = self.jaw_pid, target, jaw
+            target_jaw = target
+        if mode != previous_mode:      # bumpless: continue from the last command
+            pid.preset(self.command - feedforward, setpoint, measurement)
+        unlimited = feedforward + pid.update(setpoint, measurement)
+        command, limits_hit = self.limiter.apply(unlimited, self.command)
+        pid.track(unlimited - feedforward, command - feedforward)
+        self.command = command
+        self.mode = mode
+        self.safe_steps = 0
+        self.estimated_force = force
+        return ControlOutput(command, target_force, force, self.pull_out_per_force * force,
+                             mode, limits_hit, reasons, target_jaw, feedforward)
+
+    def _safe(self, reasons: tuple, inputs: ControlInputs) -> ControlOutput:
+        """Safe state: ramp the current to 0 A at the slew limit, keep the last estimate."""
+        command, limits_hit = self.limiter.apply(0.0, self.command)
+        self.command = command
+        self.mode = 'safe'
+        self.safe_steps += 1
+        self.force_map.reset()
+        force = self.estimated_force
+        jaw = inputs.jaw_angle
+        return ControlOutput(command, 0.0, force, self.pull_out_per_force * force, 'safe',
+                             limits_hit, reasons, jaw if _isfinite(jaw) else 0.0, 0.0)

@@ -1,0 +1,48 @@
+"""Current and slew limits of the motor current command."""
+from __future__ import annotations
+
+#: limits_hit tuples, indexed by bit mask (1 = current limit, 2 = slew limit); shared, never rebuilt
+_HITS = ((), ('current_limit',), ('slew_limit',), ('current_limit', 'slew_limit'))
+
+
+class CurrentLimiter:
+    """Clamp a current command to |I| <= max_current and |dI| <= max_step per period.
+
+    Parameters
+    ----------
+    max_current : float
+        Current limit (A).
+    max_slew : float
+        Slew limit (A/s).
+    period : float
+        Control period (s); the largest change per step is ``max_slew * period`` (A).
+    """
+
+    __slots__ = ('max_current', 'max_step')
+
+    def __init__(self, max_current: float, max_slew: float, period: float):
+        if not (max_current >= 0.0 and max_slew >= 0.0 and period > 0.0):
+            raise ValueError('max_current, max_slew must be >= 0 and period > 0')
+        self.max_current = float(max_current)
+        self.max_step = float(max_slew) * float(period)
+
+    def apply(self, desired: float, previous: float):
+        """Return ``(command [A], limits_hit)``; limits_hit is a tuple of limit names.
+
+        ``previous`` must already be within the current limit. A non-finite ``desired``
+        is treated as a request for 0 A.
+        """
+        hit = 0
+        if not (desired == desired and abs(desired) != float('inf')):
+            desired = 0.0
+        lim = self.max_current
+        if desired > lim:
+            desired, hit = lim, 1
+        elif desired < -lim:
+            desired, hit = -lim, 1
+        step = self.max_step
+        if desired > previous + step:
+            desired, hit = previous + step, hit | 2
+        elif desired < previous - step:
+            desired, hit = previous - step, hit | 2
+        return desired, _HITS[hit]

@@ -1,0 +1,94 @@
+"""PID with back-calculation anti-windup, filtered derivative on the measurement, bumpless preset."""
+from __future__ import annotations
+
+
+class PID:
+    """Discrete PID at a fixed period, for one loop (force or jaw angle).
+
+    ``u = kp*e + integral - sign*kd*d_filtered(measurement)/dt``, ``e = sign*(setpoint -
+    measurement)``. The derivative acts on the measurement (no kick on setpoint steps),
+    low-passed by a first-order filter of time constant ``derivative_filter_time`` (backward
+    Euler). Anti-windup by back-calculation: after the caller limits the total command it
+    calls :meth:`track` with the unlimited and the applied output, and the integrator moves
+    toward the applied one with time constant ``tracking_time``.
+
+    Parameters
+    ----------
+    kp : float
+        Proportional gain (output unit per error unit, e.g. A/N).
+    ki : float
+        Integral gain (output unit per error unit per s).
+    kd : float
+        Derivative gain (output unit * s per error unit).
+    derivative_filter_time : float
+        Time constant of the derivative filter (s).
+    period : float
+        Control period (s).
+    tracking_time : float
+        Back-calculation time constant (s); raised to one period if smaller.
+    sign : float
+        +1 when the output must rise with ``setpoint - measurement`` (force loop), -1 when it
+        must rise with ``measurement - setpoint`` (jaw angle: positive current closes).
+    integral_limit : float
+        Hard bound on |integral| (output unit), a second guard against windup.
+    """
+
+    __slots__ = ('kp', 'ki', 'kd', 'filter_time', 'period', 'tracking_time', 'sign',
+                 'integral_limit', 'integral', 'derivative', 'last_measurement', 'primed',
+                 'error')
+
+    def __init__(self, kp: float, ki: float, kd: float, derivative_filter_time: float,
+                 period: float, tracking_time: float = 0.01, sign: float = 1.0,
+                 integral_limit: float = 1.0):
+        if not period > 0.0:
+            raise ValueError(f'period must be > 0 s, got {period!r}')
+        self.kp, self.ki, self.kd = float(kp), float(ki), float(kd)
+        self.filter_time = float(derivative_filter_time)
+        self.period = float(period)
+        self.tracking_time = max(float(tracking_time), self.period)
+        self.sign = 1.0 if sign >= 0 else -1.0
+        self.integral_limit = float(integral_limit)
+        self.reset()
+
+    def reset(self) -> None:
+        """Zero integral and derivative state."""
+        self.integral = 0.0             # output unit
+        self.derivative = 0.0           # filtered d(measurement)/dt, measurement unit / s
+        self.last_measurement = 0.0
+        self.primed = False             # last_measurement valid
+        self.error = 0.0
+
+    def update(self, setpoint: float, measurement: float) -> float:
+        """One period: the unlimited output (call :meth:`track` after limiting)."""
+        dt = self.period
+        if self.primed:
+            raw = (measurement - self.last_measurement) / dt
+            tf = self.filter_time
+            self.derivative = (tf * self.derivative + dt * raw) / (tf + dt)
+        self.last_measurement = measurement
+        self.primed = True
+        error = self.sign * (setpoint - measurement)
+        self.error = error
+        return self.kp * error + self.integral - self.sign * self.kd * self.derivative
+
+    def track(self, unlimited: float, applied: float) -> None:
+        """Integrate the error, with back-calculation toward the applied output."""
+        dt = self.period
+        integral = self.integral + dt * (self.ki * self.error
+                                         + (applied - unlimited) / self.tracking_time)
+        lim = self.integral_limit
+        self.integral = lim if integral > lim else (-lim if integral < -lim else integral)
+
+    def preset(self, output: float, setpoint: float, measurement: float) -> None:
+        """Bumpless transfer: make the next :meth:`update` at these values return ``output``.
+
+        The derivative state restarts at this measurement (no derivative kick).
+        """
+        self.derivative = 0.0
+        self.last_measurement = measurement
+        self.primed = True
+        error = self.sign * (setpoint - measurement)
+        self.error = error
+        integral = output - self.kp * error
+        lim = self.integral_limit
+        self.integral = lim if integral > lim else (-lim if integral < -lim else integral)
