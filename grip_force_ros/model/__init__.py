@@ -1,1 +1,15 @@
-"""model"""
+"""Grip-force model of a cable-driven surgical instrument (numpy only, no rclpy).
+
+>>> from grip_force_ros.params import make_params
+>>> from grip_force_ros.model import GripForceModel
+>>> m = GripForceModel(make_params())
+>>> round(m.grip_force_scalar(0.35, 0.0, 0.0, 'needle'), 3)   # doctest: +SKIP
+
+Modules: ``friction`` (pulley ratio eta, efficiency lambda_n), ``transmission``
+(current -> drum tension -> drive torque), ``angle`` (coupling + creep), ``contact``
+(rigid, tissue, needle, pull-out), ``instrument`` (:class:`GripForceModel`).
+"""
+from grip_force_ros.model.contact import OBJECTS, ModelError
+from grip_force_ros.model.instrument import ForwardResult, GripForceModel, check_instrument
+
+__all__ = ['GripForceModel', 'ForwardResult', 'ModelError', 'OBJECTS', 'check_instrument']

@@ -38,6 +38,12 @@ INSTRUMENT = [
     _P('drive_pulley_radius', 'double', 0.0025, 'm',
        'Jaw (end effector) drive pulley radius r_n (Table 1: r4 = 2.5 mm).',
        min=1e-4, max=0.05, read_only=True),
+    _P('drive_resistance_fraction', 'double', 0.5, '',
+       "Static part of the resistance moment M' at the jaw drive pulley, as a fraction of the "
+       "ideal drive torque r_n*F0: M = r_n*F0*(lambda_n - fraction). The paper prints "
+       "M' = (2 r_n M0 - ...)/(2 r0) = r_n*F0 (fraction 1, which makes M < 0 for any lambda_n < 1); "
+       'we read the leading 2 as a typo: 0.5 (default). 0 = no static resistance. See docs/model.md.',
+       min=0.0, max=1.0, read_only=True),
     _P('wrist_finger_coupling', 'double', 0.6, 'rad/rad',
        'Jaw rotation induced per rad of wrist pitch (paper: 3/5).', min=-2.0, max=2.0, read_only=True),
     _P('jaw_moment_arm_tip', 'double', 0.012, 'm',
