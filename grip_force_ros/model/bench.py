@@ -1,0 +1,42 @@
+"""Benchmark of the model's control-loop fast paths (prints figures; never a timed test).
+
+Run: ``.venv/bin/python -m grip_force_ros.model.bench [config.yaml ...]``
+"""
+from __future__ import annotations
+
+import sys
+import timeit
+
+import numpy as np
+
+from grip_force_ros.model import GripForceModel
+from grip_force_ros.params import load_params_file
+
+
+def bench(path: str, number: int = 20000) -> dict:
+    """Microseconds per call of the scalar paths and per sample of the vectorised forward."""
+    model = GripForceModel(load_params_file(path))
+    force = model.grip_force_scalar(0.3, 0.2, 0.1, 'rigid')
+    out = {
+        'grip_force_scalar_us': timeit.timeit(lambda: model.grip_force_scalar(0.3, 0.2, 0.1, 'rigid'),
+                                              number=number) / number * 1e6,
+        'current_for_force_scalar_us': timeit.timeit(
+            lambda: model.current_for_force_scalar(force, 0.2, 0.1, 'rigid'), number=number // 10) / (number // 10) * 1e6,
+    }
+    currents = np.linspace(0, 0.5, 100_000)
+    out['forward_per_sample_us'] = timeit.timeit(lambda: model.forward(currents, 0.2, 0.1, 'rigid'),
+                                                 number=3) / 3 / currents.size * 1e6
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    paths = (argv if argv is not None else sys.argv[1:]) or [
+        'config/paper_needle_driver.yaml', 'config/four_pulley_needle_driver.yaml']
+    for path in paths:
+        figures = bench(path)
+        print(path + ': ' + ', '.join(f'{k} = {v:.3g}' for k, v in figures.items()))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,83 @@
+"""Instrument YAMLs: they load, are complete and commented, and a bad file gives one clear error."""
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from grip_force_ros.cli import main as cli_main
+from grip_force_ros.model import GripForceModel, ModelError
+from grip_force_ros.params import ParameterError, load_params_file, specs_in
+
+ROOT = Path(__file__).resolve().parents[1]
+INSTRUMENTS = ['paper_needle_driver', 'long_jaw_grasper', 'four_pulley_needle_driver']
+
+
+@pytest.mark.parametrize('name', INSTRUMENTS)
+def test_config_loads_and_builds_a_model(name):
+    path = ROOT / 'config' / f'{name}.yaml'
+    params = load_params_file(path)
+    assert params.instrument_name == name
+    model = GripForceModel(params)
+    # every instrument grips, and reaches its own force limit on a needle within its current limit
+    assert model.grip_force_scalar(params.max_current, 0.0, 0.0, 'needle') > params.max_grip_force
+
+
+@pytest.mark.parametrize('name', INSTRUMENTS)
+def test_config_states_every_number_and_its_source(name):
+    path = ROOT / 'config' / f'{name}.yaml'
+    doc = yaml.safe_load(path.read_text())
+    assert list(doc) == ['/**']
+    body = doc['/**']['ros__parameters']
+    declared = {s.name for s in specs_in('instrument', 'limits')}
+    assert set(body) == declared, 'every instrument and limits parameter is written out'
+    for line in path.read_text().splitlines():
+        if re.match(r'^\s{4}\w+:', line) and 'instrument_name' not in line:
+            assert '#' in line, f'no source comment: {line}'
+
+
+def test_the_instruments_differ_in_geometry_and_friction():
+    p = {n: load_params_file(ROOT / 'config' / f'{n}.yaml') for n in INSTRUMENTS}
+    assert len({v.jaw_moment_arm_tip for v in p.values()}) == 3
+    assert len({v.pulley_friction_coefficient for v in p.values()}) == 3
+    assert len({len(v.guide_pulley_radii) for v in p.values()}) == 2
+
+
+def test_paper_config_is_table_1():
+    p = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
+    assert (p.drum_radius, p.guide_pulley_radii, p.drive_pulley_radius) == (0.004, (0.003,) * 3, 0.0025)
+    assert (p.jaw_moment_arm_tip, p.jaw_moment_arm_inner, p.cable_modulus) == (0.012, 0.0095, 1.25e11)
+    assert p.guide_pulley_wrap_angles == pytest.approx((3.14159265 / 2, 3.14159265 / 4, 3.14159265 / 4))
+    assert (p.pulley_friction_coefficient, p.needle_friction_coefficient) == (0.15, 0.15)
+    assert (p.torque_constant, p.gear_ratio, p.drum_mass, p.jaw_mass) == (1.44, 1.23, 0.0025, 0.001)
+
+
+def _bad_copy(tmp_path, key, value):
+    text = (ROOT / 'config' / 'paper_needle_driver.yaml').read_text()
+    text, n = re.subn(rf'(\s{key}:) [^#\n]*', rf'\1 {value} ', text)
+    assert n == 1
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(text)
+    return bad
+
+
+def test_bad_value_gives_one_clear_error(tmp_path):
+    bad = _bad_copy(tmp_path, 'drum_radius', '4.0')
+    with pytest.raises(ParameterError) as err:
+        load_params_file(bad)
+    message = str(err.value)
+    assert 'bad.yaml' in message and "'drum_radius'" in message and '4.0' in message
+    assert '[0.0001, 0.05]' in message
+
+
+def test_bad_file_is_refused_by_the_cli(tmp_path, capsys):
+    bad = _bad_copy(tmp_path, 'pulley_friction_coefficient', '1.5')
+    assert cli_main(['params', '--check', str(bad)]) == 1
+    out = capsys.readouterr().out
+    assert out.count('error') == 1 and 'pulley_friction_coefficient' in out and '1.5' in out
+
+
+def test_inconsistent_file_gives_a_model_error(tmp_path):
+    bad = _bad_copy(tmp_path, 'cable_radius', '0.0035')
+    with pytest.raises(ModelError, match="'cable_radius' 0.0035 m"):
+        GripForceModel(load_params_file(bad))
