@@ -15,6 +15,7 @@ import sys
 #: subcommand -> module under grip_force_ros.cli
 COMMANDS = {
     'params': 'params',
+    'tune': 'tune',
 }
 
 
