@@ -1,0 +1,484 @@
+"""Loop analysis and PID design with python-control, on a linear plant at the grip point.
+
+Plant (continuous time, linearised around a grip at half the current limit):
+
+- current loop: the actual current follows the command with a first-order lag
+  (``current_loop_time_constant``);
+- motor + drum: inertia ``motor_inertia + drum_mass*r0**2/2`` (kg*m^2), viscous damping
+  ``drum_damping``, driven by ``gear_ratio*torque_constant*i`` (N*m);
+- cable: a spring of stiffness ``E*pi*r**2/cable_length`` (N/m) between the drum
+  (``r0*theta0``) and the jaw drive pulley (``r_n*q``); the jaw side receives the tension
+  times the chain efficiency minus the static resistance (the model's slope dM/dI);
+- jaw: inertia ``jaw_inertia``, damping ``jaw_damping``, pressing an object of contact
+  stiffness k_c at arm l (needle/rigid: l = jaw_moment_arm_tip; tissue: (l + l')/2),
+  contact damping ``contact_damping_ratio`` of critical;
+- output: grip force ``k_c*l*q`` (N) in grip; jaw closing angle q (rad) in free motion.
+
+The controller is the discrete PID of :class:`grip_force_ros.control.pid.PID` exactly
+(forward-Euler integrator, backward-Euler filtered derivative) at ``1/control_rate``, with
+one period of computation delay. Three loops are analysed:
+
+- ``force_sensor``: force PID on the load-cell force (the mechanical plant above);
+- ``force_estimate``: force PID on the model estimate from the measured current (current
+  loop lag only: the estimate is a static function of the measured current);
+- ``jaw``: jaw-angle PID in free motion.
+
+Gains are designed so that the WORST case over the plant set {nominal, cable stiffness
+x0.8 and x1.2, friction x0.8 and x1.2} keeps gain margin >= 6 dB and phase margin >= 45
+deg (design targets a little above: :data:`DESIGN_GM_DB`, :data:`DESIGN_PM_DEG`), and the
+force gains serve both force loops. Among those, the design with the highest nominal
+crossover frequency wins.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from itertools import product
+
+import numpy as np
+
+#: Margins claimed (and tested) for every loop and every plant variant.
+CLAIM_GM_DB = 6.0
+CLAIM_PM_DEG = 45.0
+#: Design targets (headroom over the claim).
+DESIGN_GM_DB = 7.0
+DESIGN_PM_DEG = 50.0
+#: Largest sensitivity peak |S| allowed by the design (-).
+DESIGN_MS = 2.0
+
+#: Plant variants: name -> (cable stiffness scale, friction coefficient scale).
+VARIANTS = {'nominal': (1.0, 1.0), 'stiffness x0.8': (0.8, 1.0), 'stiffness x1.2': (1.2, 1.0),
+            'friction x0.8': (1.0, 0.8), 'friction x1.2': (1.0, 1.2)}
+
+#: Plant data the instrument YAML may not carry (the 'sim' group defines them): fallbacks.
+_PLANT_DEFAULTS = {'cable_length': 0.09, 'motor_inertia': 1.0e-5, 'jaw_inertia': 4.8e-8,
+                   'drum_damping': 2.0e-4, 'jaw_damping': 1.0e-5,
+                   'current_loop_time_constant': 2.0e-4, 'needle_stiffness': 2.0e5,
+                   'tissue_stiffness': 2.0e3, 'rigid_stiffness': 1.0e6,
+                   'contact_damping_ratio': 0.3}
+
+
+def _get(params, name):
+    try:
+        return params[name]
+    except KeyError:
+        return _PLANT_DEFAULTS[name]
+
+
+@dataclass
+class PlantData:
+    """Linear-plant numbers (SI) derived from a ParamSet."""
+
+    torque_per_amp: float        # N*m/A at the drum: gear_ratio * torque_constant
+    drum_radius: float           # m
+    drive_radius: float          # m
+    jaw_side_gain: float         # - jaw torque / (r_n * tension): efficiency minus resistance
+    cable_stiffness: float       # N/m
+    drum_inertia: float          # kg*m^2 (motor + drum)
+    drum_damping: float          # N*m*s/rad
+    jaw_inertia: float           # kg*m^2
+    jaw_damping: float           # N*m*s/rad
+    contact_stiffness: float     # N/m at the contact arm
+    contact_arm: float           # m
+    contact_damping_ratio: float  # -
+    current_lag: float           # s
+    estimate_gain: float         # N/A, d(model grip force)/d(current) at the operating point
+
+    @property
+    def force_per_amp(self) -> float:
+        """Static grip force per ampere (N/A)."""
+        return (self.torque_per_amp / self.drum_radius * self.drive_radius * self.jaw_side_gain
+                / self.contact_arm)
+
+
+def plant_data(params, model=None, stiffness_scale: float = 1.0,
+               friction_scale: float = 1.0) -> PlantData:
+    """Linear plant numbers at the grip operating point (half the current limit)."""
+    from grip_force_ros.model import GripForceModel
+    p = params
+    if friction_scale != 1.0:
+        p = p.replace(pulley_friction_coefficient=min(1.0, p.pulley_friction_coefficient
+                                                      * friction_scale))
+    m = GripForceModel(p) if (model is None or friction_scale != 1.0) else model
+    obj = p.object_kind if p.object_kind != 'free' else 'needle'
+    current = 0.5 * p.max_current if p.max_current > 0 else 0.25        # A, operating point
+    step = 1e-4 * max(current, 1e-3)
+    torque_slope = (float(m.forward(current + step, 0.0, 0.05, obj).jaw_torque)
+                    - float(m.forward(current - step, 0.0, 0.05, obj).jaw_torque)) / (2 * step)
+    tension_per_amp = p.gear_ratio * p.torque_constant / p.drum_radius
+    jaw_side_gain = torque_slope / (tension_per_amp * p.drive_pulley_radius)
+    if obj == 'tissue':
+        arm = 0.5 * (p.jaw_moment_arm_tip + p.jaw_moment_arm_inner)
+    else:
+        arm = p.jaw_moment_arm_tip
+    jaw = _get(p, {'needle': 'needle_stiffness', 'tissue': 'tissue_stiffness',
+                   'rigid': 'rigid_stiffness'}[obj])
+    jaw_angle = 0.05                                                     # rad, near closed
+    estimate = (m.grip_force_scalar(current + step, 0.0, jaw_angle, obj)
+                - m.grip_force_scalar(current - step, 0.0, jaw_angle, obj)) / (2 * step)
+    return PlantData(
+        torque_per_amp=p.gear_ratio * p.torque_constant, drum_radius=p.drum_radius,
+        drive_radius=p.drive_pulley_radius, jaw_side_gain=max(jaw_side_gain, 1e-6),
+        cable_stiffness=stiffness_scale * p.cable_modulus * math.pi * p.cable_radius ** 2
+        / _get(p, 'cable_length'),
+        drum_inertia=_get(p, 'motor_inertia') + 0.5 * p.drum_mass * p.drum_radius ** 2,
+        drum_damping=_get(p, 'drum_damping'), jaw_inertia=_get(p, 'jaw_inertia'),
+        jaw_damping=_get(p, 'jaw_damping'), contact_stiffness=jaw, contact_arm=arm,
+        contact_damping_ratio=_get(p, 'contact_damping_ratio'),
+        current_lag=_get(p, 'current_loop_time_constant'), estimate_gain=estimate)
+
+
+def plant_statespace(d: PlantData, loop: str):
+    """Continuous state-space plant (A, B, C, D) of one loop; input current command (A).
+
+    ``loop``: 'force_sensor' (output grip force, N), 'force_estimate' (output model
+    estimate, N) or 'jaw' (output jaw closing angle, rad, no contact).
+    """
+    lag = max(d.current_lag, 1e-6)
+    if loop == 'force_estimate':
+        return (np.array([[-1.0 / lag]]), np.array([[1.0 / lag]]),
+                np.array([[d.estimate_gain]]), np.array([[0.0]]))
+    # states: current i, drum angle th, drum velocity w, jaw closing angle q, jaw velocity v
+    k, r0, rn = d.cable_stiffness, d.drum_radius, d.drive_radius
+    j0, jj = d.drum_inertia, d.jaw_inertia
+    if loop == 'force_sensor':
+        k_rot = d.contact_stiffness * d.contact_arm ** 2                       # N*m/rad
+        c_rot = 2.0 * d.contact_damping_ratio * math.sqrt(k_rot * jj)          # N*m*s/rad
+    elif loop == 'jaw':
+        k_rot = c_rot = 0.0
+    else:
+        raise ValueError(f'unknown loop {loop!r}')
+    g = d.jaw_side_gain
+    a = np.zeros((5, 5))
+    a[0, 0] = -1.0 / lag
+    a[1, 2] = 1.0
+    # J0 w' = Kg i - r0 k (r0 th - rn q) - b0 w
+    a[2, 0] = d.torque_per_amp / j0
+    a[2, 1] = -r0 * k * r0 / j0
+    a[2, 3] = r0 * k * rn / j0
+    a[2, 2] = -d.drum_damping / j0
+    a[3, 4] = 1.0
+    # Jj v' = g rn k (r0 th - rn q) - k_rot q - (bj + c_rot) v
+    a[4, 1] = g * rn * k * r0 / jj
+    a[4, 3] = -(g * rn * k * rn + k_rot) / jj
+    a[4, 4] = -(d.jaw_damping + c_rot) / jj
+    b = np.zeros((5, 1))
+    b[0, 0] = 1.0 / lag
+    c = np.zeros((1, 5))
+    if loop == 'force_sensor':
+        c[0, 3] = d.contact_stiffness * d.contact_arm          # F = k_c l q
+    else:
+        c[0, 3] = 1.0
+    return a, b, c, np.zeros((1, 1))
+
+
+def discrete_plant(d: PlantData, loop: str, period: float):
+    """ZOH-discretised plant with one period of computation delay (python-control TF)."""
+    import control
+    sys_c = control.ss(*plant_statespace(d, loop))
+    sys_d = control.c2d(sys_c, period, method='zoh')
+    delay = control.tf([1.0], [1.0, 0.0], period)                          # z^-1
+    return control.minreal(control.ss2tf(sys_d) * delay, verbose=False)
+
+
+def pid_tf(kp: float, ki: float, kd: float, filter_time: float, period: float):
+    """Discrete transfer function of :class:`PID` (error -> output), python-control TF."""
+    import control
+    z = control.tf([1.0, 0.0], [1.0], period)
+    integral = ki * period / (z - 1)
+    derivative = kd * (z - 1) / ((filter_time + period) * z - filter_time)
+    return kp + integral + derivative
+
+
+# ---------------------------------------------------------------------- fast frequency grid
+def _freq_grid(period: float, n: int = 700) -> np.ndarray:
+    return np.logspace(-1, math.log10(0.999 * math.pi / period), n)          # rad/s
+
+
+class _Plant:
+    """A discrete plant as polynomials in z and its response on a frequency grid."""
+
+    def __init__(self, tf, w: np.ndarray, period: float):
+        self.num = np.atleast_1d(np.squeeze(np.asarray(tf.num[0][0], float)))
+        self.den = np.atleast_1d(np.squeeze(np.asarray(tf.den[0][0], float)))
+        z = np.exp(1j * w * period)
+        self.resp = np.polyval(self.num, z) / np.polyval(self.den, z)
+
+
+def _pid_polys(kp, ki, kd, tf, period):
+    """Numerator and denominator (in z) of the discrete PID."""
+    a = tf + period
+    den = np.polymul([1.0, -1.0], [a, -tf])
+    num = (kp * den + np.concatenate(([0.0], ki * period * np.array([a, -tf])))
+           + kd * np.array([1.0, -2.0, 1.0]))
+    return num, den
+
+
+def _closed_loop_stable(cnum, cden, plant: _Plant) -> bool:
+    char = np.polyadd(np.polymul(cden, plant.den), np.polymul(cnum, plant.num))
+    roots = np.roots(char)
+    return bool(np.all(np.abs(roots) < 1.0 - 1e-9))
+
+
+def _margins_grid(loop_resp: np.ndarray, w: np.ndarray):
+    """(GM dB, PM deg, first crossover rad/s, Ms) from a sampled loop response.
+
+    PM is the angular distance of L from -1 at each gain crossover (the smallest);
+    stability is checked separately (closed-loop poles).
+    """
+    mag = np.abs(loop_resp)
+    ms = float(np.max(1.0 / np.abs(1.0 + loop_resp)))
+    wrapped = np.degrees(np.angle(loop_resp))                 # (-180, 180]
+    above = mag >= 1.0
+    cross = np.nonzero(above[:-1] & ~above[1:])[0]
+    if cross.size == 0:
+        return -math.inf, -math.inf, 0.0, ms
+    pm = float(np.min(180.0 - np.abs(wrapped[cross])))
+    wc = float(w[cross[0]])
+    flips = np.nonzero((np.abs(np.diff(wrapped)) > 180.0))[0]   # the phase passes +-180 deg
+    gm = math.inf
+    if flips.size:
+        gm = float(np.min(-20.0 * np.log10(np.maximum(np.maximum(mag[flips], mag[flips + 1]), 1e-300))))
+    return gm, pm, wc, ms
+
+
+# ---------------------------------------------------------------------- design
+@dataclass
+class LoopReport:
+    """Margins of one loop on one plant variant."""
+
+    loop: str
+    variant: str
+    gain_margin_db: float
+    phase_margin_deg: float
+    crossover_hz: float
+    bandwidth_hz: float
+    stable: bool
+
+
+@dataclass
+class TuneResult:
+    """Designed gains and the analysis of every loop and plant variant."""
+
+    gains: dict
+    reports: list = field(default_factory=list)
+    period: float = 1e-3
+
+    def worst(self, loop: str) -> tuple[float, float]:
+        """Worst (GM dB, PM deg) of a loop over the plant variants."""
+        rs = [r for r in self.reports if r.loop == loop]
+        return min(r.gain_margin_db for r in rs), min(r.phase_margin_deg for r in rs)
+
+    def to_dict(self) -> dict:
+        out = {'gains': self.gains, 'control_period_s': self.period,
+               'claimed': {'gain_margin_db': CLAIM_GM_DB, 'phase_margin_deg': CLAIM_PM_DEG},
+               'loops': {}}
+        for r in self.reports:
+            out['loops'].setdefault(r.loop, {})[r.variant] = {
+                'gain_margin_db': _finite(r.gain_margin_db), 'phase_margin_deg': _finite(r.phase_margin_deg),
+                'crossover_hz': r.crossover_hz, 'bandwidth_hz': r.bandwidth_hz, 'stable': r.stable}
+        return out
+
+
+def _finite(x: float):
+    return x if math.isfinite(x) else None
+
+
+def _search(plants: list, w: np.ndarray, period: float, kp_grid, ki_grid,
+            kd_grid, tf_grid, gm_min=DESIGN_GM_DB, pm_min=DESIGN_PM_DEG, ms_max=DESIGN_MS):
+    """Best (kp, ki, kd, tf) by nominal crossover meeting the margins on every plant.
+
+    ``plants[0]`` is the nominal plant (:class:`_Plant`).
+    """
+    best, best_score = None, -1.0
+    z = np.exp(1j * w * period)
+    for kp, ki, kd, tf in product(kp_grid, ki_grid, kd_grid, tf_grid):
+        cnum, cden = _pid_polys(kp, ki, kd, tf, period)
+        c = np.polyval(cnum, z) / np.polyval(cden, z)
+        ok = True
+        score = 0.0
+        for idx, plant in enumerate(plants):
+            gm, pm, wc, ms = _margins_grid(c * plant.resp, w)
+            if not (gm >= gm_min and pm >= pm_min and ms <= ms_max):
+                ok = False
+                break
+            if idx == 0:
+                score = wc + 1e-6 * ki            # prefer faster, then more integral action
+        if ok and score > best_score and all(_closed_loop_stable(cnum, cden, pl) for pl in plants):
+            best, best_score = (float(kp), float(ki), float(kd), float(tf)), score
+    return best
+
+
+def _refine(responses, w, period, start, rounds=2):
+    """Local refinement of a grid optimum on a finer multiplicative grid."""
+    best = start
+    for _ in range(rounds):
+        kp, ki, kd, tf = best
+        f = np.array([0.6, 0.8, 1.0, 1.25, 1.6])
+        cand = _search(responses, w, period, kp * f if kp else [0.0], ki * f, kd * f if kd else [0.0],
+                       [tf])
+        if cand is None:
+            break
+        best = cand
+    return best
+
+
+def design(params, model=None) -> TuneResult:
+    """Design force and jaw PID gains for an instrument; see the module docstring.
+
+    Returns
+    -------
+    TuneResult
+        ``gains`` holds the controller parameter names (force_kp, force_ki, force_kd,
+        force_derivative_filter_time, jaw_kp, jaw_ki, jaw_kd, jaw_derivative_filter_time).
+    """
+    period = 1.0 / params.control_rate
+    w = _freq_grid(period, 500)
+    variants = {name: plant_data(params, model, s, f) for name, (s, f) in VARIANTS.items()}
+    nominal = variants['nominal']
+    gain = nominal.force_per_amp                                   # N/A
+
+    force_resp = [_Plant(discrete_plant(d, loop, period), w, period)
+                  for loop in ('force_sensor', 'force_estimate') for d in variants.values()]
+    # gains are scaled by 1/gain so the grid fits any instrument
+    inv = 1.0 / gain
+    best = _search(force_resp, w, period,
+                   kp_grid=inv * np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.4]),
+                   ki_grid=inv * np.array([1.0, 2.0, 4.0, 8.0, 15.0, 30.0, 60.0, 120.0]),
+                   kd_grid=inv * np.array([0.0, 1e-4, 3e-4, 1e-3, 3e-3]),
+                   tf_grid=[0.5e-3, 2e-3])
+    if best is None:
+        raise ValueError('no force PID on the design grid meets the margins on every plant variant')
+    force = _refine(force_resp, w, period, best)
+
+    jaw_resp = [_Plant(discrete_plant(d, 'jaw', period), w, period) for d in variants.values()]
+    jaw_gain = (nominal.torque_per_amp / nominal.drum_radius * nominal.drive_radius
+                * nominal.jaw_side_gain)                           # N*m/A at the jaw
+    inv_j = nominal.drum_inertia * (nominal.drum_radius / nominal.drive_radius) / jaw_gain
+    best = _search(jaw_resp, w, period,
+                   kp_grid=inv_j * np.array([100.0, 300.0, 1e3, 3e3, 1e4, 3e4]),
+                   ki_grid=inv_j * np.array([1e3, 1e4, 1e5, 3e5]),
+                   kd_grid=inv_j * np.array([1.0, 3.0, 10.0, 30.0, 100.0]),
+                   tf_grid=[0.5e-3, 2e-3])
+    if best is None:
+        raise ValueError('no jaw PID on the design grid meets the margins on every plant variant')
+    jaw = _refine(jaw_resp, w, period, best)
+
+    gains = {'force_kp': force[0], 'force_ki': force[1], 'force_kd': force[2],
+             'force_derivative_filter_time': force[3],
+             'jaw_kp': jaw[0], 'jaw_ki': jaw[1], 'jaw_kd': jaw[2],
+             'jaw_derivative_filter_time': jaw[3]}
+    gains = {k: float(f'{v:.3g}') for k, v in gains.items()}
+    return TuneResult(gains=gains, reports=analyse(params.replace(**gains), model).reports,
+                      period=period)
+
+
+# ---------------------------------------------------------------------- analysis
+def loop_transfer(params, loop: str, variant: str = 'nominal', model=None):
+    """Discrete open loop L(z) = PID(z) * z^-1 * plant(z) with the gains in ``params``."""
+    period = 1.0 / params.control_rate
+    s, f = VARIANTS[variant]
+    d = plant_data(params, model, s, f)
+    if loop == 'jaw':
+        c = pid_tf(params.jaw_kp, params.jaw_ki, params.jaw_kd, params.jaw_derivative_filter_time, period)
+    else:
+        c = pid_tf(params.force_kp, params.force_ki, params.force_kd,
+                   params.force_derivative_filter_time, period)
+    return c * discrete_plant(d, loop, period)
+
+
+def _bandwidth_hz(closed, period) -> float:
+    """-3 dB bandwidth (Hz) of a discrete closed loop, from its frequency response."""
+    w = _freq_grid(period, 2000)
+    mag = np.abs(closed(np.exp(1j * w * period)))
+    dc = mag[0]
+    below = np.nonzero(mag < dc / math.sqrt(2.0))[0]
+    return float(w[below[0]] / (2 * math.pi)) if below.size else float(w[-1] / (2 * math.pi))
+
+
+def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw')) -> TuneResult:
+    """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant."""
+    import control
+    period = 1.0 / params.control_rate
+    reports = []
+    for loop in loops:
+        for variant in VARIANTS:
+            lt = loop_transfer(params, loop, variant, model)
+            with warnings.catch_warnings():       # python-control falls back to 'frd': fine here
+                warnings.simplefilter('ignore', UserWarning)
+                gm, pm, wg, wp = control.margin(lt)
+            closed = control.feedback(lt, 1)
+            stable = bool(np.all(np.abs(control.poles(closed)) < 1.0))
+            reports.append(LoopReport(loop, variant,
+                                      20 * math.log10(gm) if gm and math.isfinite(gm) and gm > 0 else math.inf,
+                                      float(pm), float(wp) / (2 * math.pi) if math.isfinite(wp) else 0.0,
+                                      _bandwidth_hz(closed, period), stable))
+    gains = {k: params[k] for k in ('force_kp', 'force_ki', 'force_kd', 'force_derivative_filter_time',
+                                    'jaw_kp', 'jaw_ki', 'jaw_kd', 'jaw_derivative_filter_time')}
+    return TuneResult(gains=gains, reports=reports, period=period)
+
+
+def step_responses(params, duration: float = 0.2, model=None) -> dict:
+    """Closed-loop responses to a unit target step (nominal plant), python-control.
+
+    Returns
+    -------
+    dict
+        loop -> (t [s], y [output unit per unit target]): 'force_sensor' and
+        'force_estimate' with the ideal feedforward (current = target / force_per_amp + PID),
+        'force_sensor (PID only)', and 'jaw' (PID only).
+    """
+    import control
+    period = 1.0 / params.control_rate
+    d = plant_data(params, model)
+    out = {}
+    t = np.arange(0.0, duration, period)
+    for loop in ('force_sensor', 'force_estimate', 'jaw'):
+        plant = discrete_plant(d, loop, period)
+        lt = loop_transfer(params, loop, 'nominal', model)
+        closed = control.feedback(lt, 1)
+        if loop == 'jaw':
+            out['jaw (PID only)'] = control.step_response(closed, T=t)
+            continue
+        c = pid_tf(params.force_kp, params.force_ki, params.force_kd,
+                   params.force_derivative_filter_time, period)
+        ff = 1.0 / (d.force_per_amp if loop == 'force_sensor' else d.estimate_gain)
+        with_ff = control.feedback(plant, c) * (ff + c)        # y = P (ff + C) / (1 + P C) r
+        out[f'{loop} (feedforward + PID)'] = control.step_response(with_ff, T=t)
+        if loop == 'force_sensor':
+            out[f'{loop} (PID only)'] = control.step_response(closed, T=t)
+    return {k: (np.asarray(v.time), np.asarray(v.outputs).ravel()) for k, v in out.items()}
+
+
+def settling_time(t: np.ndarray, y: np.ndarray, band: float = 0.05) -> float:
+    """Time (s) after which ``y`` stays within ``band`` of its final value."""
+    final = y[-1]
+    outside = np.nonzero(np.abs(y - final) > band * max(abs(final), 1e-12))[0]
+    return float(t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(t) else (
+        0.0 if not outside.size else float(t[-1]))
+
+
+def plot_steps(params, path, title: str = '', model=None) -> None:
+    """Write the step-response figure (PNG) of :func:`step_responses`."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    steps = step_responses(params, model=model)
+    fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    for name, (t, y) in steps.items():
+        ax = ax_j if name.startswith('jaw') else ax_f
+        ax.plot(t * 1e3, y, label=f'{name}; 5% settling {settling_time(t, y) * 1e3:.0f} ms')
+    ax_f.axhline(1.0, color='k', lw=0.5, ls='--')
+    ax_j.axhline(1.0, color='k', lw=0.5, ls='--')
+    ax_f.set_ylabel('grip force / target (-)')
+    ax_j.set_ylabel('jaw angle / target (-)')
+    ax_j.set_xlabel('time (ms)')
+    ax_f.legend(fontsize=8)
+    ax_j.legend(fontsize=8)
+    ax_f.set_title(title or 'closed-loop unit step responses (nominal linear plant, 1 kHz PID)')
+    ax_f.grid(alpha=0.3)
+    ax_j.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
