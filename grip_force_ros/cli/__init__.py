@@ -15,6 +15,8 @@ import sys
 #: subcommand -> module under grip_force_ros.cli
 COMMANDS = {
     'params': 'params',
+    'reproduce': 'reproduce',
+    'predict': 'predict',
     'tune': 'tune',
 }
 

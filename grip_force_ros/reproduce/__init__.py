@@ -1,0 +1,1 @@
+"""Reproduction of the paper: comparison rows, figures and the Markdown report."""
