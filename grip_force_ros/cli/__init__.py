@@ -18,6 +18,9 @@ COMMANDS = {
     'reproduce': 'reproduce',
     'predict': 'predict',
     'tune': 'tune',
+    'demo': 'demo',
+    'calibrate': 'calibrate',
+    'monitor': 'monitor',
 }
 
 
