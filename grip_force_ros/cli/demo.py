@@ -1,0 +1,136 @@
+"""`grip-force demo`: the closed loop on ROS 2, one needle grasp, recorded and plotted.
+
+Starts ``master``, ``sim_instrument`` and ``controller`` as separate processes
+(DDS on loopback, a free ROS domain), runs the needle grasp (approach, close,
+hold, pull test, release) with live progress, records a rosbag2 (MCAP) of
+every topic, writes a summary plot and prints target vs measured grip force,
+pull-out force and the hold-phase errors. ``--compare-instruments`` runs the
+same master trajectory on three instruments (see docs/demo.md).
+"""
+from __future__ import annotations
+
+import json
+import math
+import signal
+import sys
+import time
+from pathlib import Path
+
+HELP = 'run the closed-loop needle-grasp demo over ROS 2 (or --compare-instruments)'
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument('--config', default='paper_needle_driver',
+                        help='instrument YAML (path, or name in config/); default %(default)s')
+    parser.add_argument('--duration', type=float, default=10.0,
+                        help='length of the needle-grasp task in s (default %(default)s)')
+    parser.add_argument('--out', help='output directory (default out/demo/<UTC timestamp>)')
+    parser.add_argument('--json', action='store_true', help='print the results as JSON on stdout')
+    parser.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID (default: a free one)')
+    parser.add_argument('--compare-instruments', action='store_true',
+                        help='the same master trajectory on the shipped instruments: calibrated '
+                             'sensorless, uncalibrated, load cell and naive; prints the spreads')
+    parser.add_argument('--configs', nargs='+', metavar='YAML',
+                        help='instruments of --compare-instruments (default: config/*.yaml '
+                             'except maryland)')
+    parser.add_argument('--plant-error', type=float, default=0.2,
+                        help='--compare-instruments: relative error of the simulated plant\'s '
+                             'friction and cable stiffness vs the YAML (default %(default)s)')
+    parser.add_argument('--sequential', action='store_true',
+                        help='--compare-instruments: one instrument at a time (default: in '
+                             'parallel, one ROS domain each)')
+    parser.add_argument('--quiet', action='store_true', help='no live progress')
+
+
+def _default_out(kind: str) -> Path:
+    return Path('out') / kind / time.strftime('%Y%m%d-%H%M%S', time.gmtime())
+
+
+def _sigterm_as_interrupt() -> None:
+    def handler(_signum, _frame):
+        raise KeyboardInterrupt
+    try:
+        signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # pragma: no cover - not the main thread
+        pass
+
+
+def _fmt(value, spec='.3f', unit=' N') -> str:
+    return f'{value:{spec}}{unit}' if isinstance(value, (int, float)) and math.isfinite(value) \
+        else 'n/a'
+
+
+def print_report(result: dict, stream=sys.stdout) -> None:
+    """The human-readable end of a demo run."""
+    m = result['metrics'] or {}
+    w = stream.write
+    w(f"instrument        {result['instrument']} ({result['config']})\n")
+    w(f"task              needle grasp, {result['duration']:.2f} s, ROS domain {result['domain_id']}\n")
+    w(f"steady hold       target {_fmt(m.get('target_force'))}, measured (load cell) "
+      f"{_fmt(m.get('measured_force'))}, estimated (model) {_fmt(m.get('estimated_force'))}\n")
+    w(f"hold-phase error  mean {_fmt(m.get('hold_error_mean'), '+.3f')}, rms "
+      f"{_fmt(m.get('hold_error_rms'))}, max {_fmt(m.get('hold_error_max'))} "
+      f"({_fmt(100 * m.get('hold_error_rel', float('nan')), '+.1f', ' %')} of target)\n")
+    w(f"settling          {_fmt(m.get('settling_time'), '.3f', ' s')} to within 5 % of target\n")
+    w(f"pull test         pull-out force {_fmt(m.get('pull_out_force'))} (estimated), grip "
+      f"{_fmt(m.get('pull_grip_force'))} (load cell)\n")
+    w(f"estimate vs cell  rms {_fmt(m.get('estimate_error_rms'))} over the steady hold\n")
+    w(f"peak current      {_fmt(m.get('peak_current'), '.3f', ' A')}\n")
+    w(f"bag               {result['bag']} ({sum(result['messages'].values())} messages)\n")
+    w(f"plot              {result['plot']}\n")
+
+
+def run(args) -> int:
+    from grip_force_ros.demo import find_config
+    from grip_force_ros.demo.processes import ProcessError, pick_domain_ids
+    from grip_force_ros.params import ParameterError, load_params_file
+
+    _sigterm_as_interrupt()
+    if args.duration <= 0:
+        print('error: --duration must be > 0 s', file=sys.stderr)
+        return 2
+    try:
+        if args.compare_instruments:
+            from grip_force_ros.demo.compare import compare_instruments
+            out = Path(args.out) if args.out else _default_out('compare')
+            configs = [find_config(c) for c in args.configs] if args.configs else None
+            report = compare_instruments(
+                out, configs=configs, plant_error=args.plant_error,
+                parallel=not args.sequential, domain_id=args.domain_id,
+                log=None if args.quiet else sys.stderr)
+            if args.json:
+                print(json.dumps(report, indent=1))
+            else:
+                from grip_force_ros.demo.compare import format_report
+                print(format_report(report))
+            return 0
+
+        from grip_force_ros.demo.run import Progress, RunSpec, run_task
+        config = find_config(args.config)
+        params = load_params_file(config)
+        out = Path(args.out) if args.out else _default_out('demo')
+        domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]
+        spec = RunSpec(config=config, duration=args.duration, label=params.instrument_name)
+        progress = None if args.quiet else Progress(sys.stderr)
+        if progress is not None:
+            sys.stderr.write(f'grip-force demo: {params.instrument_name}, ROS domain {domain}, '
+                             f'output {out}\n')
+        try:
+            result = run_task(spec, out, domain, progress=progress)
+        finally:
+            if progress is not None:
+                progress.close()
+        report = result.as_dict()
+        report['instrument'] = params.instrument_name
+        (out / 'results.json').write_text(json.dumps(report, indent=1))
+        if args.json:
+            print(json.dumps(report, indent=1))
+        else:
+            print_report(report)
+        return 0
+    except KeyboardInterrupt:
+        print('interrupted: every node was stopped', file=sys.stderr)
+        return 130
+    except (ProcessError, ParameterError, FileNotFoundError, ValueError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1

@@ -1,0 +1,167 @@
+"""Figures of a run: phases, hold-phase force error, steady hold ratio, spreads.
+
+Plain numpy on the resampled series of :func:`grip_force_ros.demo.series.resample`
+(keys 't', 'master_angle', 'target_force', 'measured_force', ...). No ROS.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from grip_force_ros.trajectories import Trajectory
+
+#: Share of the hold phase, at its end, over which the force counts as steady.
+STEADY_SHARE = 0.6
+
+
+class AnalysisError(ValueError):
+    """The run has no data where a figure needs it."""
+
+
+def trajectory_start(t: np.ndarray, master_angle: np.ndarray, trajectory: Trajectory) -> float:
+    """Time (on the ``t`` axis, s) at which the master started ``trajectory``.
+
+    Found from the first crossing of the mid opening while closing, in the
+    data and in the trajectory: robust to the first samples that a recorder
+    misses while it discovers the master.
+
+    Raises
+    ------
+    AnalysisError
+        If the recorded master angle never crosses the mid opening.
+    """
+    tt = np.linspace(0.0, trajectory.duration, max(2, int(trajectory.duration * 1000) + 1))
+    aa = trajectory.angle(tt)
+    mid = 0.5 * (float(np.max(aa)) + float(np.min(aa)))
+    if not np.any(aa < mid):
+        raise AnalysisError('the trajectory never closes')
+    t_traj = _first_down_crossing(tt, aa, mid)
+    ok = np.isfinite(master_angle)
+    if not np.any(master_angle[ok] < mid) or not np.any(master_angle[ok] > mid):
+        raise AnalysisError('the recorded master angle never crosses the mid opening')
+    return _first_down_crossing(t[ok], master_angle[ok], mid) - t_traj
+
+
+def _first_down_crossing(t: np.ndarray, a: np.ndarray, level: float) -> float:
+    above = a >= level
+    idx = np.flatnonzero(above[:-1] & ~above[1:])
+    if idx.size == 0:
+        raise AnalysisError('no downward crossing')
+    i = int(idx[0])
+    da = a[i + 1] - a[i]
+    return float(t[i] + (level - a[i]) / da * (t[i + 1] - t[i])) if da else float(t[i])
+
+
+def phase_windows(trajectory: Trajectory, start: float) -> dict[str, tuple[float, float]]:
+    """Phase -> (start, end) on the data time axis (s)."""
+    return {name: (a + start, b + start) for name, (a, b) in trajectory.phase_times().items()}
+
+
+def steady_window(windows: Mapping[str, tuple[float, float]],
+                  share: float = STEADY_SHARE) -> tuple[float, float]:
+    """The last ``share`` of the hold phase (s): where the grip force is steady."""
+    if 'hold' not in windows:
+        raise AnalysisError('the trajectory has no hold phase')
+    a, b = windows['hold']
+    return b - share * (b - a), b
+
+
+def _mask(t: np.ndarray, window: tuple[float, float]) -> np.ndarray:
+    return (t >= window[0]) & (t <= window[1])
+
+
+def _mean(x: np.ndarray) -> float:
+    x = x[np.isfinite(x)]
+    return float(np.mean(x)) if x.size else float('nan')
+
+
+def force_metrics(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[float, float]],
+                  force_key: str = 'measured_force') -> dict[str, float]:
+    """Hold-phase force error and the other figures the demo prints.
+
+    Parameters
+    ----------
+    data : mapping
+        Resampled series ('t', 'target_force', ``force_key``, ...).
+    windows : mapping
+        Phase windows on the same time axis (:func:`phase_windows`).
+    force_key : str
+        Which force is compared with the target: the load cell
+        ('measured_force') by default.
+
+    Returns
+    -------
+    dict
+        target_force, measured_force, estimated_force (steady-hold means, N);
+        hold_error_mean / _rms / _max (N, measured - target over the steady
+        hold); hold_error_rel (mean error / target); steady_ratio (measured /
+        target); settling_time (s from the start of hold until the error
+        stays within 5 % of the target, NaN if never); estimate_error_rms (N,
+        model estimate - load cell over the steady hold); pull_out_force and
+        pull_grip_force (means over the pull phase, N); peak_current (A,
+        largest |command|).
+
+    Raises
+    ------
+    AnalysisError
+        If the steady hold window holds no sample with a target and a force.
+    """
+    t = data['t']
+    steady = _mask(t, steady_window(windows))
+    target = data['target_force']
+    force = data[force_key]
+    ok = steady & np.isfinite(target) & np.isfinite(force)
+    if ok.sum() < 3:
+        raise AnalysisError('no force samples in the steady hold window')
+    err = force[ok] - target[ok]
+    target_mean = float(np.mean(target[ok]))
+    out = {
+        'target_force': target_mean,
+        'measured_force': float(np.mean(force[ok])),
+        'estimated_force': _mean(data.get('estimated_force', np.full(t.shape, np.nan))[ok]),
+        'hold_error_mean': float(np.mean(err)),
+        'hold_error_rms': float(np.sqrt(np.mean(err ** 2))),
+        'hold_error_max': float(np.max(np.abs(err))),
+        'hold_error_rel': float(np.mean(err) / target_mean) if target_mean > 0 else float('nan'),
+        'steady_ratio': float(np.mean(force[ok]) / target_mean) if target_mean > 0 else float('nan'),
+    }
+    est = data.get('estimated_force')
+    meas = data.get('measured_force')
+    if est is not None and meas is not None:
+        both = steady & np.isfinite(est) & np.isfinite(meas)
+        out['estimate_error_rms'] = (float(np.sqrt(np.mean((est[both] - meas[both]) ** 2)))
+                                     if both.any() else float('nan'))
+    out['settling_time'] = settling_time(t, target, force, windows['hold'])
+    if 'pull' in windows:
+        pull = _mask(t, windows['pull'])
+        out['pull_out_force'] = _mean(data.get('pull_out_force', np.full(t.shape, np.nan))[pull])
+        out['pull_grip_force'] = _mean(force[pull])
+    cmd = data.get('current_command')
+    if cmd is not None and np.isfinite(cmd).any():
+        out['peak_current'] = float(np.nanmax(np.abs(cmd)))
+    return out
+
+
+def settling_time(t: np.ndarray, target: np.ndarray, force: np.ndarray,
+                  hold: tuple[float, float], tolerance: float = 0.05) -> float:
+    """Time (s) from the start of ``hold`` until |force - target| <= tolerance*target for good."""
+    m = _mask(t, hold) & np.isfinite(target) & np.isfinite(force)
+    if m.sum() < 2:
+        return float('nan')
+    tt, tg, f = t[m], target[m], force[m]
+    bad = np.abs(f - tg) > tolerance * np.maximum(np.abs(tg), 1e-9)
+    if not bad.any():
+        return 0.0
+    last_bad = int(np.flatnonzero(bad)[-1])
+    if last_bad == tt.size - 1:
+        return float('nan')
+    return float(tt[last_bad + 1] - hold[0])
+
+
+def spread(ratios: Sequence[float]) -> float:
+    """max - min of the steady hold force / target ratios (NaN if any is missing)."""
+    r = np.asarray(list(ratios), dtype=float)
+    if r.size == 0 or not np.all(np.isfinite(r)):
+        return float('nan')
+    return float(np.max(r) - np.min(r))

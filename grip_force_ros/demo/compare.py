@@ -1,0 +1,268 @@
+"""``grip-force demo --compare-instruments``: one master trajectory, three instruments.
+
+Not rigged: each simulated plant runs with its cable-pulley friction
+coefficient and cable stiffness ``plant_error`` (20 %) off what its YAML says,
+in alternating directions (``friction_scale``/``stiffness_scale`` of the sim;
+the controller is not told). As a lab would, every instrument first does a
+calibration grasp on the load cell (a few force levels); ``calibrate`` fits
+its friction coefficient and writes a calibrated YAML. Then, all through the
+real ROS processes, per instrument:
+
+``controlled``    calibrated YAML, no force sensor (model estimate feedback)
+``uncalibrated``  YAML as shipped, no force sensor
+``sensor``        YAML as shipped, load-cell feedback (force_sensor_enabled)
+``naive``         current proportional to the master closing, ONE gain for all
+
+For each, the steady hold force / target; the spread of a condition is max - min
+over the instruments.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import multiprocessing
+import time
+from pathlib import Path
+from typing import Any, Sequence, TextIO
+
+import numpy as np
+
+from grip_force_ros.demo import comparison_configs
+from grip_force_ros.demo.analysis import spread
+
+CONDITIONS = ('controlled', 'uncalibrated', 'sensor', 'naive')
+#: Master trajectory length of the comparison runs (s): the needle grasp at time_scale 1.
+TASK_DURATION = 5.0
+#: Calibration staircase: shares of the master travel past contact, each held this long (s).
+CALIBRATION_SHARES = (0.25, 0.5, 0.75, 1.0)
+CALIBRATION_HOLD = 0.6
+
+
+def plant_scales(index: int, plant_error: float) -> dict[str, float]:
+    """Sim friction/stiffness scales of instrument ``index``: signs alternate per instrument."""
+    sign = 1.0 if index % 2 == 0 else -1.0
+    return {'friction_scale': round(1.0 + sign * plant_error, 6),
+            'stiffness_scale': round(1.0 - sign * plant_error, 6)}
+
+
+def calibration_csv(params, path: Path) -> Path:
+    """Write the calibration grasp (t, master_angle) for an instrument's force map.
+
+    Open, close to the first level past contact, then a staircase through
+    :data:`CALIBRATION_SHARES` of the travel from the contact angle to fully
+    closed, then open again.
+    """
+    open_angle = min(0.8, params.master_angle_max)
+    contact, closed = params.master_contact_angle, params.master_angle_min
+    rows = [(0.0, open_angle), (0.4, open_angle)]
+    t = 0.4
+    for k, share in enumerate(CALIBRATION_SHARES):
+        t += 0.4 if k == 0 else 0.1
+        angle = contact - share * (contact - closed)
+        rows.append((t, angle))
+        t += CALIBRATION_HOLD
+        rows.append((t, angle))
+    t += 0.3
+    rows.append((t, open_angle))
+    rows.append((t + 0.2, open_angle))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text('t,master_angle\n' + ''.join(f'{a:.4f},{b:.6f}\n' for a, b in rows))
+    return path
+
+
+def naive_gain(reference_config: Path) -> float:
+    """The naive map's one gain: the current (A) that gives grip_force_max on the reference
+    instrument per its shipped model, on the needle (the gain a lab would tune on one tool)."""
+    from grip_force_ros.model import GripForceModel
+    from grip_force_ros.params import load_params_file
+    p = load_params_file(reference_config)
+    jaw = 0.0  # closed on a 0.5 mm needle: the needle contact gain does not depend on it
+    return float(GripForceModel(p).inverse(p.grip_force_max, 0.0, jaw, 'needle'))
+
+
+def _run_worker(job: dict[str, Any]) -> dict[str, Any]:
+    """One run in a fresh process (own rclpy, own GIL). Returns a JSON-able summary."""
+    from grip_force_ros.demo.run import RunSpec, run_task
+    spec = RunSpec(**job['spec'])
+    t0 = time.monotonic()
+    result = run_task(spec, job['out_dir'], job['domain_id'], analyse=job['analyse'],
+                      plot=job['plot'])
+    out = result.as_dict()
+    out['wall_time'] = time.monotonic() - t0
+    return out
+
+
+def _run_all(jobs: list[dict], parallel: bool, log: TextIO | None) -> list[dict]:
+    if not parallel:
+        results = []
+        for job in jobs:
+            results.append(_run_worker(job))
+            _log(log, f"  {job['spec']['label']}: done ({results[-1]['wall_time']:.1f} s)")
+        return results
+    ctx = multiprocessing.get_context('spawn')
+    with cf.ProcessPoolExecutor(max_workers=len(jobs), mp_context=ctx) as pool:
+        futures = [pool.submit(_run_worker, job) for job in jobs]
+        results = []
+        for job, fut in zip(jobs, futures):
+            results.append(fut.result())
+            _log(log, f"  {job['spec']['label']}: done ({results[-1]['wall_time']:.1f} s)")
+        return results
+
+
+def _log(stream: TextIO | None, text: str) -> None:
+    if stream is not None:
+        stream.write(text + '\n')
+        stream.flush()
+
+
+def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = None,
+                        plant_error: float = 0.2, parallel: bool = True,
+                        domain_id: int | None = None, task_duration: float = TASK_DURATION,
+                        log: TextIO | None = None) -> dict[str, Any]:
+    """Calibrate, then run the four conditions on every instrument; return the report.
+
+    Parameters
+    ----------
+    out_dir : path
+        Everything goes here: calibration bags and YAMLs, one directory per run.
+    configs : sequence of Path, optional
+        Instrument YAMLs (default :func:`comparison_configs`).
+    plant_error : float
+        Relative friction / stiffness error of each simulated plant.
+    parallel : bool
+        Run the instruments of a stage at the same time (one process and
+        ROS domain each).
+    domain_id : int, optional
+        First ROS domain id to use (default: free ones).
+
+    Returns
+    -------
+    dict
+        ``instruments`` (per-instrument details) and ``spread_controlled``,
+        ``spread_uncalibrated``, ``spread_sensor``, ``spread_naive``.
+    """
+    from grip_force_ros.demo.calibration import calibrated_yaml, fit_instrument
+    from grip_force_ros.demo.processes import pick_domain_ids
+    from grip_force_ros.logs import read_log
+    from grip_force_ros.params import load_params_file
+
+    started = time.monotonic()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    configs = [Path(c) for c in (configs or comparison_configs())]
+    if len(configs) < 2:
+        raise ValueError('--compare-instruments needs at least two instrument YAMLs')
+    names = [load_params_file(c).instrument_name for c in configs]
+    n = len(configs)
+    if domain_id is not None:
+        domains = list(range(domain_id, domain_id + n))
+    else:
+        domains = pick_domain_ids(n)
+    scales = [plant_scales(k, plant_error) for k in range(n)]
+    gain = naive_gain(configs[0])
+    _log(log, f'compare: {n} instruments {names}, plants off by {plant_error:.0%} '
+              f'(friction, stiffness), naive gain {gain:.4f} A, domains {domains}')
+
+    # --- 1. calibration grasp on the load cell, per instrument ------------------------------
+    _log(log, 'stage 1/5: calibration grasps (load cell)')
+    jobs = []
+    for k, config in enumerate(configs):
+        params = load_params_file(config)
+        csv_path = calibration_csv(params, out_dir / names[k] / 'calibration_master.csv')
+        jobs.append({'spec': dict(config=config, duration=0.0, label=f'{names[k]}/calibration',
+                                  controller_overrides={'force_sensor_enabled': True},
+                                  sim_overrides=scales[k],
+                                  master_overrides={'trajectory': 'csv',
+                                                    'trajectory_file': str(csv_path.resolve())}),
+                     'out_dir': str(out_dir / names[k] / 'calibration'),
+                     'domain_id': domains[k], 'analyse': False, 'plot': False})
+    calib_runs = _run_all(jobs, parallel, log)
+    calibrated, calibrations = [], []
+    for k, (config, run) in enumerate(zip(configs, calib_runs)):
+        params = load_params_file(config)
+        fit = fit_instrument(params, read_log(run['bag']))
+        path = out_dir / names[k] / f'{names[k]}_calibrated.yaml'
+        path.write_text(calibrated_yaml(config, fit, run['bag']))
+        calibrated.append(path)
+        calibrations.append({**fit.as_dict(), 'yaml': str(path), 'bag': run['bag']})
+        _log(log, f"  {names[k]}: mu {fit.before['pulley_friction_coefficient']:.4f} -> "
+                  f"{fit.values['pulley_friction_coefficient']:.4f} +/- "
+                  f"{fit.std_errors['pulley_friction_coefficient']:.4f} (plant "
+                  f"{fit.before['pulley_friction_coefficient'] * scales[k]['friction_scale']:.4f})")
+
+    # --- 2..5. the four conditions -------------------------------------------------------
+    def spec_for(condition: str, k: int) -> dict:
+        base = dict(config=configs[k], sim_config=configs[k], duration=task_duration,
+                    label=f'{names[k]}/{condition}', sim_overrides=scales[k])
+        if condition == 'controlled':
+            base.update(config=calibrated[k], controller_overrides={'force_sensor_enabled': False})
+        elif condition == 'uncalibrated':
+            base.update(controller_overrides={'force_sensor_enabled': False})
+        elif condition == 'sensor':
+            base.update(controller_overrides={'force_sensor_enabled': True})
+        else:
+            base.update(controller='naive', controller_overrides={'naive_current_closed': gain})
+        return base
+
+    runs: dict[str, list[dict]] = {}
+    for stage, condition in enumerate(CONDITIONS, start=2):
+        _log(log, f'stage {stage}/5: {condition}')
+        jobs = [{'spec': spec_for(condition, k),
+                 'out_dir': str(out_dir / names[k] / condition), 'domain_id': domains[k],
+                 'analyse': True, 'plot': True} for k in range(n)]
+        runs[condition] = _run_all(jobs, parallel, log)
+
+    instruments = []
+    for k in range(n):
+        per = {'name': names[k], 'config': str(configs[k]), 'plant': scales[k],
+               'calibration': calibrations[k], 'runs': {}}
+        for condition in CONDITIONS:
+            r = runs[condition][k]
+            m = r['metrics'] or {}
+            per['runs'][condition] = {
+                'steady_ratio': m.get('steady_ratio'), 'target_force': m.get('target_force'),
+                'measured_force': m.get('measured_force'),
+                'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag']}
+        instruments.append(per)
+    report: dict[str, Any] = {'instruments': instruments}
+    for condition in CONDITIONS:
+        report[f'spread_{condition}'] = spread(
+            [i['runs'][condition]['steady_ratio'] for i in instruments])
+    report['naive_current_closed'] = gain
+    report['plant_error'] = plant_error
+    report['task_duration'] = task_duration
+    report['wall_time'] = time.monotonic() - started
+    report['out_dir'] = str(out_dir)
+    _json_safe(report)
+    (out_dir / 'compare.json').write_text(json.dumps(report, indent=1))
+    return report
+
+
+def _json_safe(obj: Any) -> Any:
+    """Replace NaN by None in place (JSON has no NaN)."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            obj[k] = _json_safe(v)
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            obj[i] = _json_safe(v)
+    elif isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """A table: steady hold force / target per instrument and condition, then the spreads."""
+    lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in CONDITIONS)]
+    for inst in report['instruments']:
+        cells = []
+        for c in CONDITIONS:
+            v = inst['runs'][c]['steady_ratio']
+            cells.append(f'{v:14.3f}' if v is not None else f"{'n/a':>14s}")
+        lines.append(f"{inst['name']:28s}" + ''.join(cells))
+    lines.append(f"{'spread (max - min)':28s}" + ''.join(
+        f"{report[f'spread_{c}']:14.3f}" if report[f'spread_{c}'] is not None else f"{'n/a':>14s}"
+        for c in CONDITIONS))
+    lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "
+                 f"{report['wall_time']:.0f} s; {report['out_dir']})")
+    return '\n'.join(lines)

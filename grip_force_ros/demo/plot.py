@@ -1,0 +1,90 @@
+"""The summary plot of a demo run (PNG, matplotlib Agg). No ROS."""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+_PHASE_COLOURS = {'approach': '#f0f0f0', 'close': '#e3ecf7', 'hold': '#e6f4e6',
+                  'pull': '#fbeede', 'release': '#f3e6f3'}
+
+
+def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[float, float]],
+                 metrics: Mapping[str, float], path: str | Path, title: str = '') -> Path:
+    """Write the summary figure of one run.
+
+    Panels: master gripper angle and jaw angle (rad); target, estimated and
+    measured grip force and the estimated needle pull-out force (N); current
+    command and measured current (A). Phases are shaded; the steady hold
+    window is marked.
+
+    Returns
+    -------
+    Path
+        The PNG written.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from grip_force_ros.demo.analysis import steady_window
+
+    path = Path(path)
+    t = data['t']
+    nan = np.full(t.shape, np.nan)
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), sharex=True,
+                             gridspec_kw={'height_ratios': [1, 1.6, 1]})
+    for ax in axes:
+        for name, (a, b) in windows.items():
+            ax.axvspan(a, b, color=_PHASE_COLOURS.get(name, '#f7f7f7'), zorder=0)
+        ax.grid(True, alpha=0.3)
+    for name, (a, b) in windows.items():
+        axes[0].text(0.5 * (a + b), 1.0, name, transform=axes[0].get_xaxis_transform(),
+                     ha='center', va='bottom', fontsize=9)
+
+    ax = axes[0]
+    ax.plot(t, data.get('master_angle', nan), label='master gripper angle', color='tab:blue')
+    ax.plot(t, data.get('jaw_angle', nan), label='jaw angle (measured)', color='tab:gray', lw=1)
+    ax.set_ylabel('angle [rad]')
+    ax.legend(loc='upper right', fontsize=8)
+
+    ax = axes[1]
+    ax.plot(t, data.get('target_force', nan), label='target grip force', color='black', lw=2)
+    ax.plot(t, data.get('estimated_force', nan), label='estimated grip force (model)',
+            color='tab:orange', lw=1.2)
+    ax.plot(t, data.get('measured_force', nan), label='measured grip force (load cell)',
+            color='tab:green', lw=1.2, alpha=0.9)
+    ax.plot(t, data.get('pull_out_force', nan), label='needle pull-out force (estimated)',
+            color='tab:purple', lw=1.2, ls='--')
+    if 'hold' in windows:
+        a, b = steady_window(windows)
+        ax.axvspan(a, b, ymin=0, ymax=0.04, color='tab:green', alpha=0.6)
+        ax.annotate('steady hold', ((a + b) / 2, 0.05), xycoords=('data', 'axes fraction'),
+                    ha='center', fontsize=8)
+    ax.set_ylabel('force [N]')
+    ax.legend(loc='upper left', fontsize=8)
+    if metrics:
+        ax.text(0.99, 0.97,
+                'steady hold: target {:.3f} N, measured {:.3f} N\n'
+                'error mean {:+.3f} N, rms {:.3f} N, max {:.3f} N'.format(
+                    metrics.get('target_force', np.nan), metrics.get('measured_force', np.nan),
+                    metrics.get('hold_error_mean', np.nan), metrics.get('hold_error_rms', np.nan),
+                    metrics.get('hold_error_max', np.nan)),
+                transform=ax.transAxes, ha='right', va='top', fontsize=8,
+                bbox={'facecolor': 'white', 'alpha': 0.8, 'edgecolor': '#cccccc'})
+
+    ax = axes[2]
+    ax.plot(t, data.get('current_command', nan), label='current command', color='tab:red')
+    ax.plot(t, data.get('current', nan), label='measured current', color='tab:brown', lw=1,
+            alpha=0.8)
+    ax.set_ylabel('current [A]')
+    ax.set_xlabel('time since the master started the task [s]')
+    ax.legend(loc='upper right', fontsize=8)
+
+    fig.suptitle(title or 'grip-force demo: needle grasp')
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,196 @@
+"""A rosbag2 (MCAP) recorder and a live cache of the latest values, in one rclpy node.
+
+This is the only module of ``grip_force_ros.demo`` besides the monitor that
+imports rclpy. Messages are received serialized (``raw=True``) and written
+as they are, with the publisher's type name and offered QoS, so that
+``ros2 bag info`` / ``ros2 bag play`` elsewhere read the bag as if
+``ros2 bag record`` had made it.
+"""
+from __future__ import annotations
+
+import importlib
+import threading
+import time
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
+                                QosReliability, QosTime)
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from grip_force_ros.demo.messages import TOPIC_TYPES, absolute
+
+_INFINITE = QosTime(2147483647, 4294967295)  # what rosbag2 writes for an infinite duration
+
+
+def message_class(type_name: str):
+    """The rclpy message class of 'pkg/msg/Name'."""
+    pkg, _, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{pkg}.msg'), name)
+
+
+def _qos_time(duration) -> QosTime:
+    ns = int(duration.nanoseconds)
+    if ns <= 0 or ns >= 2**63 - 1:
+        return _INFINITE if ns else QosTime(0, 0)
+    return QosTime(ns // 1_000_000_000, ns % 1_000_000_000)
+
+
+def _enum(enum_cls, policy) -> Any:
+    try:
+        return enum_cls[policy.name]
+    except (KeyError, AttributeError):
+        return enum_cls.UNKNOWN
+
+
+def to_bag_qos(profile: QoSProfile) -> Qos:
+    """An rclpy QoS profile as the rosbags metadata record."""
+    return Qos(history=_enum(QosHistory, profile.history), depth=int(profile.depth),
+               reliability=_enum(QosReliability, profile.reliability),
+               durability=_enum(QosDurability, profile.durability),
+               deadline=_qos_time(profile.deadline), lifespan=_qos_time(profile.lifespan),
+               liveliness=_enum(QosLiveliness, profile.liveliness),
+               liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
+               avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
+
+
+def subscription_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
+    """A QoS that matches every offered profile (reliable only if all offer it)."""
+    offered = list(offered)
+    reliable = bool(offered) and all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    transient = bool(offered) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                      for q in offered)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient
+                      else DurabilityPolicy.VOLATILE)
+
+
+class RecorderNode(Node):
+    """Subscribe to ``topics`` as their publishers appear; write every message to a bag.
+
+    Parameters
+    ----------
+    bag_path : path or None
+        Directory of the new rosbag2 (must not exist). None: record nothing,
+        only keep the latest message of each topic (the monitor uses that).
+    topic_types : mapping
+        Topic -> type name ('sensor_msgs/msg/JointState').
+    """
+
+    def __init__(self, bag_path: str | Path | None, topic_types: Mapping[str, str] = TOPIC_TYPES,
+                 node_name: str = 'grip_force_recorder', context=None):
+        super().__init__(node_name, context=context)
+        self.topic_types = {absolute(t): ty for t, ty in topic_types.items()}
+        self._short = {absolute(t): t for t in topic_types}
+        self._lock = threading.Lock()
+        self._latest: dict[str, tuple[float, bytes]] = {}
+        self.counts: dict[str, int] = {t: 0 for t in self.topic_types}
+        self._subs: dict[str, Any] = {}
+        self._connections: dict[str, Any] = {}
+        self._typestore = get_typestore(Stores.ROS2_JAZZY)
+        self._writer: Writer | None = None
+        if bag_path is not None:
+            self._writer = Writer(Path(bag_path), version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        self._discovery_timer = self.create_timer(0.05, self._discover)
+        self._discover()
+
+    # -- subscriptions -----------------------------------------------------
+    def _discover(self) -> None:
+        for topic, type_name in self.topic_types.items():
+            if topic in self._subs:
+                continue
+            infos = [i for i in self.get_publishers_info_by_topic(topic)
+                     if i.topic_type == type_name]
+            if not infos:
+                continue
+            offered = [i.qos_profile for i in infos]
+            self._subscribe(topic, type_name, subscription_qos(offered), offered)
+        if len(self._subs) == len(self.topic_types):
+            self._discovery_timer.cancel()
+
+    def _subscribe(self, topic: str, type_name: str, qos: QoSProfile,
+                   offered: list[QoSProfile]) -> None:
+        if self._writer is not None:
+            self._connections[topic] = self._writer.add_connection(
+                topic, type_name, typestore=self._typestore, serialization_format='cdr',
+                offered_qos_profiles=[to_bag_qos(q) for q in offered])
+
+        def callback(data: bytes, topic=topic) -> None:
+            now_ns = time.time_ns()
+            with self._lock:
+                self._latest[topic] = (now_ns * 1e-9, data)
+                self.counts[topic] += 1
+                if self._writer is not None:
+                    self._writer.write(self._connections[topic], now_ns, data)
+
+        self._subs[topic] = self.create_subscription(message_class(type_name), topic, callback,
+                                                     qos, raw=True)
+
+    @property
+    def subscribed(self) -> list[str]:
+        """Topics (as in topics.py) with a live subscription."""
+        return [self._short[t] for t in self._subs]
+
+    # -- live values ---------------------------------------------------------
+    def latest(self, topic: str) -> tuple[float, Any] | None:
+        """(receive time [s], deserialized message) of the newest message on ``topic``."""
+        topic = absolute(topic)
+        with self._lock:
+            item = self._latest.get(topic)
+        if item is None:
+            return None
+        return item[0], deserialize_message(item[1], message_class(self.topic_types[topic]))
+
+    def count(self, topic: str) -> int:
+        with self._lock:
+            return self.counts[absolute(topic)]
+
+    # -- end -----------------------------------------------------------------
+    def close(self) -> Path | None:
+        """Close the bag (topics never seen get a connection with no messages)."""
+        with self._lock:
+            if self._writer is None:
+                return None
+            for topic, type_name in self.topic_types.items():
+                if topic not in self._connections:
+                    default = QoSProfile(depth=10)
+                    self._connections[topic] = self._writer.add_connection(
+                        topic, type_name, typestore=self._typestore,
+                        offered_qos_profiles=[to_bag_qos(default)])
+            self._writer.close()
+            path, self._writer = self._writer.path, None
+        return path
+
+
+class SpinThread:
+    """Spin one node on a background thread until :meth:`stop`."""
+
+    def __init__(self, node: Node):
+        self.node = node
+        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor.add_node(node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f'spin-{node.get_name()}',
+                                        daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set() and rclpy.ok(context=self.node.context):
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def start(self) -> 'SpinThread':
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.executor.remove_node(self.node)

@@ -1,0 +1,297 @@
+"""One closed-loop run through real ROS processes: start, record, show, stop, analyse.
+
+:func:`run_task` starts ``sim_instrument``, the controller (or the naive
+map) and ``master`` as separate processes on one ROS domain, records every
+topic of :data:`grip_force_ros.topics.RECORDED` to a rosbag2 (MCAP), shows
+live progress, stops every process (SIGINT, wait, SIGTERM, SIGKILL) whatever
+happens, then reads the bag back and computes the figures of
+:mod:`grip_force_ros.demo.analysis`.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from grip_force_ros import topics
+from grip_force_ros.demo import analysis
+from grip_force_ros.demo.messages import values_of
+from grip_force_ros.demo.processes import (ProcessError, ProcessGroup, node_command, ros_args,
+                                           ros_environment)
+from grip_force_ros.params import read_params_yaml
+from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
+
+#: Seconds the nodes get to start and be discovered before the run is abandoned.
+STARTUP_TIMEOUT = 30.0
+#: Seconds recorded after the master's trajectory ends.
+TAIL = 0.3
+
+
+def default_duration() -> float:
+    """Length (s) of the needle grasp at time_scale 1."""
+    return needle_grasp().duration
+
+
+@dataclass
+class RunSpec:
+    """What one run does.
+
+    Attributes
+    ----------
+    config : Path
+        Instrument YAML given to the controller (``--params-file``).
+    sim_config : Path or None
+        YAML given to the simulated instrument (default: ``config``). The
+        compare run gives the sim the YAML as shipped and the controller the
+        calibrated one.
+    duration : float
+        Length of the master's task (s); the needle grasp is time-scaled to it.
+    controller : str
+        'controller' (the package's node) or 'naive' (current proportional to
+        the master closing, :mod:`grip_force_ros.demo.naive_node`).
+    controller_overrides, sim_overrides, master_overrides : dict
+        ``-p name:=value`` per process.
+    label : str
+        Name of the run (log files, progress lines).
+    """
+
+    config: Path
+    duration: float = 0.0
+    sim_config: Path | None = None
+    controller: str = 'controller'
+    controller_overrides: dict = field(default_factory=dict)
+    sim_overrides: dict = field(default_factory=dict)
+    master_overrides: dict = field(default_factory=dict)
+    label: str = 'demo'
+
+    def master_values(self) -> dict[str, Any]:
+        """The master parameters: schema defaults, then the YAML, then overrides."""
+        values = {s.name: s.default for s in MASTER_SPECS}
+        try:
+            yaml_values = read_params_yaml(self.config)
+        except ValueError:
+            yaml_values = {}
+        values.update({k: v for k, v in yaml_values.items() if k in values})
+        values.update(self.master_overrides)
+        if values['trajectory'] == 'needle_grasp' and self.duration > 0:
+            values['time_scale'] = self.duration / default_duration()
+        return values
+
+    def trajectory(self) -> Trajectory:
+        v = self.master_values()
+        return make_trajectory(v['trajectory'], v['trajectory_file'],
+                               master_open_angle=v['master_open_angle'],
+                               master_closed_angle=v['master_closed_angle'],
+                               time_scale=v['time_scale'])
+
+
+@dataclass
+class RunResult:
+    """Outcome of :func:`run_task` (paths, message counts, figures)."""
+
+    spec: RunSpec
+    out_dir: Path
+    bag: Path
+    domain_id: int
+    counts: dict[str, int]
+    exit_codes: dict[str, int | None]
+    trajectory: Trajectory
+    data: dict | None = None
+    windows: dict | None = None
+    metrics: dict | None = None
+    plot: Path | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            'label': self.spec.label, 'config': str(self.spec.config),
+            'sim_config': str(self.spec.sim_config or self.spec.config),
+            'controller': self.spec.controller,
+            'controller_overrides': self.spec.controller_overrides,
+            'sim_overrides': self.spec.sim_overrides,
+            'duration': self.trajectory.duration, 'domain_id': self.domain_id,
+            'out_dir': str(self.out_dir), 'bag': str(self.bag),
+            'plot': str(self.plot) if self.plot else None,
+            'messages': self.counts, 'exit_codes': self.exit_codes,
+            'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
+            'metrics': self.metrics,
+        }
+
+
+def _node_argv(name: str, spec: RunSpec) -> list[str]:
+    if name == 'master':
+        overrides = dict(spec.master_values())
+        overrides['exit_when_done'] = True
+        return node_command('master') + ros_args(spec.config, overrides)
+    if name == 'sim_instrument':
+        return node_command('sim_instrument') + ros_args(spec.sim_config or spec.config,
+                                                         spec.sim_overrides)
+    if spec.controller == 'naive':
+        return ([sys.executable, '-m', 'grip_force_ros.demo.naive_node']
+                + ros_args(spec.config, spec.controller_overrides, node_name='controller'))
+    return node_command('controller') + ros_args(spec.config, spec.controller_overrides)
+
+
+def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float,
+              what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        group.check_alive()
+        if time.monotonic() > deadline:
+            raise ProcessError(f'timed out after {timeout:.0f} s waiting for {what}')
+        time.sleep(0.05)
+
+
+def live_status(recorder, trajectory: Trajectory, elapsed: float) -> dict[str, Any]:
+    """The newest values of the force and state topics, and the task phase."""
+    status: dict[str, Any] = {'t': elapsed, 'phase': trajectory.phase(elapsed),
+                              'duration': trajectory.duration}
+    for topic in (topics.MASTER_JS, topics.TARGET_FORCE, topics.ESTIMATED_FORCE,
+                  topics.MEASURED_FORCE, topics.SERVO_CURRENT):
+        item = recorder.latest(topic)
+        if item is not None:
+            status.update(values_of(topic, item[1]))
+    return status
+
+
+def format_status(s: Mapping[str, Any], label: str = '') -> str:
+    """One progress line: phase, time, master angle, target vs measured force, current."""
+    def f(key, fmt):
+        v = s.get(key)
+        return format(v, fmt) if isinstance(v, float) and math.isfinite(v) else '  -  '
+    return (f"{label + ' ' if label else ''}[{s.get('phase', '?'):8s} {s.get('t', 0.0):5.2f}/"
+            f"{s.get('duration', 0.0):.2f} s] master {f('master_angle', '6.3f')} rad | target "
+            f"{f('target_force', '6.3f')} N  measured {f('measured_force', '6.3f')} N  "
+            f"estimated {f('estimated_force', '6.3f')} N | current {f('current_command', '6.3f')} A")
+
+
+class Progress:
+    """Live progress on a stream: in place on a TTY, plain lines otherwise."""
+
+    def __init__(self, stream=None, label: str = '', every: float = 0.5):
+        self.stream = stream
+        self.label = label
+        self.tty = bool(stream is not None and getattr(stream, 'isatty', lambda: False)())
+        self.every = 0.1 if self.tty else every
+        self._last = -1e9
+
+    def __call__(self, status: Mapping[str, Any]) -> None:
+        if self.stream is None:
+            return
+        now = time.monotonic()
+        if now - self._last < self.every:
+            return
+        self._last = now
+        line = format_status(status, self.label)
+        if self.tty:
+            self.stream.write('\r\033[K' + line)
+        else:
+            self.stream.write(line + '\n')
+        self.stream.flush()
+
+    def close(self, message: str = '') -> None:
+        if self.stream is None:
+            return
+        if self.tty:
+            self.stream.write('\r\033[K')
+        if message:
+            self.stream.write(message + '\n')
+        self.stream.flush()
+
+
+def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
+             progress: Callable[[Mapping[str, Any]], None] | None = None,
+             analyse: bool = True, plot: bool = True,
+             startup_timeout: float = STARTUP_TIMEOUT) -> RunResult:
+    """Run one task through the real ROS processes and record it.
+
+    Parameters
+    ----------
+    spec : RunSpec
+    out_dir : path
+        New directory for the bag (``bag/``), the node logs (``logs/``) and
+        the plot (``summary.png``).
+    domain_id : int
+        ROS_DOMAIN_ID of the nodes and the recorder.
+    progress : callable, optional
+        Called about every 0.1 s with :func:`live_status`.
+    analyse, plot : bool
+        Read the bag back and compute the figures / write the summary plot.
+
+    Raises
+    ------
+    ProcessError
+        A node failed to start or died during the run.
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag_path = out_dir / 'bag'
+    trajectory = spec.trajectory()
+    env = ros_environment(domain_id)
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    recorder = spinner = None
+    group = ProcessGroup(env, log_dir=out_dir / 'logs')
+    try:
+        recorder = RecorderNode(bag_path, context=context)
+        spinner = SpinThread(recorder).start()
+        with group:
+            group.start('sim_instrument', _node_argv('sim_instrument', spec))
+            group.start('controller', _node_argv('controller', spec))
+            needed = [topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.SERVO_CURRENT]
+            _wait_for(lambda: all(t in recorder.subscribed for t in needed)
+                      and all(recorder.count(t) > 0 for t in needed),
+                      group, startup_timeout, 'the simulated instrument and the controller')
+            master = group.start('master', _node_argv('master', spec))
+            _wait_for(lambda: topics.MASTER_JS in recorder.subscribed, group, startup_timeout,
+                      'the master')
+            started = time.monotonic()
+            end = trajectory.duration + TAIL
+            while True:
+                elapsed = time.monotonic() - started
+                if progress is not None:
+                    progress(live_status(recorder, trajectory, elapsed))
+                if elapsed > end or not master.alive():
+                    break
+                group.check_alive()
+                time.sleep(0.05)
+            exit_codes = group.stop()
+    finally:
+        if spinner is not None:
+            spinner.stop()
+        counts = {}
+        if recorder is not None:
+            counts = {t: recorder.count(t) for t in topics.RECORDED}
+            recorder.close()
+            recorder.destroy_node()
+        rclpy.shutdown(context=context)
+    result = RunResult(spec, out_dir, bag_path, domain_id, counts, exit_codes, trajectory)
+    if analyse:
+        analyse_run(result, plot=plot)
+    return result
+
+
+def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
+    """Read the run's bag back; phases, figures and (optionally) the summary plot."""
+    from grip_force_ros.demo.series import read_bag_series, resample
+
+    series, _diagnostics = read_bag_series(result.bag)
+    raw = resample(series, rate=500.0, t0=0.0)
+    start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
+    data = dict(raw)
+    data['t'] = raw['t'] - start
+    windows = analysis.phase_windows(result.trajectory, 0.0)
+    result.data, result.windows = data, windows
+    result.metrics = analysis.force_metrics(data, windows)
+    if plot:
+        from grip_force_ros.demo.plot import summary_plot
+        result.plot = summary_plot(data, windows, result.metrics, result.out_dir / 'summary.png',
+                                   title=f'grip-force demo: needle grasp ({result.spec.label})')
+    return result

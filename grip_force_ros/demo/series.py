@@ -1,0 +1,101 @@
+"""Time series of a run, read back from its rosbag2 (with ``rosbags``; no rclpy).
+
+:func:`read_bag_series` returns, per topic, the sample times and the plain
+values of :func:`grip_force_ros.demo.messages.values_of`; :func:`resample`
+puts every signal on one uniform time grid for the analysis and the plot.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from grip_force_ros import topics
+from grip_force_ros.demo.messages import FIELDS, diagnostic_summary, values_of
+
+
+class BagError(ValueError):
+    """The bag cannot be read or lacks a topic the analysis needs."""
+
+
+def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]], list]:
+    """Read a demo bag.
+
+    Returns
+    -------
+    series : dict
+        Topic (as in topics.py) -> {'t': times [s], <field>: values (SI)}.
+        Times are the recorder's receive times (one clock for every node,
+        whatever clock each node stamps its messages with).
+    diagnostics : list
+        (time [s], list of status dicts) per /diagnostics message.
+    """
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    wanted = {('/' + t.lstrip('/')): t for t in FIELDS}
+    rows: dict[str, dict[str, list]] = {t: {'t': [], **{f: [] for f in FIELDS[t]}} for t in FIELDS}
+    diagnostics = []
+    try:
+        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+            for conn, stamp_ns, raw in reader.messages():
+                msg = reader.deserialize(raw, conn.msgtype)
+                t = stamp_ns * 1e-9
+                if conn.topic == topics.DIAGNOSTICS:
+                    diagnostics.append((t, diagnostic_summary(msg)))
+                    continue
+                short = wanted.get(conn.topic)
+                if short is None:
+                    continue
+                row = rows[short]
+                row['t'].append(t)
+                for name, value in values_of(short, msg).items():
+                    row[name].append(value)
+    except Exception as exc:  # rosbags raises several types for unreadable bags
+        raise BagError(f'{path}: cannot read rosbag2: {exc}') from exc
+    series = {}
+    for topic, row in rows.items():
+        t = np.asarray(row['t'], dtype=float)
+        order = np.argsort(t, kind='stable')
+        series[topic] = {k: np.asarray(v, dtype=float)[order] for k, v in row.items()}
+    return series, diagnostics
+
+
+def resample(series: Mapping[str, Mapping[str, np.ndarray]], rate: float = 500.0,
+             t0: float | None = None) -> dict[str, np.ndarray]:
+    """Every field of every topic on one uniform grid (linear interpolation).
+
+    Parameters
+    ----------
+    series : mapping
+        As returned by :func:`read_bag_series`.
+    rate : float
+        Grid rate (Hz).
+    t0 : float, optional
+        Time origin (s) subtracted from the grid; default the first sample.
+
+    Returns
+    -------
+    dict
+        't' (s since ``t0``) and one array per field; a field whose topic has
+        no samples is all NaN.
+    """
+    starts = [s['t'][0] for s in series.values() if s['t'].size]
+    ends = [s['t'][-1] for s in series.values() if s['t'].size]
+    if not starts:
+        raise BagError('no samples on any topic')
+    start, end = min(starts), max(ends)
+    grid = np.arange(start, end, 1.0 / rate)
+    out = {'t': grid - (start if t0 is None else t0)}
+    for topic, s in series.items():
+        for name, values in s.items():
+            if name == 't':
+                continue
+            ok = np.isfinite(values)
+            if ok.sum() >= 2:
+                out[name] = np.interp(grid, s['t'][ok], values[ok], left=np.nan, right=np.nan)
+            else:
+                out[name] = np.full(grid.shape, np.nan)
+    return out
