@@ -1,5 +1,147 @@
-"""Simulated-instrument parameters (groups 'sim' and 'effects'). Owned by sim/."""
-from grip_force_ros.params.schema import ParamSpec  # noqa: F401
+"""Simulated-instrument parameters (groups 'sim' and 'effects'). Owned by sim/.
 
-SIM: list = []
-EFFECTS: list = []
+The 'sim' group describes the plant that stands in for hardware: what the
+paper does not give (cable free length, motor inertia, damping, contact
+stiffness, sensor noise) is our stated assumption. ``friction_scale`` and
+``stiffness_scale`` make the plant differ from the instrument YAML on purpose
+(the controller is not told).
+
+The 'effects' group holds one strength per unmodelled effect, named as in
+DESIGN.md; every strength defaults to 0 (= off).
+"""
+import math
+
+from grip_force_ros.params.schema import ParamSpec
+
+
+def _sim(*args, **kwargs):
+    return ParamSpec(*args, group='sim', **kwargs)
+
+
+def _fx(*args, **kwargs):
+    return ParamSpec(*args, group='effects', **kwargs)
+
+
+SIM = [
+    _sim('sim_rate', 'double', 10000.0, 'Hz',
+         'Internal integration rate of the plant; step(dt) is split into sub-steps of at most '
+         '1/sim_rate.', min=1000.0, max=200000.0),
+    _sim('publish_rate', 'double', 1000.0, 'Hz',
+         'Rate at which the simulated instrument node steps and publishes its sensors.',
+         min=1.0, max=10000.0),
+    _sim('cable_length', 'double', 0.09, 'm',
+         'Effective free length L of the jaw cable (stiffness k = E*A/L). Assumed: 90 mm makes the '
+         "elastic jaw-angle loss ~1 rad/A, the paper's creep term (1.046 rad/A).",
+         min=1e-3, max=2.0),
+    _sim('cable_jaw_side_fraction', 'double', 0.2, '',
+         'Share of the cable length between the guide pulleys and the jaw (the rest runs from the '
+         'drum to the pulleys). Splits the cable into two springs around the pulley friction.',
+         min=0.01, max=0.99),
+    _sim('stiffness_scale', 'double', 1.0, '',
+         'Plant cable stiffness = YAML value (E*A/L) times this. 1 = the plant matches the YAML.',
+         min=0.05, max=20.0),
+    _sim('friction_scale', 'double', 1.0, '',
+         'Plant cable-pulley friction coefficient = YAML mu times this. 1 = the plant matches the YAML.',
+         min=0.0, max=5.0),
+    _sim('motor_inertia', 'double', 1.0e-5, 'kg*m^2',
+         'Motor rotor (and gear) inertia reflected to the drum, added to the drum inertia '
+         '0.5*m0*r0^2. Not in the paper; assumed: a flat brushless motor of this torque class.',
+         min=0.0, max=1e-2),
+    _sim('jaw_inertia', 'double', 4.8e-8, 'kg*m^2',
+         'Jaw inertia about its pivot. Default: a 1 g jaw (Table 1) as a 12 mm rod, m*l^2/3.',
+         min=1e-12, max=1e-3),
+    _sim('drum_damping', 'double', 6.0e-3, 'N*m*s/rad',
+         'Viscous damping on the drum (motor drive, bearings, cable internal damping seen at the '
+         'drum). Assumed: damping ratio ~0.5 of the drum-cable mode at the defaults (the paper only '
+         'says the cable oscillation dies out within 0.1 s).', min=0.0, max=1.0),
+    _sim('jaw_damping', 'double', 1.0e-5, 'N*m*s/rad',
+         'Viscous damping at the jaw pivot that is part of the nominal plant (small).',
+         min=0.0, max=1.0),
+    _sim('current_loop_time_constant', 'double', 2.0e-4, 's',
+         'First-order lag of the motor current loop: actual current follows the command with this '
+         'time constant.', min=0.0, max=0.1),
+    _sim('needle_stiffness', 'double', 2.0e5, 'N/m',
+         'Contact stiffness of jaw + 0.5 mm needle, at the contact point (l from the pivot).',
+         min=1.0, max=1e8),
+    _sim('tissue_stiffness', 'double', 2.0e3, 'N/m',
+         'Tissue contact stiffness at small compression (at the mean contact arm (l+l\')/2).',
+         min=1.0, max=1e8),
+    _sim('tissue_model', 'string', 'exponential', '',
+         "Tissue force law: 'linear' F = k*d, or 'exponential' F = (k/b)*(exp(b*d) - 1) "
+         '(soft tissue stiffens with compression d).', choices=('linear', 'exponential')),
+    _sim('tissue_exponential_rate', 'double', 500.0, '1/m',
+         "Rate b of the exponential tissue law (stiffness grows by e per 1/b of compression).",
+         min=0.0, max=1e5),
+    _sim('rigid_stiffness', 'double', 1.0e6, 'N/m',
+         'Contact stiffness of a rigid object (and of the jaw hard stops), at the contact point.',
+         min=1.0, max=1e9),
+    _sim('contact_damping_ratio', 'double', 0.3, '',
+         'Damping of every contact, as a ratio of critical damping of the jaw on that contact.',
+         min=0.0, max=5.0),
+    _sim('needle_contact_angle', 'double', 0.0417, 'rad',
+         'Jaw angle at which the jaw touches the needle (0.5 mm at l = 12 mm: 0.5/12).',
+         min=0.0, max=math.pi / 2),
+    _sim('tissue_contact_angle', 'double', 0.25, 'rad',
+         'Jaw angle at which the jaw touches the tissue (object position).', min=0.0, max=math.pi / 2),
+    _sim('rigid_contact_angle', 'double', 0.1, 'rad',
+         'Jaw angle at which the jaw touches the rigid object (object position).',
+         min=0.0, max=math.pi / 2),
+    _sim('initial_jaw_angle', 'double', 0.6, 'rad',
+         'Jaw angle at reset (no cable tension, motor angle 0).', min=0.0, max=math.pi / 2),
+    _sim('initial_wrist_angle', 'double', 0.0, 'rad',
+         'Wrist pitch at reset. The wrist is a kinematic input (set_wrist_angle).',
+         min=-math.pi / 2, max=math.pi / 2),
+    _sim('sim_object', 'string', 'needle', '',
+         'Object between the jaws: free, rigid, tissue or needle.',
+         choices=('free', 'rigid', 'tissue', 'needle')),
+    _sim('current_noise_std', 'double', 0.002, 'A',
+         'Std of white noise on the measured motor current.', min=0.0, max=1.0),
+    _sim('motor_angle_noise_std', 'double', 1.0e-4, 'rad',
+         'Std of white noise on the drum angle (encoder).', min=0.0, max=1.0),
+    _sim('motor_velocity_noise_std', 'double', 0.01, 'rad/s',
+         'Std of white noise on the drum velocity.', min=0.0, max=100.0),
+    _sim('wrist_angle_noise_std', 'double', 1.0e-3, 'rad',
+         'Std of white noise on the measured wrist angle.', min=0.0, max=1.0),
+    _sim('jaw_angle_noise_std', 'double', 1.0e-3, 'rad',
+         'Std of white noise on the measured jaw angle.', min=0.0, max=1.0),
+    _sim('jaw_velocity_noise_std', 'double', 0.05, 'rad/s',
+         'Std of white noise on the measured jaw velocity.', min=0.0, max=100.0),
+    _sim('grip_force_noise_std', 'double', 0.02, 'N',
+         'Std of white noise on the load-cell grip force.', min=0.0, max=10.0),
+    _sim('sim_seed', 'integer', 0, '',
+         'Seed of the sensor-noise generator of the simulated instrument.', min=0, max=2**31 - 1),
+]
+
+EFFECTS = [
+    _fx('pivot_coulomb_friction', 'double', 0.0, 'N*m',
+        'Coulomb (stick-slip) friction torque at the jaw pivot, opposing jaw motion. 0 = off.',
+        min=0.0, max=0.5),
+    _fx('viscous_friction', 'double', 0.0, 'N*m*s/rad',
+        'Extra viscous friction at the jaw pivot (torque = -c * jaw velocity). 0 = off.',
+        min=0.0, max=1.0),
+    _fx('cable_hysteresis', 'double', 0.0, '',
+        'Hysteresis of the cable elasticity (Dahl model): half-width of the tension loop as a '
+        'fraction of the tension. 0 = off.', min=0.0, max=0.5),
+    _fx('backlash', 'double', 0.0, 'rad',
+        'Dead band (full width, at the jaw) in the cable-jaw transmission. 0 = off.',
+        min=0.0, max=0.5),
+    _fx('tension_dependent_friction', 'double', 0.0, '1/N',
+        'Cable-pulley friction that grows with tension: mu(T) = mu*(1 + g*|T|), g unknown to the '
+        'model. 0 = off.', min=0.0, max=0.1),
+    _fx('viscoelastic_creep', 'double', 0.0, '',
+        'Slow relaxation of the transmitted jaw torque under load: this fraction of it relaxes '
+        'with time constant viscoelastic_creep_time_constant and recovers when unloaded. 0 = off.',
+        min=0.0, max=0.9),
+    _fx('viscoelastic_creep_time_constant', 'double', 2.0, 's',
+        'Time constant of viscoelastic_creep.', min=1e-3, max=1e4),
+    _fx('sensor_delay', 'double', 0.0, 's',
+        'Transport delay of the load cell (grip force) relative to the other sensors. 0 = off.',
+        min=0.0, max=1.0),
+    _fx('torque_constant_drift', 'double', 0.0, '',
+        'Motor heating lowers the torque constant: K = K0*(1 - s*h), h = normalised heat (first '
+        'order in I^2, 1 at a sustained max_current). 0 = off.', min=0.0, max=0.9),
+    _fx('torque_constant_drift_time_constant', 'double', 20.0, 's',
+        'Thermal time constant of torque_constant_drift.', min=1e-3, max=1e5),
+    _fx('force_sensor_offset', 'double', 0.0, 'N',
+        'Constant offset added to the load-cell grip force. 0 = off.', min=-50.0, max=50.0),
+]
