@@ -146,11 +146,13 @@ def efficiency_vs_current(params, out: Path, gains=(0.0, 2.5e-4, 5e-4, 1e-3, 2e-
     axes[0].axhline(params.drive_resistance_fraction, color='C3', ls='-.', lw=1,
                     label=f'drive_resistance_fraction = {params.drive_resistance_fraction:g} (no grip below)')
     axes[0].set_ylabel('chain efficiency lambda_3 [-]')
+    axes[0].set_ylim(params.drive_resistance_fraction - 0.05, 1.1)
     axes[1].set_ylabel('needle grip force [N]')
     for ax in axes:
         ax.set_xlabel('motor current I [A]')
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7.5)
+    axes[0].legend(fontsize=7, loc='upper center', ncol=2)
+    axes[1].legend(fontsize=7.5, loc='upper left')
     axes[0].set_title('efficiency against current: constant vs tension-dependent friction', fontsize=9)
     axes[1].set_title('needle grip force for the same friction laws', fontsize=9)
     return _save(fig, out / 'efficiency_vs_current.png')
