@@ -42,8 +42,14 @@ class Plateaus:
 
 
 def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_force: float = 0.3,
-                    max_force_cv: float = 0.05, max_current_cv: float = 0.05) -> Plateaus:
+                    max_force_cv: float = 0.05, max_current_cv: float = 0.05,
+                    loading_only: bool = True) -> Plateaus:
     """Means of consecutive ``window``-long slices where force and current are steady.
+
+    Cable-pulley friction sticks: once the cable stops, the tension it holds
+    depends on the way it got there. The model describes the loading
+    direction (motor driving the jaw), so by default only the slices up to
+    the largest force of the log count (a staircase up, as a lab records it).
 
     Parameters
     ----------
@@ -56,6 +62,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
         Slices whose mean force is below this (N) are dropped (no contact).
     max_force_cv, max_current_cv : float
         Largest std/mean within a slice for it to count as steady.
+    loading_only : bool
+        Keep only the slices up to the time of the largest force.
 
     Raises
     ------
@@ -74,8 +82,13 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     bounds = np.concatenate([[0], edges, [t.size]])
     cols = {c: np.asarray(log[c], float) for c in ('current', 'wrist_angle', 'jaw_angle',
                                                     'grip_force')}
+    if loading_only:
+        force = np.where(np.isfinite(cols['grip_force']), cols['grip_force'], -np.inf)
+        peak_time = t[int(np.argmax(force))]
     rows = []
     for a, b in zip(bounds[:-1], bounds[1:]):
+        if loading_only and t[a] > peak_time:
+            break
         if b - a < 5:
             continue
         seg = {c: v[a:b] for c, v in cols.items()}

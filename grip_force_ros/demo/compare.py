@@ -48,16 +48,17 @@ def plant_scales(index: int, plant_error: float) -> dict[str, float]:
 def calibration_csv(params, path: Path) -> Path:
     """Write the calibration grasp (t, master_angle) for an instrument's force map.
 
-    Open, close to the first level past contact, then a staircase through
+    Open, close to the first level past contact, then a staircase up through
     :data:`CALIBRATION_SHARES` of the travel from the contact angle to fully
-    closed, then open again.
+    closed (slow ramps: the pulley friction is then in its loading direction,
+    as the model describes it), then open again.
     """
     open_angle = min(0.8, params.master_angle_max)
     contact, closed = params.master_contact_angle, params.master_angle_min
     rows = [(0.0, open_angle), (0.4, open_angle)]
     t = 0.4
     for k, share in enumerate(CALIBRATION_SHARES):
-        t += 0.4 if k == 0 else 0.1
+        t += 0.5 if k == 0 else 0.3
         angle = contact - share * (contact - closed)
         rows.append((t, angle))
         t += CALIBRATION_HOLD
