@@ -47,6 +47,9 @@ DESIGN_PM_DEG = 50.0
 #: Largest sensitivity peak |S| allowed by the design (-).
 DESIGN_MS = 2.0
 
+#: Rise time of the ramped target in the step figure (s): a master closing in 25 ms is fast.
+RAMP_TIME = 0.025
+
 #: Plant variants: name -> (cable stiffness scale, friction coefficient scale).
 VARIANTS = {'nominal': (1.0, 1.0), 'stiffness x0.8': (0.8, 1.0), 'stiffness x1.2': (1.2, 1.0),
             'friction x0.8': (1.0, 0.8), 'friction x1.2': (1.0, 1.2)}
@@ -193,7 +196,10 @@ def pid_tf(kp: float, ki: float, kd: float, filter_time: float, period: float):
 
 # ---------------------------------------------------------------------- fast frequency grid
 def _freq_grid(period: float, n: int = 700) -> np.ndarray:
-    return np.logspace(-1, math.log10(0.999 * math.pi / period), n)          # rad/s
+    """Frequencies (rad/s) up to Nyquist, log-spaced, plus a dense linear top decade."""
+    nyquist = math.pi / period
+    return np.unique(np.concatenate([np.logspace(-1, math.log10(0.9999 * nyquist), n),
+                                     np.linspace(0.1 * nyquist, 0.9999 * nyquist, n)]))
 
 
 class _Plant:
@@ -285,39 +291,63 @@ def _finite(x: float):
     return x if math.isfinite(x) else None
 
 
-def _search(plants: list, w: np.ndarray, period: float, kp_grid, ki_grid,
-            kd_grid, tf_grid, gm_min=DESIGN_GM_DB, pm_min=DESIGN_PM_DEG, ms_max=DESIGN_MS):
-    """Best (kp, ki, kd, tf) by nominal crossover meeting the margins on every plant.
+def _step_settling(cnum, cden, plant: "_Plant", feedforward: float, period: float,
+                   horizon: float = 0.3) -> float:
+    """5% settling time (s) of the closed-loop unit step, feedforward + PID, on ``plant``."""
+    from scipy.signal import lfilter
+    num = np.polymul(plant.num, np.polyadd(feedforward * cden, cnum))
+    den = np.polyadd(np.polymul(plant.den, cden), np.polymul(plant.num, cnum))
+    n = int(round(horizon / period))
+    y = lfilter(num / den[0], den / den[0], np.ones(n))
+    t = np.arange(n) * period
+    final = 1.0
+    outside = np.nonzero(np.abs(y - final) > 0.05)[0]
+    if not outside.size:
+        return 0.0
+    return float(t[outside[-1]] + period) if outside[-1] + 1 < n else math.inf
 
-    ``plants[0]`` is the nominal plant (:class:`_Plant`).
+
+def _search(plants: list, w: np.ndarray, period: float, kp_grid, ki_grid,
+            kd_grid, tf_grid, feedforward: float = 0.0, gm_min=DESIGN_GM_DB,
+            pm_min=DESIGN_PM_DEG, ms_max=DESIGN_MS):
+    """Best (kp, ki, kd, tf) meeting the margins on every plant (``plants[0]`` nominal).
+
+    Best = highest nominal gain-crossover frequency, then the shorter 5% settling of the
+    nominal unit step (with ``feedforward`` A per unit target added to the PID output).
+    (The force loop with a load cell is limited by the lightly damped drum-on-cable mode:
+    with one period of delay a derivative adds little damping, so the feedforward step
+    rings at the plant's own frequency whatever the PID; see docs/control.md.)
     """
-    best, best_score = None, -1.0
+    best, best_score = None, (-math.inf, -math.inf)
     z = np.exp(1j * w * period)
     for kp, ki, kd, tf in product(kp_grid, ki_grid, kd_grid, tf_grid):
         cnum, cden = _pid_polys(kp, ki, kd, tf, period)
         c = np.polyval(cnum, z) / np.polyval(cden, z)
         ok = True
-        score = 0.0
+        wc0 = 0.0
         for idx, plant in enumerate(plants):
             gm, pm, wc, ms = _margins_grid(c * plant.resp, w)
             if not (gm >= gm_min and pm >= pm_min and ms <= ms_max):
                 ok = False
                 break
             if idx == 0:
-                score = wc + 1e-6 * ki            # prefer faster, then more integral action
-        if ok and score > best_score and all(_closed_loop_stable(cnum, cden, pl) for pl in plants):
+                wc0 = wc
+        if not ok:
+            continue
+        score = (wc0, -_step_settling(cnum, cden, plants[0], feedforward, period))
+        if score > best_score and all(_closed_loop_stable(cnum, cden, pl) for pl in plants):
             best, best_score = (float(kp), float(ki), float(kd), float(tf)), score
     return best
 
 
-def _refine(responses, w, period, start, rounds=2):
+def _refine(responses, w, period, start, rounds=2, feedforward=0.0):
     """Local refinement of a grid optimum on a finer multiplicative grid."""
     best = start
     for _ in range(rounds):
         kp, ki, kd, tf = best
         f = np.array([0.6, 0.8, 1.0, 1.25, 1.6])
         cand = _search(responses, w, period, kp * f if kp else [0.0], ki * f, kd * f if kd else [0.0],
-                       [tf])
+                       [tf], feedforward=feedforward)
         if cand is None:
             break
         best = cand
@@ -346,11 +376,11 @@ def design(params, model=None) -> TuneResult:
     best = _search(force_resp, w, period,
                    kp_grid=inv * np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.4]),
                    ki_grid=inv * np.array([1.0, 2.0, 4.0, 8.0, 15.0, 30.0, 60.0, 120.0]),
-                   kd_grid=inv * np.array([0.0, 1e-4, 3e-4, 1e-3, 3e-3]),
-                   tf_grid=[0.5e-3, 2e-3])
+                   kd_grid=inv * np.array([0.0, 1e-4, 3e-4, 1e-3, 2e-3, 4e-3]),
+                   tf_grid=[0.5e-3, 2e-3], feedforward=inv)
     if best is None:
         raise ValueError('no force PID on the design grid meets the margins on every plant variant')
-    force = _refine(force_resp, w, period, best)
+    force = _refine(force_resp, w, period, best, feedforward=inv)
 
     jaw_resp = [_Plant(discrete_plant(d, 'jaw', period), w, period) for d in variants.values()]
     jaw_gain = (nominal.torque_per_amp / nominal.drum_radius * nominal.drive_radius
@@ -401,13 +431,16 @@ def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw'))
     """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant."""
     import control
     period = 1.0 / params.control_rate
+    grid = _freq_grid(period, 1500)
     reports = []
     for loop in loops:
         for variant in VARIANTS:
             lt = loop_transfer(params, loop, variant, model)
-            with warnings.catch_warnings():       # python-control falls back to 'frd': fine here
+            # margins on a dense frequency response (FRD) up to Nyquist: the 'poly' method is
+            # ill-conditioned here and its own FRD fallback grid reports spurious crossovers
+            with warnings.catch_warnings():
                 warnings.simplefilter('ignore', UserWarning)
-                gm, pm, wg, wp = control.margin(lt)
+                gm, pm, wg, wp = control.margin(control.frd(lt, grid))
             closed = control.feedback(lt, 1)
             stable = bool(np.all(np.abs(control.poles(closed)) < 1.0))
             reports.append(LoopReport(loop, variant,
@@ -448,6 +481,9 @@ def step_responses(params, duration: float = 0.2, model=None) -> dict:
         out[f'{loop} (feedforward + PID)'] = control.step_response(with_ff, T=t)
         if loop == 'force_sensor':
             out[f'{loop} (PID only)'] = control.step_response(closed, T=t)
+            ramp = np.minimum(t / RAMP_TIME, 1.0)
+            out[f'{loop} (feedforward + PID, target ramped over {RAMP_TIME * 1e3:.0f} ms)'] = \
+                control.forced_response(with_ff, T=t, U=ramp)
     return {k: (np.asarray(v.time), np.asarray(v.outputs).ravel()) for k, v in out.items()}
 
 
