@@ -120,8 +120,8 @@ EFFECTS = [
         'Extra viscous friction at the jaw pivot (torque = -c * jaw velocity). 0 = off.',
         min=0.0, max=1.0),
     _fx('cable_hysteresis', 'double', 0.0, '',
-        'Hysteresis of the cable elasticity (Dahl model): half-width of the tension loop as a '
-        'fraction of the tension. 0 = off.', min=0.0, max=0.5),
+        'Hysteresis of the cable bending over the drive pulley (Dahl model): a moment opposing '
+        'changes of the cable tension, loop half-width as a fraction of the jaw drive moment. 0 = off.', min=0.0, max=0.5),
     _fx('backlash', 'double', 0.0, 'rad',
         'Dead band (full width, at the jaw) in the cable-jaw transmission. 0 = off.',
         min=0.0, max=0.5),
@@ -129,7 +129,7 @@ EFFECTS = [
         'Cable-pulley friction that grows with tension: mu(T) = mu*(1 + g*|T|), g unknown to the '
         'model. 0 = off.', min=0.0, max=0.1),
     _fx('viscoelastic_creep', 'double', 0.0, '',
-        'Slow relaxation of the transmitted jaw torque under load: this fraction of it relaxes '
+        'Slow relaxation of the jaw drive moment under load: this fraction of it relaxes '
         'with time constant viscoelastic_creep_time_constant and recovers when unloaded. 0 = off.',
         min=0.0, max=0.9),
     _fx('viscoelastic_creep_time_constant', 'double', 2.0, 's',

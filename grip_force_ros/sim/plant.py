@@ -191,6 +191,12 @@ class InstrumentSim:
         return chain_efficiency_scalar(self._mu, p.guide_pulley_radii, p.cable_radius, wraps,
                                        drum_tension, self._friction_gain)
 
+    def _drive_arm(self) -> float:
+        """Jaw moment per N of jaw-side tension (m): ``r_n (1 - f/lambda)``, >= 0."""
+        lam = self._lambda
+        arm = self._rn * (1.0 - self._resistance_fraction / lam) if lam > 0.0 else 0.0
+        return arm if arm > 0.0 else 0.0
+
     # ------------------------------------------------------------------ public API
     @property
     def obj(self) -> str:
@@ -306,7 +312,7 @@ class InstrumentSim:
             self._heat += (load - self._heat) * (1.0 - math.exp(-dt / self._drift_tau))
             gear_k *= 1.0 - self._drift * self._heat
         if self._creep > 0.0:
-            target = self._creep * self._rn * self._tension_jaw
+            target = self._creep * self._drive_arm() * self._tension_jaw
             self._creep_moment += (target - self._creep_moment) * (1.0 - math.exp(-dt / self._creep_tau))
 
         # locals for the inner loop
@@ -316,9 +322,7 @@ class InstrumentSim:
         one_minus_lam = 1.0 - lam
         drum_c, jaw_c = self._drum_damping, self._jaw_damping
         kd = k1 * r0 * r0                        # N*m/rad, drum stiffness bound
-        drive_arm = rn * (1.0 - self._resistance_fraction / lam) if lam > 0.0 else 0.0
-        if drive_arm < 0.0:
-            drive_arm = 0.0                      # m: jaw moment per N of jaw-side tension
+        drive_arm = self._drive_arm()            # m: jaw moment per N of jaw-side tension
         kj_cable = k2 * rn * drive_arm           # N*m/rad, cable stiffness seen by the jaw
         coulomb = self._pivot_coulomb
         g2 = self._backlash_half
@@ -413,8 +417,8 @@ class InstrumentSim:
                 tn = k2 * (u - g2 if u > g2 else (u + g2 if u < -g2 else 0.0))
             # --- cable hysteresis (Dahl): a moment opposing changes of the jaw tension
             if hyst_frac > 0.0:
-                limit = hyst_frac * rn * abs(tn)
-                change = rn * (tn - previous_tn)
+                limit = hyst_frac * drive_arm * abs(tn)
+                change = drive_arm * (tn - previous_tn)
                 previous_tn = tn
                 if limit > 0.0:
                     if change > 0.0:
