@@ -21,6 +21,7 @@ COMMANDS = {
     'demo': 'demo',
     'calibrate': 'calibrate',
     'monitor': 'monitor',
+    'import-rig': 'import_rig',
 }
 
 

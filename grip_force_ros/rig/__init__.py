@@ -1,0 +1,14 @@
+"""The MRDLab da Vinci tool rig: import, conventions, and a motor-side jaw torque estimator.
+
+Real instrument data (O'Neill et al., IEEE RA-L 2018; MRDLab/mis-tool-characterization,
+ODbL/DbCL): a Maryland forceps jaw driven through its cables from the input disk
+while a second motor resists it at the jaw. No rclpy here.
+
+>>> from grip_force_ros.rig import read_runs, default_data_dir    # doctest: +SKIP
+>>> runs = read_runs(default_data_dir())                          # doctest: +SKIP
+"""
+from grip_force_ros.rig.reader import (EXTRA_COLUMNS, RigDataError, RigRun, default_data_dir,
+                                       read_run, read_runs, run_files, to_contract_log)
+
+__all__ = ['EXTRA_COLUMNS', 'RigDataError', 'RigRun', 'default_data_dir', 'read_run',
+           'read_runs', 'run_files', 'to_contract_log']
