@@ -54,6 +54,14 @@ def rows_json(rows) -> dict:
     return {'rows': [{k: clean(v) for k, v in row.as_dict().items()} for row in rows]}
 
 
+def _shown_path(path: Path) -> str:
+    """``path`` relative to the working directory when it is below it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def _fmt(value: float) -> str:
     return f'{value:.4g}'
 
@@ -70,7 +78,7 @@ def build_report(out: Path, config: Path | None = None) -> tuple[list, Path]:
     out.mkdir(parents=True, exist_ok=True)
     config = Path(config) if config else find_config()
     params = load_params_file(config) if config else make_params()
-    source = str(config) if config else 'schema defaults (Table 1)'
+    source = _shown_path(config) if config else 'schema defaults (Table 1)'
     others = []
     if config:
         other = config.parent / 'long_jaw_grasper.yaml'

@@ -166,7 +166,7 @@ def compute_rows(params) -> list[Row]:
                      f'{float(finger):.4g} rad/A, wrist cable {float(wrist):.4g} rad/A, net -({float(finger):.4g} - '
                      f'{p.wrist_finger_coupling:g}*{float(wrist):.4g}) = {current_c:.4g}. '
                      f'-1.046 would need EA = {needed_ea:.3g} N (cable radius {needed_r * 1e6:.1f} um), '
-                     f'{abs(PAPER["current_coefficient"] / current_c):.0f}x our value. (For scale: the '
+                     f'the paper\'s value is {abs(PAPER["current_coefficient"] / current_c):.0f}x ours. (For scale: the '
                      f'straight stretch F0 L/(EA r_n) of a free cable of L = {free_length * 1e3:.0f} mm '
                      'alone would give 1.046 rad/A; the paper\'s creep model has no such term.)'))
 
