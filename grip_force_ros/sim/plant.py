@@ -490,13 +490,14 @@ class InstrumentSim:
         Keys: t (s), motor_angle (rad), motor_velocity (rad/s), current (A, actual),
         current_command (A), wrist_angle, jaw_angle (rad), jaw_velocity (rad/s),
         grip_force (N, undelayed, no offset), drum_tension, jaw_tension (N),
-        contact_moment (N*m), efficiency (-).
+        contact_moment (N*m), efficiency (-), torque_constant (N*m/A, after drift).
         """
         return {'t': self._t, 'motor_angle': self._theta0, 'motor_velocity': self._w0,
                 'current': self._i_act, 'current_command': self._i_cmd, 'wrist_angle': self._wrist,
                 'jaw_angle': self._phi, 'jaw_velocity': self._wj, 'grip_force': self._true_grip_force(),
                 'drum_tension': self._tension_drum, 'jaw_tension': self._tension_jaw,
-                'contact_moment': self._contact_moment, 'efficiency': self._lambda}
+                'contact_moment': self._contact_moment, 'efficiency': self._lambda,
+                'torque_constant': self.params.torque_constant * (1.0 - self._drift * self._heat)}
 
     def energy(self) -> float:
         """Mechanical energy stored in the plant (J): kinetic + cable + contact springs."""
