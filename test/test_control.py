@@ -1,0 +1,284 @@
+"""Controller core: force map, PID, limits, input validation, watchdog, bumpless switching."""
+import math
+
+import numpy as np
+import pytest
+
+from grip_force_ros.control import PID, ControlInputs, CurrentLimiter, ForceMap, GripController
+from grip_force_ros.params import make_params
+
+PERIOD = 1e-3
+
+
+@pytest.fixture
+def params():
+    return make_params({})
+
+
+def feed(inputs, t, master, jaw, current, wrist=0.0, jaw_velocity=0.0):
+    inputs.set_master(t, master)
+    inputs.set_instrument(t, wrist, jaw, jaw_velocity)
+    inputs.set_actuator(t, current)
+
+
+def run_grip(ctrl, inputs, n=300, master=0.05, jaw=0.04, t0=0.0):
+    """Hold the master closed on a needle; the measured current follows the command."""
+    out = None
+    for k in range(n):
+        t = t0 + k * PERIOD
+        feed(inputs, t, master, jaw, ctrl.command)
+        out = ctrl.step(t, inputs)
+    return out, t0 + n * PERIOD
+
+
+# --------------------------------------------------------------------------- force map
+def test_force_map_free_then_grip_rising_and_capped():
+    fm = ForceMap(master_angle_min=0.0, master_contact_angle=0.2, master_to_jaw_gain=1.5,
+                  jaw_angle_max=1.5, force_max=4.0)
+    gripping, jaw_target = fm.update(0.6, 0.9)
+    assert not gripping and jaw_target == pytest.approx(0.9)
+    forces = []
+    for m in np.linspace(0.19, 0.0, 20):
+        gripping, f = fm.update(m, 0.04)
+        assert gripping
+        forces.append(f)
+    assert np.all(np.diff(forces) > 0)                         # rises with further closing
+    assert forces[-1] == pytest.approx(4.0)                    # reaches the maximum at closed
+    assert max(forces) <= 4.0
+
+
+def test_force_map_detects_blocked_jaw_and_releases_with_hysteresis():
+    fm = ForceMap(master_angle_min=0.0, master_contact_angle=0.2, master_to_jaw_gain=1.0,
+                  jaw_angle_max=1.5, force_max=4.0, contact_jaw_margin=0.05,
+                  contact_jaw_speed=0.5, release_hysteresis=0.02)
+    # jaw held at 0.5 rad by tissue while the master asks for 0.4: contact at master 0.4
+    assert fm.update(0.4, 0.5, 0.0) == (True, 0.0)
+    assert fm.contact_angle == pytest.approx(0.4)
+    gripping, f = fm.update(0.2, 0.5)
+    assert gripping and f == pytest.approx(4.0 * 0.2 / 0.4)
+    assert fm.update(0.41, 0.5)[0]                              # inside the hysteresis
+    assert not fm.update(0.43, 0.5)[0]                          # released
+    # a jaw lagging while moving fast is not a contact
+    assert not fm.update(0.4, 0.5, jaw_velocity=-3.0)[0]
+
+
+def test_force_map_exponent_and_cap_from_params(params):
+    p = params.replace(grip_force_max=50.0, max_grip_force=6.0, force_map_exponent=2.0)
+    fm = ForceMap.from_params(p)
+    assert fm.force_max == 6.0                                  # never above the hardware limit
+    fm.update(0.1, 0.04)
+    half = fm.force_target(0.1)                                 # half way from 0.2 to 0
+    assert half == pytest.approx(6.0 * 0.25)
+
+
+# --------------------------------------------------------------------------- PID
+def test_pid_integrates_and_back_calculation_limits_windup():
+    pid = PID(kp=0.0, ki=10.0, kd=0.0, derivative_filter_time=1e-3, period=PERIOD,
+              tracking_time=0.01, integral_limit=100.0)
+    lim = CurrentLimiter(0.5, 1e6, PERIOD)
+    cmd = 0.0
+    for _ in range(5000):                                       # 5 s of a large error
+        u = pid.update(1.0, 0.0)
+        cmd, _ = lim.apply(u, cmd)
+        pid.track(u, cmd)
+    assert cmd == 0.5
+    # back-calculation keeps the integral near the limit, not at ki*e*t = 50
+    assert pid.integral < 0.7
+    # the error reverses: the output leaves saturation within a few ms
+    steps = 0
+    while cmd >= 0.5 and steps < 1000:
+        u = pid.update(-1.0, 0.0)
+        cmd, _ = lim.apply(u, cmd)
+        pid.track(u, cmd)
+        steps += 1
+    assert steps < 30
+
+
+def test_pid_derivative_on_measurement_no_setpoint_kick_and_filtered():
+    pid = PID(kp=0.0, ki=0.0, kd=1.0, derivative_filter_time=0.01, period=PERIOD)
+    pid.update(0.0, 0.0)
+    assert pid.update(5.0, 0.0) == 0.0                          # setpoint step: no kick
+    out = pid.update(5.0, 0.001)                                # measurement ramps 1 rad/s
+    assert out == pytest.approx(-1.0 * (PERIOD / (0.01 + PERIOD)))  # first-order filtered
+    for _ in range(200):
+        m = pid.last_measurement + 0.001
+        out = pid.update(5.0, m)
+    assert out == pytest.approx(-1.0, rel=1e-3)                 # -kd * d(measurement)/dt
+
+
+def test_pid_preset_is_bumpless():
+    pid = PID(kp=2.0, ki=5.0, kd=0.1, derivative_filter_time=1e-3, period=PERIOD, sign=-1.0)
+    pid.preset(0.123, setpoint=0.3, measurement=0.5)
+    assert pid.update(0.3, 0.5) == pytest.approx(0.123)
+
+
+# --------------------------------------------------------------------------- limiter
+def test_limiter_reports_which_limit():
+    lim = CurrentLimiter(0.5, 100.0, PERIOD)                    # 0.1 A per step
+    assert lim.apply(0.05, 0.0) == (0.05, ())
+    assert lim.apply(0.3, 0.0) == (pytest.approx(0.1), ('slew_limit',))
+    assert lim.apply(0.9, 0.45) == (0.5, ('current_limit',))
+    assert lim.apply(0.9, 0.2) == (pytest.approx(0.3), ('current_limit', 'slew_limit'))
+    assert lim.apply(math.nan, 0.05) == (0.0, ())
+
+
+# --------------------------------------------------------------------------- inputs
+def test_inputs_reject_bad_samples_and_keep_last_good(params):
+    inp = ControlInputs.from_params(params)
+    assert inp.set_instrument(0.0, 0.1, 0.3) is None
+    for bad in [(math.nan, 0.3), (0.1, math.inf), (3.0, 0.3), (0.1, 2.0), (0.1, -0.5)]:
+        reason = inp.set_instrument(0.001, *bad)
+        assert reason and reason.startswith('instrument:')
+        assert inp.instrument_fault == reason
+        assert (inp.wrist_angle, inp.jaw_angle) == (0.1, 0.3)    # last good kept
+    assert inp.set_instrument(0.002, 0.1, 0.31) is None
+    assert inp.instrument_fault is None
+    assert inp.set_actuator(0.0, 'garbage').startswith('actuator: a value is not a number')
+    assert sum(inp.rejected.values()) == 6
+
+
+def test_inputs_stamps_backwards_future_and_duplicates(params):
+    inp = ControlInputs.from_params(params)
+    assert inp.set_master(1.0, 0.5, stamp=0.999) is None
+    assert inp.set_master(1.001, 0.6, stamp=0.999) is None      # duplicate: ignored
+    assert inp.master_angle == 0.5 and inp.master_time == 1.0  # no watchdog refresh
+    assert 'backwards' in inp.set_master(1.002, 0.6, stamp=0.5)
+    assert inp.set_master(1.003, 0.6, stamp=0.51) is None       # stream continues from the jump
+    assert 'ahead' in inp.set_master(1.004, 0.6, stamp=5.0)
+
+
+def test_master_clamped_or_rejected(params):
+    inp = ControlInputs.from_params(params)                     # range [0, 1.2], tolerance 0.5
+    assert inp.set_master(0.0, -0.2) is None and inp.master_clamped and inp.master_angle == 0.0
+    assert inp.set_master(0.0, 1.3) is None and inp.master_clamped and inp.master_angle == 1.2
+    assert inp.set_master(0.0, 0.4) is None and not inp.master_clamped
+    assert 'outside' in inp.set_master(0.0, 5.0)
+
+
+# --------------------------------------------------------------------------- controller
+def test_starts_safe_until_inputs_arrive(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    out = ctrl.step(0.0, inp)
+    assert out.mode == 'safe' and out.current_command == 0.0
+    assert any('no master input' in r for r in out.reasons)
+
+
+def test_grip_on_needle_reaches_target_with_model_estimate(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    out, _ = run_grip(ctrl, inp, n=400, master=0.1)
+    assert out.mode == 'grip'
+    assert out.target_force == pytest.approx(params.grip_force_max * 0.5)
+    assert out.estimated_force == pytest.approx(out.target_force, rel=0.02)
+    assert out.pull_out_force == pytest.approx(
+        (math.sqrt(2) + 1) * params.needle_friction_coefficient * out.estimated_force)
+    assert 0.0 < out.current_command <= params.max_current
+
+
+def test_watchdog_safe_within_two_periods_and_ramps_down(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    out, t = run_grip(ctrl, inp, n=300, master=0.0)
+    i_before = out.current_command
+    assert i_before > 0.2
+    # instrument joint states stop; master and actuator keep coming
+    last_instrument = inp.instrument_time
+    modes, currents = [], []
+    for k in range(60):
+        now = t + k * PERIOD
+        inp.set_master(now, 0.0)
+        inp.set_actuator(now, ctrl.command)
+        out = ctrl.step(now, inp)
+        modes.append(out.mode)
+        currents.append(out.current_command)
+        if out.mode == 'safe':
+            assert any('stale instrument' in r for r in out.reasons)
+    first_safe = t + modes.index('safe') * PERIOD
+    assert first_safe - (last_instrument + params.watchdog_timeout) <= 2 * PERIOD
+    steps = np.abs(np.diff([i_before] + currents))
+    assert np.all(steps <= params.max_current_slew * PERIOD + 1e-12)
+    assert currents[-1] == 0.0                                   # ramped to zero
+
+
+def test_resume_after_stale_without_current_jump(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    _, t = run_grip(ctrl, inp, n=300, master=0.0)
+    for k in range(35):                                          # 35 ms silence: safe
+        out = ctrl.step(t + k * PERIOD, inp)
+    assert out.mode == 'safe'
+    held = out.current_command
+    t += 35 * PERIOD
+    feed(inp, t, 0.0, 0.04, ctrl.command)
+    out = ctrl.step(t, inp)
+    assert out.mode == 'grip'
+    assert out.current_command == pytest.approx(held, abs=1e-12)   # bumpless: continues
+    # and the loop then converges back to the target force
+    out, _ = run_grip(ctrl, inp, n=400, master=0.0, t0=t + PERIOD)
+    assert out.estimated_force == pytest.approx(out.target_force, rel=0.02)
+
+
+def test_free_to_grip_switch_is_bumpless(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    cmds = []
+    masters = np.concatenate([np.full(100, 0.5), np.linspace(0.5, 0.1, 200)])
+    jaw = 0.5
+    for k, m in enumerate(masters):
+        t = k * PERIOD
+        jaw = max(0.04, m)                                       # jaw follows until the needle
+        feed(inp, t, m, jaw, ctrl.command)
+        out = ctrl.step(t, inp)
+        cmds.append((out.mode, out.current_command, out.feedforward_current))
+    modes = [c[0] for c in cmds]
+    k = modes.index('grip')
+    assert modes[k - 1] == 'free'
+    # the feedforward appears at the switch but the command does not jump
+    assert abs(cmds[k][1] - cmds[k - 1][1]) < 0.01
+
+
+@pytest.mark.parametrize('bad', [
+    dict(master=math.nan), dict(jaw=math.inf), dict(jaw=3.0), dict(wrist=-2.0),
+    dict(current=math.nan), dict(current=50.0), dict(master=9.0)])
+def test_invalid_input_goes_safe_at_once_and_says_why(params, bad):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    _, t = run_grip(ctrl, inp, n=200, master=0.0)
+    values = dict(master=0.0, jaw=0.04, current=ctrl.command, wrist=0.0)
+    values.update(bad)
+    inp.set_master(t, values['master'])
+    inp.set_instrument(t, values['wrist'], values['jaw'], 0.0)
+    inp.set_actuator(t, values['current'])
+    out = ctrl.step(t, inp)
+    assert out.mode == 'safe'
+    assert any(r.startswith('invalid input') for r in out.reasons)
+    assert all(math.isfinite(v) for v in (out.current_command, out.target_force,
+                                          out.estimated_force, out.pull_out_force))
+
+
+def test_force_sensor_feedback_used_when_enabled(params):
+    ctrl = GripController(params.replace(force_sensor_enabled=True))
+    inp = ctrl.new_inputs()
+    for k in range(50):
+        t = k * PERIOD
+        feed(inp, t, 0.0, 0.04, ctrl.command)
+        out = ctrl.step(t, inp)
+    assert out.mode == 'safe' and any('no force input' in r for r in out.reasons)
+    for k in range(50, 600):
+        t = k * PERIOD
+        feed(inp, t, 0.0, 0.04, ctrl.command)
+        inp.set_force(t, 0.8 * ctrl.model.grip_force_scalar(ctrl.command, 0.0, 0.04, 'needle'))
+        out = ctrl.step(t, inp)
+    # the plant gives 20% less force than the model: the integrator makes up for it
+    assert out.mode == 'grip'
+    assert out.estimated_force == pytest.approx(out.target_force, rel=0.05)
+    assert out.current_command > out.feedforward_current * 1.1
+
+
+def test_nonfinite_clock_is_safe(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    _, t = run_grip(ctrl, inp, n=50)
+    out = ctrl.step(math.nan, inp)
+    assert out.mode == 'safe' and 'clock' in out.reasons[0]
