@@ -323,8 +323,11 @@ class GripForceModel:
         if need <= 0.0:
             return need / self._slope_at_zero(wrist_angle)
         slope0 = self._slope_at_zero(wrist_angle)
-        low = 0.0
-        high = need / slope0                          # friction only grows: M(I) <= slope0 I
+        guess = need / slope0                         # friction only grows: M(I) <= slope0 I
+        newton = self._newton_current(need, wrist_angle, guess)
+        if newton is not None:
+            return newton
+        low, high = 0.0, guess
         for _ in range(200):
             value = self._torque_scalar(high, wrist_angle)
             if value >= need:
@@ -338,6 +341,27 @@ class GripForceModel:
             raise ModelError(f'drive torque {need:.4g} N*m not reached')
         return brentq(lambda i: self._torque_scalar(i, wrist_angle) - need, low, high,
                       xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=200)
+
+    def _newton_current(self, need: float, wrist_angle: float, start: float) -> float | None:
+        """Newton from ``start``; None (hand over to brentq) if it does not converge.
+
+        The slope is a forward difference. A non-positive slope (past the peak of M)
+        or a step out of (0, inf) gives up.
+        """
+        current = start
+        for _ in range(30):
+            value = self._torque_scalar(current, wrist_angle) - need
+            step_size = 1e-7 * current
+            slope = (self._torque_scalar(current + step_size, wrist_angle) - need - value) / step_size
+            if not slope > 0.0:
+                return None
+            step = -value / slope
+            current += step
+            if not current > 0.0:
+                return None
+            if abs(step) <= 1e-13 * current:
+                return current
+        return None
 
     def _slope_at_zero(self, wrist_angle: float) -> float:
         lam = self._efficiency_scalar(0.0, wrist_angle)
