@@ -127,7 +127,7 @@ EFFECTS = [
         min=0.0, max=0.5),
     _fx('tension_dependent_friction', 'double', 0.0, '1/N',
         'Cable-pulley friction that grows with tension: mu(T) = mu*(1 + g*|T|), g unknown to the '
-        'model. 0 = off.', min=0.0, max=0.1),
+        'model. 0 = off.', min=0.0, max=0.01),
     _fx('viscoelastic_creep', 'double', 0.0, '',
         'Slow relaxation of the jaw drive moment under load: this fraction of it relaxes '
         'with time constant viscoelastic_creep_time_constant and recovers when unloaded. 0 = off.',

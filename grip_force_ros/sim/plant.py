@@ -249,8 +249,11 @@ class InstrumentSim:
         wrist_angle = float(wrist_angle)
         if not math.isfinite(wrist_angle):
             raise SimError(f'wrist angle must be finite, got {wrist_angle!r}')
+        if wrist_angle == self._wrist:
+            return
         self._wrist = wrist_angle
-        self._lambda = self._efficiency(self._tension_drum)
+        if self.params.wrist_wrap_gain > 0.0:          # the last wrap angle follows |wrist|
+            self._lambda = self._efficiency(self._tension_drum)
         self._measurement = None
 
     def reset(self) -> None:
