@@ -67,10 +67,12 @@ class GripController:
         bound = 2.0 * params.max_current + 1e-3                       # A, integrator guard
         self.force_pid = PID(params.force_kp, params.force_ki, params.force_kd,
                              params.force_derivative_filter_time, self.period,
-                             params.anti_windup_tracking_time, sign=1.0, integral_limit=bound)
+                             params.anti_windup_tracking_time, sign=1.0, integral_limit=bound,
+                             bumpless_time=params.bumpless_transfer_time)
         self.jaw_pid = PID(params.jaw_kp, params.jaw_ki, params.jaw_kd,
                            params.jaw_derivative_filter_time, self.period,
-                           params.anti_windup_tracking_time, sign=-1.0, integral_limit=bound)
+                           params.anti_windup_tracking_time, sign=-1.0, integral_limit=bound,
+                           bumpless_time=params.bumpless_transfer_time)
         self.command = 0.0              # A, last output
         self.mode = 'safe'              # starts safe until every input has arrived
         self.estimated_force = 0.0      # N, last good estimate

@@ -43,7 +43,8 @@ class ForceMap:
 
     __slots__ = ('master_angle_min', 'master_contact_angle', 'master_to_jaw_gain',
                  'jaw_angle_max', 'force_max', 'exponent', 'contact_jaw_margin',
-                 'contact_jaw_speed', 'release_hysteresis', 'contact_angle', 'gripping')
+                 'contact_jaw_speed', 'release_hysteresis', 'contact_angle', 'gripping',
+                 'last_master')
 
     def __init__(self, *, master_angle_min: float, master_contact_angle: float,
                  master_to_jaw_gain: float, jaw_angle_max: float, force_max: float,
@@ -62,6 +63,7 @@ class ForceMap:
         self.release_hysteresis = float(release_hysteresis)
         self.contact_angle = math.nan    # m_c [rad] while gripping
         self.gripping = False
+        self.last_master = math.inf      # rad, previous master angle
 
     @classmethod
     def from_params(cls, params) -> 'ForceMap':
@@ -118,6 +120,8 @@ class ForceMap:
             Grip force target (N) when gripping, else the jaw angle target (rad).
         """
         jaw_target = self.jaw_target(master_angle)
+        opening = master_angle > self.last_master
+        self.last_master = master_angle
         if self.gripping:
             if master_angle > self.contact_angle + self.release_hysteresis:
                 self.gripping = False
@@ -128,7 +132,7 @@ class ForceMap:
             self.gripping = True
             self.contact_angle = self.master_contact_angle
             return True, self.force_target(master_angle)
-        if (jaw_angle - jaw_target > self.contact_jaw_margin
+        if (not opening and jaw_angle - jaw_target > self.contact_jaw_margin
                 and abs(jaw_velocity) < self.contact_jaw_speed):
             self.gripping = True
             self.contact_angle = master_angle
@@ -139,3 +143,4 @@ class ForceMap:
         """Back to free motion (no contact)."""
         self.gripping = False
         self.contact_angle = math.nan
+        self.last_master = math.inf

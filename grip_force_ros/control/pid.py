@@ -1,6 +1,8 @@
 """PID with back-calculation anti-windup, filtered derivative on the measurement, bumpless preset."""
 from __future__ import annotations
 
+import math
+
 
 class PID:
     """Discrete PID at a fixed period, for one loop (force or jaw angle).
@@ -31,15 +33,25 @@ class PID:
         must rise with ``measurement - setpoint`` (jaw angle: positive current closes).
     integral_limit : float
         Hard bound on |integral| (output unit), a second guard against windup.
+    bumpless_time : float
+        Time constant (s) with which the transfer offset of :meth:`preset` decays.
+
+    Notes
+    -----
+    Bumpless transfer (:meth:`preset`) zeroes the integral and stores the difference
+    between the wanted output and the PID's own output as an offset that decays
+    exponentially with ``bumpless_time``: the output is continuous at the switch and
+    becomes the plain PID output within a few ``bumpless_time``, without the integral
+    having to unwind a proportional term (which would take ``kp/ki`` seconds).
     """
 
     __slots__ = ('kp', 'ki', 'kd', 'filter_time', 'period', 'tracking_time', 'sign',
                  'integral_limit', 'integral', 'derivative', 'last_measurement', 'primed',
-                 'error')
+                 'error', 'offset', 'offset_decay')
 
     def __init__(self, kp: float, ki: float, kd: float, derivative_filter_time: float,
                  period: float, tracking_time: float = 0.01, sign: float = 1.0,
-                 integral_limit: float = 1.0):
+                 integral_limit: float = 1.0, bumpless_time: float = 0.02):
         if not period > 0.0:
             raise ValueError(f'period must be > 0 s, got {period!r}')
         self.kp, self.ki, self.kd = float(kp), float(ki), float(kd)
@@ -48,6 +60,7 @@ class PID:
         self.tracking_time = max(float(tracking_time), self.period)
         self.sign = 1.0 if sign >= 0 else -1.0
         self.integral_limit = float(integral_limit)
+        self.offset_decay = math.exp(-self.period / max(float(bumpless_time), 1e-9))
         self.reset()
 
     def reset(self) -> None:
@@ -57,6 +70,7 @@ class PID:
         self.last_measurement = 0.0
         self.primed = False             # last_measurement valid
         self.error = 0.0
+        self.offset = 0.0               # output unit, bumpless transfer offset (decays)
 
     def update(self, setpoint: float, measurement: float) -> float:
         """One period: the unlimited output (call :meth:`track` after limiting)."""
@@ -69,7 +83,9 @@ class PID:
         self.primed = True
         error = self.sign * (setpoint - measurement)
         self.error = error
-        return self.kp * error + self.integral - self.sign * self.kd * self.derivative
+        offset = self.offset
+        self.offset = offset * self.offset_decay
+        return self.kp * error + self.integral + offset - self.sign * self.kd * self.derivative
 
     def track(self, unlimited: float, applied: float) -> None:
         """Integrate the error, with back-calculation toward the applied output."""
@@ -82,13 +98,13 @@ class PID:
     def preset(self, output: float, setpoint: float, measurement: float) -> None:
         """Bumpless transfer: make the next :meth:`update` at these values return ``output``.
 
-        The derivative state restarts at this measurement (no derivative kick).
+        The integral restarts at 0, the derivative at this measurement (no derivative
+        kick); the difference is an offset that decays with ``bumpless_time``.
         """
         self.derivative = 0.0
         self.last_measurement = measurement
         self.primed = True
         error = self.sign * (setpoint - measurement)
         self.error = error
-        integral = output - self.kp * error
-        lim = self.integral_limit
-        self.integral = lim if integral > lim else (-lim if integral < -lim else integral)
+        self.integral = 0.0
+        self.offset = output - self.kp * error

@@ -93,4 +93,8 @@ CONTROLLER = [
     _P('anti_windup_tracking_time', 'double', 0.01, 's',
        'Back-calculation anti-windup: the integrator tracks the limited command with this '
        'time constant (never below one control period).', min=1e-4, max=10.0, group=_G),
+    _P('bumpless_transfer_time', 'double', 0.02, 's',
+       'On a switch (free <-> grip, or back from the safe state) the command continues from its '
+       'last value; the difference to the new loop output decays with this time constant.',
+       min=1e-3, max=1.0, group=_G),
 ]
