@@ -107,6 +107,7 @@ class GripForceModel:
         for (a, b), wrap in zip(self._exps[:-1], self.wraps[:-1]):
             fixed /= _friction.pulley_ratio_scalar(a, b, wrap)
         self._fixed_efficiency = fixed            # all pulleys but the last (wrist-independent)
+        self._rho = tuple((r - p.cable_radius) / p.cable_radius for r in self.radii)
         self._rn = p.drive_pulley_radius
         self._tip, self._inner = p.jaw_moment_arm_tip, p.jaw_moment_arm_inner
         self._pull_per_grip = _contact.PULL_OUT_PER_MU * p.needle_friction_coefficient
@@ -266,15 +267,21 @@ class GripForceModel:
         if self.affine:
             a, b = self._exps[-1]
             return self._fixed_efficiency / _friction.pulley_ratio_scalar(a, b, last_wrap)
-        tension = drum_tension if drum_tension > 0.0 else 0.0
-        start = tension if tension > 0.0 else 1.0
+        loaded = drum_tension > 0.0
+        start = drum_tension if loaded else 1.0
         tension = start
-        cable = self.params.cable_radius
-        for i, radius in enumerate(self.radii):
-            wrap = last_wrap if i == len(self.radii) - 1 else self.wraps[i]
-            mu_here = self.mu * (1.0 + self.friction_gain * (tension if drum_tension > 0.0 else 0.0))
-            a, b = _friction.exponents_scalar(mu_here, radius, cable)
-            tension /= _friction.pulley_ratio_scalar(a, b, wrap)
+        mu, gain, exp, sqrt = self.mu, self.friction_gain, math.exp, math.sqrt
+        last = len(self._rho) - 1
+        for i, rho in enumerate(self._rho):
+            wrap = last_wrap if i == last else self.wraps[i]
+            mu_here = mu * (1.0 + gain * tension) if loaded else mu        # mu(F) = mu (1 + g F)
+            if mu_here <= 0.0:
+                continue
+            root = sqrt((1.0 + rho) ** 2 + 4.0 * mu_here * mu_here * rho)
+            a = 2.0 * mu_here * rho / ((1.0 + rho) + root)
+            b = -((1.0 + rho) + root) / (2.0 * mu_here)
+            weight = a / (a - b)
+            tension /= weight * exp(b * wrap) + (1.0 - weight) * exp(a * wrap)   # / eta_i
         return tension / start
 
     def _torque_scalar(self, current: float, wrist_angle: float) -> float:
