@@ -254,3 +254,32 @@ def test_needle_step_response_damps_within_the_papers_0_1_s():
     m = step_response_metrics(make_params(), current=0.35, obj='needle', duration=0.2)
     assert m.settling_time < 0.1
     assert m.final_value > 0.0
+
+
+@pytest.mark.parametrize('obj', ['needle', 'tissue'])
+def test_slow_loading_and_unloading_follow_the_quasi_static_play_reference(obj):
+    from grip_force_ros.sim.quasistatic import quasi_static_grip_force
+    p = quiet_params()
+    t = np.arange(8000) * 1e-3
+    profile = np.interp(t, [0, 2, 4, 5.5, 8], [0.0, 0.4, 0.1, 0.35, 0.05])
+    log = simulate(p, profile, 1e-3, obj=obj, extra=True)
+    reference = quasi_static_grip_force(p, log['current'], 0.0, log['jaw_angle'], obj)
+    touching = log['true_grip_force'] > 0.2
+    assert touching.mean() > 0.8
+    touching &= t > t[np.argmax(touching)] + 0.1          # after the impact of the first touch
+    np.testing.assert_allclose(log['true_grip_force'][touching], reference[touching], rtol=0.01, atol=0.01)
+    # while the model's single-valued map misses the unloading branches by far
+    model = GripForceModel(p).forward(log['current'], 0.0, log['jaw_angle'], obj).grip_force
+    assert np.max(np.abs(model[touching] - log['true_grip_force'][touching])) > 1.0
+
+
+def test_capstan_play_stays_in_the_band_and_is_the_loading_branch_when_rising():
+    from grip_force_ros.sim.quasistatic import capstan_play
+    rng = np.random.default_rng(0)
+    drum = np.cumsum(rng.normal(size=500)) * 5
+    out = capstan_play(drum, 0.6)
+    lo = np.minimum(0.6 * drum, drum / 0.6)
+    hi = np.maximum(0.6 * drum, drum / 0.6)
+    assert np.all((out >= lo - 1e-12) & (out <= hi + 1e-12))
+    rising = np.linspace(0, 100, 50)
+    np.testing.assert_allclose(capstan_play(rising, 0.6), 0.6 * rising)

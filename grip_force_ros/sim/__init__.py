@@ -12,7 +12,8 @@ See docs/sim.md for the dynamics, the effects and the measured step response.
 from grip_force_ros.sim.effects import EFFECT_NAMES, SimError
 from grip_force_ros.sim.plant import OBJECTS, InstrumentSim, SimMeasurement
 from grip_force_ros.sim.offline import simulate
+from grip_force_ros.sim.quasistatic import capstan_play, quasi_static_grip_force
 from grip_force_ros.sim.step_response import StepMetrics, step_response_metrics
 
 __all__ = ['EFFECT_NAMES', 'OBJECTS', 'InstrumentSim', 'SimMeasurement', 'SimError', 'simulate',
-           'StepMetrics', 'step_response_metrics']
+           'StepMetrics', 'step_response_metrics', 'capstan_play', 'quasi_static_grip_force']
