@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import SPECS, make_params
@@ -188,3 +190,38 @@ def test_torque_constant_drift_follows_the_heat_of_the_current():
     assert regrasp['grip_force'] == pytest.approx(expected, rel=0.01)
     assert regrasp['grip_force'] < 0.85 * cold
     assert sim.measure().current == pytest.approx(p.max_current, rel=1e-3)   # measured current unchanged
+
+
+EFFECT_RANGES = {'pivot_coulomb_friction': (0.0, 0.02), 'viscous_friction': (0.0, 0.04),
+                 'cable_hysteresis': (0.0, 0.3), 'backlash': (0.0, 0.15),
+                 'tension_dependent_friction': (0.0, 0.004), 'viscoelastic_creep': (0.0, 0.5),
+                 'sensor_delay': (0.0, 0.05), 'torque_constant_drift': (0.0, 0.5),
+                 'force_sensor_offset': (-1.0, 1.0)}
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.dictionaries(st.sampled_from(EFFECT_NAMES), st.floats(0.0, 1.0), max_size=4),
+       st.lists(st.tuples(st.floats(-0.5, 0.5), st.floats(-1.0, 1.0),
+                          st.sampled_from(['free', 'needle', 'tissue', 'rigid'])), min_size=3, max_size=12),
+       st.integers(0, 2**16))
+def test_any_effect_mix_stays_bounded_and_deterministic(mix, segments, seed):
+    effects = {name: EFFECT_RANGES[name][0] + u * (EFFECT_RANGES[name][1] - EFFECT_RANGES[name][0])
+               for name, u in mix.items()}
+    runs = []
+    for _ in range(2):
+        sim = InstrumentSim(make_params(), 'needle', effects=effects, seed=seed)
+        rows = []
+        for current, wrist, obj in segments:
+            sim.set_object(obj)
+            sim.set_wrist_angle(wrist)
+            for _ in range(40):
+                sim.step(current, DT)
+                m = sim.measure()
+                rows.append((m.jaw_angle, m.motor_angle, m.grip_force, m.current))
+                tr = sim.truth()
+                assert -0.1 < tr['jaw_angle'] < math.pi / 2 + 0.1
+                assert abs(tr['drum_tension']) < 1000.0 and abs(tr['jaw_velocity']) < 1e3
+                assert 0.0 <= tr['grip_force'] < 100.0
+        runs.append(np.array(rows))
+    assert np.all(np.isfinite(runs[0]))
+    np.testing.assert_array_equal(runs[0], runs[1])
