@@ -261,3 +261,27 @@ def test_inconsistent_geometry_is_rejected():
         GripForceModel(PAPER.replace(cable_radius=0.004))
     with pytest.raises(ModelError, match='guide_pulley_wrap_angles'):
         GripForceModel(PAPER.replace(guide_pulley_radii=[0.003, 0.003]))
+
+
+@given(mu=st.floats(0.02, 0.5), theta=st.floats(0.1, 2 * math.pi),
+       r1=st.floats(1e-5, 2.9e-3), r2=st.floats(1e-5, 2.9e-3))
+def test_thicker_cable_loses_less(mu, theta, r1, r2):
+    # rho falls as r grows, so eta falls towards 1: the capstan e^(mu theta) is the worst case
+    thin, thick = sorted((r1, r2))
+    eta_thin = float(friction.pulley_ratio(mu, 0.003, thin, theta))
+    eta_thick = float(friction.pulley_ratio(mu, 0.003, thick, theta))
+    assert 1.0 <= eta_thick <= eta_thin * (1 + 1e-12) <= math.exp(mu * theta) * (1 + 1e-12)
+
+
+@given(motor=st.floats(-2, 2), wrist=st.floats(-1.5, 1.5), current=st.floats(-0.5, 0.5))
+def test_motor_angle_inverts_jaw_angle(motor, wrist, current):
+    m = GripForceModel(load_params_file('config/long_jaw_grasper.yaml'))
+    jaw = m.jaw_angle(motor, wrist, current)
+    assert float(m.motor_angle(jaw, wrist, current)) == pytest.approx(motor, abs=1e-12)
+
+
+def test_creep_grows_with_current_and_is_odd():
+    m = GripForceModel(PAPER)
+    finger, wrist = m.creep_angles(np.array([-0.4, 0.0, 0.2, 0.4]))
+    assert finger[1] == 0.0 and finger[3] == pytest.approx(2 * finger[2]) and finger[0] == pytest.approx(-finger[3])
+    assert np.all(wrist[2:] > 0.0)

@@ -73,3 +73,13 @@ def test_predict_reports_a_bad_log(tmp_path, capsys):
     bad.write_text('t,current\n0,0.1\n')
     assert cli_main(['predict', '--config', CONFIG, '--input', str(bad), '--output', str(tmp_path / 'o.csv')]) == 1
     assert 'missing column' in capsys.readouterr().err
+
+
+def test_torque_logs_get_a_model_torque_column():
+    log = small_log(with_object=False)
+    log['jaw_torque'] = log.pop('grip_force') * 0.01
+    params = load_params_file(CONFIG)
+    out = predict_log(log, params)
+    want = GripForceModel(params).forward(log['current'], log['wrist_angle'], log['jaw_angle'], 'needle')
+    np.testing.assert_allclose(out['jaw_torque_model'], want.jaw_torque, rtol=1e-12)
+    assert 'jaw_torque_model' not in predict_log(small_log(), params)

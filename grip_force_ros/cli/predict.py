@@ -48,15 +48,17 @@ def predict_log(log: dict, params, default_object: str = 'needle', losses: bool 
     zeros = np.zeros(n)
     motor_velocity = np.asarray(log.get('motor_velocity', zeros), float)
     jaw_velocity = np.asarray(log.get('jaw_velocity', zeros), float)
-    grip, pull = np.zeros(n), np.zeros(n)
+    grip, pull, torque = np.zeros(n), np.zeros(n), np.zeros(n)
     for obj in np.unique(objects):
         rows = objects == obj
         result = model.forward(log['current'][rows], log['wrist_angle'][rows], log['jaw_angle'][rows],
                                str(obj), motor_velocity[rows], jaw_velocity[rows])
-        grip[rows], pull[rows] = result.grip_force, result.pull_out_force
+        grip[rows], pull[rows], torque[rows] = result.grip_force, result.pull_out_force, result.jaw_torque
     out = dict(log)
     out['grip_force_model'] = grip
     out['pull_out_force_model'] = pull
+    if 'jaw_torque' in log:                 # a rig that measures torque at the jaw: compare like with like
+        out['jaw_torque_model'] = torque
     out['jaw_angle_model'] = np.asarray(model.jaw_angle(log['motor_angle'], log['wrist_angle'],
                                                         log['current']), float)
     return out
