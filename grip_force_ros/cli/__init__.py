@@ -22,6 +22,8 @@ COMMANDS = {
     'calibrate': 'calibrate',
     'monitor': 'monitor',
     'import-rig': 'import_rig',
+    'diagnose': 'diagnose',
+    'blindcheck': 'blindcheck',
 }
 
 
