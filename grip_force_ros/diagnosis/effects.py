@@ -1,0 +1,160 @@
+"""The unmodelled effects of the DESIGN.md vocabulary, each a small augmentation of the model.
+
+Every effect adds a few regressors to one or both of two channels:
+
+- force channel: ``y ~ gain * base + sum_j c_j * force_col_j`` where ``y`` is the
+  measured grip force (N) or jaw torque (N*m) and ``base`` is the model's nominal
+  prediction (the sensor delay shifts it in time instead of adding a column);
+- angle channel: ``jaw ~ a0 + a1 * jaw_model + a2 * F0 + a3 * Tn + a4 * jaw_velocity
+  + sum_k d_k * angle_col_k`` (rad): the measured jaw angle against the model's jaw angle
+  from the drum angle, with the calibrated zero, scale, cable stretch and dynamic lag.
+
+Nonlinear parameters (a width, a time constant, a delay) are picked from a small
+grid; the coefficients are linear least squares. Each effect's shape:
+
+| effect | force column(s) | angle column(s) | grid |
+|---|---|---|---|
+| pivot_coulomb_friction | contact * G * dir(drive torque) | dir(jaw_model) | friction torque |
+| viscous_friction | contact * jaw_velocity | - | - |
+| cable_hysteresis | nominal * dir(log jaw tension) | - | relative width |
+| backlash | - | tanh(current / width) | width |
+| tension_dependent_friction | nominal * current | - | - |
+| viscoelastic_creep | lowpass_tau(nominal) | - | tau |
+| sensor_delay | (base = nominal(t - d)) | - | d |
+| torque_constant_drift | nominal * lowpass_tau(current^2)/I_max^2, or nominal * t | - | tau |
+| force_sensor_offset | 1 | - | - |
+
+``dir(x)`` is a play operator output in [-1, 1]: the direction of the last motion
+of ``x`` with memory (stiction, dead band).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from grip_force_ros.diagnosis.frame import lowpass, play
+
+#: The DESIGN.md vocabulary (``none`` is the verdict when no effect is needed).
+EFFECT_NAMES = ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
+                'tension_dependent_friction', 'viscoelastic_creep', 'sensor_delay',
+                'torque_constant_drift', 'force_sensor_offset')
+NONE = 'none'
+
+
+@dataclass
+class Design:
+    """Regressors of one effect at one grid value, for one frame."""
+    force_base: np.ndarray
+    force_cols: list = field(default_factory=list)
+    angle_cols: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One effect: its grid, its regressors and the names of its coefficients."""
+    name: str
+    grid: tuple
+    grid_name: str | None
+    grid_unit: str
+    build: Callable
+    force_params: tuple = ()
+    angle_params: tuple = ()
+    #: physical meaning of each coefficient: (name, unit, transform(coef, gain))
+    describe: tuple = ()
+
+    @property
+    def n_params(self) -> int:
+        return len(self.force_params) + len(self.angle_params) + (1 if self.grid_name else 0)
+
+
+#: Jaw torque per rad of cable stretch seen at the jaw, for the angle signature of pivot friction
+#: in free motion (N*m/rad; order of the sim's E A r_n^2 / L).
+ANGLE_PER_TORQUE = 1.0
+
+
+def _cached(f, key, make):
+    cache = f.setdefault('_cache', {})
+    if key not in cache:
+        cache[key] = make()
+    return cache[key]
+
+
+def _coulomb(f, tau):
+    # the pivot sticks while the drive torque changes by less than 2 tau: a play on the torque
+    force_dir = _cached(f, ('play_torque', tau), lambda: play(f['torque'], 2.0 * tau))
+    angle_dir = _cached(f, ('play_jaw_model', 2.0 * tau / ANGLE_PER_TORQUE),
+                        lambda: play(f['jaw_model'], 2.0 * tau / ANGLE_PER_TORQUE))
+    return Design(f['nominal'], [f['contact'] * f['gain'] * force_dir], [angle_dir])
+
+
+def _viscous(f, _):
+    return Design(f['nominal'], [f['contact'] * f['jaw_velocity']])
+
+
+def _hysteresis(f, width):
+    # Dahl loop: a moment proportional to the tension, flipping after a relative tension change
+    log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
+    direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
+    return Design(f['nominal'], [f['nominal'] * direction])
+
+
+def _backlash(f, current_width):
+    # the cable is taut on the side the current pulls: the jaw sits half the dead band
+    # to that side of where the drum puts it; the side flips as the current changes sign
+    return Design(f['nominal'], [], [np.tanh(f['current'] / current_width)])
+
+
+def _tension(f, _):
+    return Design(f['nominal'], [f['nominal'] * f['current']])
+
+
+def _creep(f, tau):
+    return Design(f['nominal'], [lowpass(f['nominal'], float(f['dt']), tau, initial=0.0)])
+
+
+def _delay(f, d):
+    return Design(np.interp(f['t'] - d, f['t'], f['nominal']))
+
+
+def _drift(f, tau):
+    if tau == 'linear':
+        return Design(f['nominal'], [f['nominal'] * f['t']])
+    i_ref = float(f['max_current']) if 'max_current' in f else max(float(np.max(np.abs(f['current']))), 1e-9)
+    heat = lowpass((f['current'] / i_ref) ** 2, float(f['dt']), float(tau), initial=0.0)
+    return Design(f['nominal'], [f['nominal'] * heat])
+
+
+def _offset(f, _):
+    return Design(f['nominal'], [np.ones_like(f['nominal'])])
+
+
+def _rel(coef, gain):
+    return coef / gain if gain else float('nan')
+
+
+EFFECTS: dict[str, Effect] = {e.name: e for e in (
+    Effect('pivot_coulomb_friction', (0.002, 0.005, 0.01, 0.02, 0.04), 'friction_torque_grid', 'N*m',
+           _coulomb,
+           ('force_step',), ('angle_step',),
+           (('force_step', 'unit of y', lambda c, g: c), ('angle_step', 'rad', lambda c, g: c))),
+    Effect('viscous_friction', (None,), None, '', _viscous,
+           ('force_per_jaw_velocity',), (),
+           (('force_per_jaw_velocity', 'unit of y*s/rad', lambda c, g: c),)),
+    Effect('cable_hysteresis', (0.02, 0.05, 0.1, 0.2), 'relative_tension_width', '-', _hysteresis,
+           ('loop_fraction',), (), (('loop_fraction', '-', lambda c, g: -_rel(c, g)),)),
+    Effect('backlash', (0.002, 0.005, 0.01, 0.02), 'current_width', 'A', _backlash,
+           (), ('dead_band',), (('dead_band', 'rad', lambda c, g: -2.0 * c),)),
+    Effect('tension_dependent_friction', (None,), None, '', _tension,
+           ('efficiency_loss_per_amp',), (),
+           (('efficiency_loss_per_amp', '1/A', lambda c, g: -_rel(c, g)),)),
+    Effect('viscoelastic_creep', (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0), 'time_constant', 's', _creep,
+           ('relaxing_fraction',), (), (('relaxing_fraction', '-', lambda c, g: -_rel(c, g)),)),
+    Effect('sensor_delay', (0.002, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3),
+           'delay', 's', _delay),
+    Effect('torque_constant_drift', ('linear', 5.0, 20.0, 60.0, 200.0), 'time_constant', 's', _drift,
+           ('gain_loss',), (), (('gain_loss', '- (per s if linear)', lambda c, g: -_rel(c, g)),)),
+    Effect('force_sensor_offset', (None,), None, '', _offset,
+           ('offset',), (), (('offset', 'unit of y', lambda c, g: c),)),
+)}

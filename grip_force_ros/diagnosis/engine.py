@@ -1,0 +1,349 @@
+"""The sim-to-real gap diagnosis: calibrate, locate, name the effect, measure the shrink.
+
+Steps (all fits on the training part, all judgements on the held-out part):
+
+1. nominal: the model's prediction; calibrate what a lab calibrates anyway
+   (force gain = efficiency scale, jaw-encoder zero and scale), reported apart;
+2. where: the calibrated residual binned over operating regions, ranked by share
+   of the held-out gap;
+3. which: every effect of :data:`EFFECTS` fitted as an augmentation, ranked by a
+   held-out score (change of log mean-square error of both channels, plus a
+   per-parameter penalty); ``none`` unless the best one lowers it by a margin;
+4. how far: held-out RMS gap before and after the winning effect.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE
+from grip_force_ros.diagnosis.frame import (OBJECT_CODES, DiagnosisError, build_frame, load_decimated,
+                                            measured_of)
+
+#: Held-out score margin for naming an effect: the mean-square error (both channels
+#: summed in log) must fall by at least this fraction, beyond the parameter penalty.
+MIN_IMPROVEMENT = 0.2
+#: Penalty per fitted parameter (grid parameter included), in log mean-square error.
+PARAM_PENALTY = 0.01
+#: Default split of a log into time blocks when no test logs are given.
+BLOCKS = 6
+TEST_BLOCKS = (1, 4)
+
+UNITS = {'grip_force': 'N', 'jaw_torque': 'N*m'}
+
+
+@dataclass
+class Diagnosis:
+    """The JSON result, plus held-out series for the report's plots."""
+    result: dict
+    series: dict = field(default_factory=dict)
+
+
+def _lstsq(X: np.ndarray, y: np.ndarray) -> np.ndarray:
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    return coef
+
+
+def _block_bootstrap_std(X, y, rng, blocks: int = 20, draws: int = 200) -> np.ndarray:
+    """Std of least-squares coefficients over a moving-block bootstrap (keeps autocorrelation)."""
+    n, k = X.shape
+    if n < 2 * blocks:
+        return np.full(k, np.nan)
+    edges = np.linspace(0, n, blocks + 1).astype(int)
+    xtx = np.stack([X[a:b].T @ X[a:b] for a, b in zip(edges[:-1], edges[1:])])
+    xty = np.stack([X[a:b].T @ y[a:b] for a, b in zip(edges[:-1], edges[1:])])
+    picks = rng.integers(0, blocks, size=(draws, blocks))
+    coefs = []
+    for p in picks:
+        try:
+            coefs.append(np.linalg.solve(xtx[p].sum(0), xty[p].sum(0)))
+        except np.linalg.LinAlgError:
+            continue
+    return np.std(coefs, axis=0) if len(coefs) > 2 else np.full(k, np.nan)
+
+
+def _rms(x) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float('nan')
+
+
+def _concat(frames, key):
+    return np.concatenate([f[key] for f in frames])
+
+
+class _Data:
+    """Frames of all logs, concatenated, with the train/test masks."""
+
+    def __init__(self, frames, train_masks):
+        self.frames = frames
+        steady = _concat(frames, 'steady') > 0
+        self.train = np.concatenate(train_masks) & steady
+        self.test = ~np.concatenate(train_masks) & steady
+        self.transient_share = float(1.0 - steady.mean())
+        for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
+                    'jaw_velocity', 'load_time', 'object', 't'):
+            setattr(self, key, _concat(frames, key))
+        # angle calibration: zero, scale, the cable's elastic stretch under both tensions and
+        # the lag of the jaw behind the drum in motion
+        # (the scale r0/r_n is geometry: kept, so the target is jaw - jaw_model)
+        self.angle_target = self.jaw - self.jaw_model
+        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'drum_tension'),
+                                           _concat(frames, 'jaw_tension'), self.jaw_velocity])
+        self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
+
+    def designs(self, effect, grid_value):
+        parts = [effect.build(f, grid_value) for f in self.frames]
+        base = np.concatenate([d.force_base for d in parts])
+        fcols = [np.concatenate([d.force_cols[j] for d in parts]) for j in range(len(parts[0].force_cols))]
+        acols = [np.concatenate([d.angle_cols[j] for d in parts]) for j in range(len(parts[0].angle_cols))]
+        Xf = np.column_stack([base] + fcols)
+        Xa = np.column_stack([self.angle_base] + acols)
+        return Xf, Xa
+
+
+def _fit_channels(data: _Data, Xf, Xa):
+    tr, te = data.train, data.test
+    cf = _lstsq(Xf[tr], data.y[tr])
+    ca = _lstsq(Xa[tr], data.angle_target[tr])
+    rf = data.y - Xf @ cf
+    ra = data.angle_target - Xa @ ca
+    return {'coef_force': cf, 'coef_angle': ca,
+            'train_mse_f': float(np.mean(rf[tr] ** 2)), 'train_mse_a': float(np.mean(ra[tr] ** 2)),
+            'test_mse_f': float(np.mean(rf[te] ** 2)), 'test_mse_a': float(np.mean(ra[te] ** 2)),
+            'resid_f': rf, 'resid_a': ra}
+
+
+def _score(fit, base) -> float:
+    return (math.log(max(fit['test_mse_f'], 1e-300) / max(base['test_mse_f'], 1e-300))
+            + math.log(max(fit['test_mse_a'], 1e-300) / max(base['test_mse_a'], 1e-300)))
+
+
+def _train_objective(fit) -> float:
+    return math.log(max(fit['train_mse_f'], 1e-300)) + math.log(max(fit['train_mse_a'], 1e-300))
+
+
+def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
+    """Held-out residual binned over operating regions, ranked by share of the gap."""
+    te = data.test
+    r2 = resid[te] ** 2
+    total = float(r2.sum()) or 1.0
+    n = int(te.sum())
+    out = []
+
+    def add(dimension, label, sel):
+        k = int(sel.sum())
+        if k == 0:
+            return
+        out.append({'where': f'{dimension}: {label}', 'dimension': dimension,
+                    'share_of_gap': float(r2[sel].sum() / total), 'share_of_samples': k / n,
+                    'rms': _rms(resid[te][sel]), 'mean': float(np.mean(resid[te][sel])), 'unit': unit})
+
+    def tertiles(dimension, values, fmt, value_unit):
+        v = values[te]
+        edges = np.quantile(v, [0, 1 / 3, 2 / 3, 1])
+        for i, name in enumerate(('low', 'mid', 'high')):
+            lo, hi = edges[i], edges[i + 1]
+            sel = (v >= lo) & ((v < hi) if i < 2 else (v <= hi))
+            add(dimension, f'{name} ({fmt(lo)}..{fmt(hi)} {value_unit})', sel)
+
+    tertiles('current level', data.current, lambda x: f'{x:.3g}', 'A')
+    tertiles('jaw angle', data.jaw, lambda x: f'{x:.3g}', 'rad')
+    tertiles('wrist angle', data.wrist, lambda x: f'{x:.3g}', 'rad')
+    tertiles('jaw speed', np.abs(data.jaw_velocity), lambda x: f'{x:.3g}', 'rad/s')
+    rate = data.current_rate[te]
+    thr = 0.25 * float(np.std(rate)) if rate.size else 0.0
+    add('direction of motion', 'closing (current rising)', rate > thr)
+    add('direction of motion', 'opening (current falling)', rate < -thr)
+    add('direction of motion', 'holding (current steady)', np.abs(rate) <= thr)
+    lt = data.load_time[te]
+    loaded = data.contact[te] > 0
+    add('time under load', 'not loaded', ~loaded)
+    add('time under load', 'loaded < 1 s', loaded & (lt < 1.0))
+    add('time under load', 'loaded 1..5 s', loaded & (lt >= 1.0) & (lt < 5.0))
+    add('time under load', 'loaded > 5 s', loaded & (lt >= 5.0))
+    obj = data.object[te]
+    for code in np.unique(obj):
+        add('object', OBJECT_CODES[int(code)], obj == code)
+    out.sort(key=lambda r: -r['share_of_gap'])
+    return out
+
+
+def _split_masks(frames, blocks, test_blocks):
+    masks = []
+    for f in frames:
+        t = f['t']
+        block = np.minimum((t - t[0]) / max(t[-1] - t[0], 1e-12) * blocks, blocks - 1).astype(int)
+        masks.append(~np.isin(block, test_blocks))
+    return masks
+
+
+def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, params=None, *,
+                  model=None, analysis_rate: float = 200.0, default_object: str = 'needle',
+                  blocks: int = BLOCKS, test_blocks: Sequence[int] = TEST_BLOCKS,
+                  min_improvement: float = MIN_IMPROVEMENT, param_penalty: float = PARAM_PENALTY,
+                  seed: int = 0, progress=None) -> Diagnosis:
+    """Diagnose the gap between the model and measured logs (see :func:`diagnose`)."""
+    if model is None:
+        from grip_force_ros.model import GripForceModel
+        if params is None:
+            from grip_force_ros.params import make_params
+            params = make_params()
+        model = GripForceModel(params)
+    say = progress or (lambda msg: None)
+    train_logs = list(train_logs)
+    test_logs = list(test_logs or [])
+    if not train_logs:
+        raise DiagnosisError('no logs to diagnose')
+    logs = [load_decimated(x, analysis_rate) for x in train_logs + test_logs]
+    measured = measured_of(logs)
+    unit = UNITS[measured]
+    say(f'building frames of {len(logs)} log(s) at {analysis_rate:g} Hz')
+    frames = [build_frame(log, model, measured=measured, default_object=default_object) for log in logs]
+    if test_logs:
+        masks = [np.full(len(f['t']), i < len(train_logs)) for i, f in enumerate(frames)]
+        split = {'method': 'files', 'train_logs': len(train_logs), 'test_logs': len(test_logs)}
+    else:
+        masks = _split_masks(frames, blocks, tuple(test_blocks))
+        split = {'method': 'time_blocks', 'blocks': blocks, 'test_blocks': list(test_blocks),
+                 'description': f'each log cut into {blocks} equal time blocks; blocks '
+                                f'{", ".join(str(b) for b in test_blocks)} (0-based) held out, '
+                                'the fit sees only the others'}
+    data = _Data(frames, masks)
+    if data.train.sum() < 10 or data.test.sum() < 10:
+        raise DiagnosisError('too few samples in the training or the held-out part')
+    if not np.any(data.contact[data.train] > 0):
+        raise DiagnosisError('the model predicts no load anywhere in the training part: nothing to '
+                             'compare (check the object column or --object)')
+    split.update({'train_seconds': float(data.train.sum() * np.mean([f['dt'] for f in frames])),
+                  'test_seconds': float(data.test.sum() * np.mean([f['dt'] for f in frames])),
+                  'analysis_rate_hz': analysis_rate,
+                  'transient_share': data.transient_share,
+                  'transients': 'samples within 0.2 s of the predicted load starting or stopping '
+                                '(impact, fly-off) are left out of every fit and score'})
+    rng = np.random.default_rng(seed)
+
+    # 1. nominal + calibration
+    Xf0 = data.nominal[:, None]
+    Xa0 = data.angle_base
+    base = _fit_channels(data, Xf0, Xa0)
+    gain = float(base['coef_force'][0])
+    gain_std = float(_block_bootstrap_std(Xf0[data.train], data.y[data.train], rng)[0])
+    a_std = _block_bootstrap_std(Xa0[data.train], data.angle_target[data.train], rng)
+    raw_gap = _rms(data.y[data.test] - data.nominal[data.test])
+    calibration = {
+        'force_gain': {'value': gain, 'std': gain_std, 'unit': '-',
+                       'meaning': f'measured {measured} / model {measured} (efficiency scale)'},
+        'jaw_angle_offset': {'value': float(base['coef_angle'][0]), 'std': float(a_std[0]),
+                             'unit': 'rad', 'meaning': 'jaw encoder zero'},
+        'jaw_angle_per_drum_tension': {'value': float(base['coef_angle'][1]), 'std': float(a_std[1]),
+                                       'unit': 'rad/N', 'meaning': 'cable stretch, drum side'},
+        'jaw_angle_per_jaw_tension': {'value': float(base['coef_angle'][2]), 'std': float(a_std[2]),
+                                      'unit': 'rad/N', 'meaning': 'cable stretch, jaw side'},
+        'jaw_angle_lag': {'value': float(base['coef_angle'][3]), 'std': float(a_std[3]),
+                          'unit': 's', 'meaning': 'jaw angle per jaw velocity (dynamic lag)'},
+        'gap_uncalibrated': raw_gap,
+        'note': 'calibrated on the training part as a lab would; not counted as an unmodelled effect',
+    }
+
+    # 3. which effect
+    ranking = []
+    fits = {}
+    for name in EFFECT_NAMES:
+        effect = EFFECTS[name]
+        say(f'fitting {name}')
+        best = None
+        for value in effect.grid:
+            Xf, Xa = data.designs(effect, value)
+            fit = _fit_channels(data, Xf, Xa)
+            obj = _train_objective(fit)
+            if best is None or obj < best[0]:
+                best = (obj, value, fit, Xf, Xa)
+        _, value, fit, Xf, Xa = best
+        fits[name] = fit
+        score = _score(fit, base) + param_penalty * effect.n_params
+        params_out = {}
+        sf = _block_bootstrap_std(Xf[data.train], data.y[data.train], rng)
+        sa = _block_bootstrap_std(Xa[data.train], data.angle_target[data.train], rng)
+        g = float(fit['coef_force'][0])
+        for (pname, punit, transform), coef, std in zip(
+                effect.describe,
+                list(fit['coef_force'][1:]) + list(fit['coef_angle'][4:]),
+                list(sf[1:]) + list(sa[4:])):
+            val = float(transform(float(coef), g))
+            scale = abs(val / coef) if coef else 1.0
+            params_out[pname] = {'value': val, 'std': float(std) * scale,
+                                 'unit': punit.replace('unit of y', unit)}
+        if effect.grid_name:
+            params_out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
+                                            'note': 'picked from a grid on the training part'}
+        ranking.append({'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
+                        'holdout_angle_rmse': math.sqrt(fit['test_mse_a']),
+                        'train_rmse': math.sqrt(fit['train_mse_f']),
+                        'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out})
+    ranking.append({'effect': NONE, 'holdout_rmse': math.sqrt(base['test_mse_f']),
+                    'holdout_angle_rmse': math.sqrt(base['test_mse_a']),
+                    'train_rmse': math.sqrt(base['train_mse_f']), 'score': math.log(1.0 - min_improvement),
+                    'n_params': 0, 'gain': gain, 'params': {}})
+    ranking.sort(key=lambda r: r['score'])
+    winner = ranking[0]['effect']
+
+    # 4. how far
+    gap_before = math.sqrt(base['test_mse_f'])
+    angle_before = math.sqrt(base['test_mse_a'])
+    if winner == NONE:
+        gap_after, angle_after, resid_after = gap_before, angle_before, base['resid_f']
+    else:
+        gap_after = math.sqrt(fits[winner]['test_mse_f'])
+        angle_after = math.sqrt(fits[winner]['test_mse_a'])
+        resid_after = fits[winner]['resid_f']
+    verdict = {'effect': winner, 'gap_before': gap_before, 'gap_after': gap_after,
+               'shrink': 1.0 - gap_after / gap_before if gap_before > 0 else 0.0,
+               'unit': unit, 'measured': measured,
+               'angle_gap_before': angle_before, 'angle_gap_after': angle_after, 'angle_unit': 'rad',
+               'runner_up': ranking[1]['effect'],
+               'rule': f'an effect is named when its held-out score (log MSE ratio, force + angle, '
+                       f'+{param_penalty} per parameter) is below log(1 - {min_improvement})'}
+
+    # 2. where
+    regions = _regions(data, base['resid_f'], unit)
+
+    result = {'verdict': verdict, 'ranking': ranking, 'regions': regions, 'split': split,
+              'calibration': calibration, 'measured': measured, 'unit': unit,
+              'samples': {'train': int(data.train.sum()), 'test': int(data.test.sum())}}
+    te = data.test
+    series = {'t': data.t[te], 'log_index': data.log_index[te], 'y': data.y[te],
+              'calibrated': gain * data.nominal[te], 'after': (data.y - resid_after)[te],
+              'resid_before': base['resid_f'][te], 'resid_after': resid_after[te],
+              'jaw': data.jaw[te], 'jaw_before': (data.jaw - base['resid_a'])[te],
+              'jaw_after': (data.jaw - (fits[winner]['resid_a'] if winner != NONE else base['resid_a']))[te],
+              'current': data.current[te], 'wrist': data.wrist[te], 'jaw_velocity': data.jaw_velocity[te],
+              'load_time': data.load_time[te], 'current_rate': data.current_rate[te]}
+    return Diagnosis(result, series)
+
+
+def diagnose(train_logs: Sequence, test_logs: Sequence | None = None, params=None, **kwargs) -> dict:
+    """Where the model disagrees with the logs, which effect explains it, how far the gap shrinks.
+
+    Parameters
+    ----------
+    train_logs : sequence of log dicts or paths
+        Logs in the DESIGN.md contract (see :mod:`grip_force_ros.logs`). Without
+        ``test_logs`` each is split into time blocks (train / held out).
+    test_logs : sequence of log dicts or paths, optional
+        Held-out logs the fits never see.
+    params : ParamSet, optional
+        Instrument parameters of the nominal model (defaults when omitted).
+    **kwargs
+        ``model``, ``analysis_rate`` (Hz), ``default_object``, ``blocks``,
+        ``test_blocks``, ``min_improvement``, ``param_penalty``, ``seed``, ``progress``.
+
+    Returns
+    -------
+    dict
+        ``{"verdict": {"effect", "gap_before", "gap_after", ...}, "ranking": [...],
+        "regions": [...], "split": {...}, "calibration": {...}}``, gaps in the unit of
+        the measured column (N or N*m), RMS on held-out data.
+    """
+    return run_diagnosis(train_logs, test_logs, params, **kwargs).result

@@ -1,0 +1,179 @@
+"""Markdown report with PNG figures (matplotlib, Agg) of one diagnosis."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from grip_force_ros.diagnosis.engine import Diagnosis
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _binned(x, y, bins=20):
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    if edges.size < 3:
+        return np.array([]), np.array([]), np.array([])
+    idx = np.clip(np.searchsorted(edges, x, side='right') - 1, 0, edges.size - 2)
+    count = np.bincount(idx, minlength=edges.size - 1)
+    keep = count > 0
+    mean = np.bincount(idx, weights=y, minlength=edges.size - 1)[keep] / count[keep]
+    rms = np.sqrt(np.bincount(idx, weights=y * y, minlength=edges.size - 1)[keep] / count[keep])
+    centre = 0.5 * (edges[:-1] + edges[1:])[keep]
+    return centre, mean, rms
+
+
+def plot_regions(d: Diagnosis, path: Path) -> Path:
+    """Bar chart: held-out share of the gap per operating region (top 14)."""
+    plt = _plt()
+    regions = d.result['regions'][:14][::-1]
+    fig, ax = plt.subplots(figsize=(9, 0.35 * len(regions) + 1.5))
+    y = np.arange(len(regions))
+    ax.barh(y, [r['share_of_gap'] for r in regions], color='tab:red', label='share of the gap')
+    ax.plot([r['share_of_samples'] for r in regions], y, 'k|', markersize=14, label='share of samples')
+    ax.set_yticks(y, [r['where'] for r in regions], fontsize=8)
+    ax.set_xlabel('share of held-out squared residual (calibrated model)')
+    ax.set_xlim(0, 1)
+    ax.legend(loc='lower right', fontsize=8)
+    ax.set_title('Where the model disagrees with the log')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_residuals(d: Diagnosis, path: Path) -> Path:
+    """Held-out residual (binned mean and RMS) against six operating variables."""
+    plt = _plt()
+    s = d.series
+    unit = d.result['unit']
+    panels = (('current', 'current (A)'), ('jaw', 'jaw angle (rad)'), ('wrist', 'wrist angle (rad)'),
+              ('jaw_velocity', 'jaw velocity (rad/s)'), ('current_rate', 'current rate (A/s)'),
+              ('load_time', 'time under load (s)'))
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5))
+    for ax, (key, label) in zip(axes.ravel(), panels):
+        for resid, name, colour in ((s['resid_before'], 'calibrated model', 'tab:red'),
+                                    (s['resid_after'], f"+ {d.result['verdict']['effect']}", 'tab:green')):
+            c, mean, rms = _binned(s[key], resid)
+            ax.plot(c, mean, '-o', ms=3, color=colour, label=f'{name}: mean')
+            ax.plot(c, rms, '--', color=colour, label=f'{name}: rms')
+        ax.axhline(0, color='k', lw=0.5)
+        ax.set_xlabel(label)
+        ax.set_ylabel(f'residual ({unit})')
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle('Held-out residual over operating regions (binned by quantiles)')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_timeseries(d: Diagnosis, path: Path, seconds: float = 30.0) -> Path:
+    """Held-out stretch of the first log: measured, calibrated model, model + effect."""
+    plt = _plt()
+    s = d.series
+    sel = s['log_index'] == s['log_index'][0]
+    t = s['t'][sel]
+    keep = t <= t[0] + seconds
+    unit = d.result['unit']
+    fig, (a, b) = plt.subplots(2, 1, figsize=(11, 6.5), sharex=True)
+    idx = np.arange(keep.sum())
+    a.plot(idx, s['y'][sel][keep], color='0.3', lw=1, label=f"measured {d.result['measured']}")
+    a.plot(idx, s['calibrated'][sel][keep], color='tab:red', lw=1, label='calibrated model')
+    a.plot(idx, s['after'][sel][keep], color='tab:green', lw=1,
+           label=f"model + {d.result['verdict']['effect']}")
+    a.set_ylabel(f"{d.result['measured']} ({unit})")
+    a.legend(fontsize=8)
+    b.plot(idx, s['resid_before'][sel][keep], color='tab:red', lw=1, label='residual, calibrated model')
+    b.plot(idx, s['resid_after'][sel][keep], color='tab:green', lw=1, label='residual, + effect')
+    b.axhline(0, color='k', lw=0.5)
+    b.set_ylabel(f'residual ({unit})')
+    b.set_xlabel('held-out sample (analysis rate; held-out blocks joined)')
+    b.legend(fontsize=8)
+    fig.suptitle('Held-out data the fits never saw')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_ranking(d: Diagnosis, path: Path) -> Path:
+    """Held-out score of every effect (lower is better; `none` marks the naming threshold)."""
+    plt = _plt()
+    ranking = d.result['ranking'][::-1]
+    fig, ax = plt.subplots(figsize=(8, 0.35 * len(ranking) + 1.5))
+    y = np.arange(len(ranking))
+    colours = ['tab:gray' if r['effect'] == 'none' else 'tab:blue' for r in ranking]
+    ax.barh(y, [r['score'] for r in ranking], color=colours)
+    ax.set_yticks(y, [r['effect'] for r in ranking], fontsize=8)
+    ax.axvline(0, color='k', lw=0.5)
+    ax.set_xlabel('held-out score: change of log MSE (force + angle) + parameter penalty')
+    ax.set_title('Which effect (lower = explains more of the held-out gap)')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _fmt(x, digits=4):
+    if x is None:
+        return '-'
+    if isinstance(x, str):
+        return x
+    return f'{x:.{digits}g}'
+
+
+def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnosis',
+                 sources=()) -> Path:
+    """Write ``report.md`` and its PNG figures into ``out_dir``; return the Markdown path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = {'regions': plot_regions(d, out / 'regions.png'),
+            'residuals': plot_residuals(d, out / 'residuals.png'),
+            'timeseries': plot_timeseries(d, out / 'timeseries.png'),
+            'ranking': plot_ranking(d, out / 'ranking.png')}
+    r = d.result
+    v = r['verdict']
+    unit = r['unit']
+    lines = [f'# {title}', '']
+    if sources:
+        lines += ['Logs: ' + ', '.join(f'`{s}`' for s in sources), '']
+    lines += [f"**Verdict: `{v['effect']}`** - held-out RMS gap of {r['measured']} "
+              f"{_fmt(v['gap_before'])} {unit} -> {_fmt(v['gap_after'])} {unit} "
+              f"(shrink {100 * v['shrink']:.0f} %); jaw angle {_fmt(v['angle_gap_before'])} -> "
+              f"{_fmt(v['angle_gap_after'])} rad. Runner-up: `{v['runner_up']}`.", '',
+              f"Split: {r['split'].get('description', r['split']['method'])}; "
+              f"{r['samples']['train']} training and {r['samples']['test']} held-out samples at "
+              f"{_fmt(r['split']['analysis_rate_hz'])} Hz.", '',
+              '## 1. Nominal model and calibration', '',
+              'Calibrated on the training part as a lab would (not unmodelled effects):', '',
+              '| quantity | value | std | unit | meaning |', '|---|---|---|---|---|']
+    for name, c in r['calibration'].items():
+        if isinstance(c, dict):
+            lines.append(f"| {name} | {_fmt(c['value'])} | {_fmt(c['std'], 2)} | {c['unit']} | {c['meaning']} |")
+    lines += ['', f"Uncalibrated held-out RMS gap: {_fmt(r['calibration']['gap_uncalibrated'])} {unit}.", '',
+              '## 2. Where', '', f"![regions]({figs['regions'].name})", '',
+              '| region | share of gap | share of samples | rms | mean |', '|---|---|---|---|---|']
+    for g in r['regions'][:12]:
+        lines.append(f"| {g['where']} | {g['share_of_gap']:.2f} | {g['share_of_samples']:.2f} | "
+                     f"{_fmt(g['rms'])} | {_fmt(g['mean'])} |")
+    lines += ['', f"![residuals]({figs['residuals'].name})", '',
+              '## 3. Which effect', '', f"![ranking]({figs['ranking'].name})", '',
+              f'| effect | held-out rmse ({unit}) | held-out angle rmse (rad) | score | parameters |',
+              '|---|---|---|---|---|']
+    for e in r['ranking']:
+        ps = '; '.join(f"{k} = {_fmt(p['value'])}" + (f" ± {_fmt(p['std'], 2)}" if p.get('std') is not None else '')
+                       + f" {p['unit']}" for k, p in e['params'].items())
+        lines.append(f"| {e['effect']} | {_fmt(e['holdout_rmse'])} | {_fmt(e['holdout_angle_rmse'])} | "
+                     f"{e['score']:.3f} | {ps} |")
+    lines += ['', f"Rule: {v['rule']}.", '', '## 4. How far', '',
+              f"![timeseries]({figs['timeseries'].name})", '',
+              f"Held-out RMS gap {_fmt(v['gap_before'])} -> {_fmt(v['gap_after'])} {unit}.", '']
+    path = out / 'report.md'
+    path.write_text('\n'.join(lines))
+    return path
