@@ -505,7 +505,7 @@ class InstrumentSim:
     def energy(self) -> float:
         """Mechanical energy stored in the plant (J): kinetic + cable + contact springs."""
         k1, k2, g2 = self._k1, self._k2, self._backlash_half
-        u = self._x - self._a
+        u = self._x - self._rn * (self._coupling * self._wrist - self._phi)
         slack = u - g2 if u > g2 else (u + g2 if u < -g2 else 0.0)
         cable = 0.5 * k1 * (self._r0 * self._theta0 - self._x) ** 2 + 0.5 * k2 * slack ** 2
         kinetic = 0.5 * self._j0 * self._w0 ** 2 + 0.5 * self._jj * self._wj ** 2
