@@ -79,7 +79,7 @@ def test_bad_file_is_refused_by_the_cli(tmp_path, capsys):
     assert out.count('error') == 1 and 'pulley_friction_coefficient' in out and '1.5' in out
 
 
-def test_inconsistent_file_gives_a_model_error(tmp_path):
+def test_inconsistent_file_is_refused_at_load(tmp_path):
     bad = _bad_copy(tmp_path, 'cable_radius', '0.0035')
-    with pytest.raises(ModelError, match="'cable_radius' 0.0035 m"):
-        GripForceModel(load_params_file(bad))
+    with pytest.raises(ParameterError, match="bad.*'cable_radius' 0.0035 m"):
+        load_params_file(bad)

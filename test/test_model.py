@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.integrate import quad, solve_ivp
 
-from grip_force_ros.model import OBJECTS, GripForceModel, ModelError
+from grip_force_ros.model import OBJECTS, GripForceModel, ModelError, check_instrument
 from grip_force_ros.model import angle, contact, friction, transmission
-from grip_force_ros.params import load_params_file, make_params
+from grip_force_ros.params import ParameterError, load_params_file, make_params
 
 CONFIGS = ['config/paper_needle_driver.yaml', 'config/long_jaw_grasper.yaml',
            'config/four_pulley_needle_driver.yaml']
@@ -257,10 +257,12 @@ def test_wrist_wrap_gain_lowers_efficiency_with_wrist_angle():
 
 
 def test_inconsistent_geometry_is_rejected():
-    with pytest.raises(ModelError, match='cable_radius'):
-        GripForceModel(PAPER.replace(cable_radius=0.004))
-    with pytest.raises(ModelError, match='guide_pulley_wrap_angles'):
-        GripForceModel(PAPER.replace(guide_pulley_radii=[0.003, 0.003]))
+    with pytest.raises(ParameterError, match='cable_radius'):
+        PAPER.replace(cable_radius=0.004)
+    with pytest.raises(ParameterError, match='guide_pulley_wrap_angles'):
+        PAPER.replace(guide_pulley_radii=[0.003, 0.003])
+    with pytest.raises(ModelError, match='cable_radius'):  # built without the schema
+        check_instrument(dict(PAPER, cable_radius=0.004))
 
 
 @given(mu=st.floats(0.02, 0.5), theta=st.floats(0.1, 2 * math.pi),

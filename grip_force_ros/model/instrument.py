@@ -19,6 +19,7 @@ from grip_force_ros.model import contact as _contact
 from grip_force_ros.model import friction as _friction
 from grip_force_ros.model import transmission as _tx
 from grip_force_ros.model.contact import OBJECTS, ModelError, check_object
+from grip_force_ros.params import ParameterError, check_consistency
 
 __all__ = ['GripForceModel', 'ForwardResult', 'ModelError', 'OBJECTS', 'check_instrument']
 
@@ -51,22 +52,18 @@ class ForwardResult:
 def check_instrument(params: Any) -> None:
     """Cross-field checks the per-key ranges cannot express.
 
+    :func:`grip_force_ros.params.make_params` already runs them on every load; this
+    re-check covers parameter objects built by other means.
+
     Raises
     ------
     ModelError
         Naming the keys and values (e.g. cable thicker than a pulley).
     """
-    radii, wraps = params.guide_pulley_radii, params.guide_pulley_wrap_angles
-    if len(radii) != len(wraps):
-        raise ModelError(f"'guide_pulley_radii' has {len(radii)} entries but 'guide_pulley_wrap_angles' "
-                         f'has {len(wraps)}; give one radius and one wrap angle per guide pulley')
-    smallest = min(radii)
-    if params.cable_radius >= smallest:
-        raise ModelError(f"'cable_radius' {params.cable_radius} m must be smaller than every "
-                         f"guide pulley radius (smallest 'guide_pulley_radii' = {smallest} m)")
-    if params.jaw_angle_min >= params.jaw_angle_max:
-        raise ModelError(f"'jaw_angle_min' {params.jaw_angle_min} rad must be below "
-                         f"'jaw_angle_max' {params.jaw_angle_max} rad")
+    try:
+        check_consistency(params)
+    except ParameterError as exc:
+        raise ModelError(str(exc)) from None
 
 
 class GripForceModel:

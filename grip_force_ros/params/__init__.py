@@ -27,7 +27,7 @@ if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
     raise RuntimeError('duplicate parameter name in the schema')
 
 __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
-           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml']
+           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency']
 
 
 def specs_in(*groups: str) -> list[ParamSpec]:
@@ -44,7 +44,31 @@ def make_params(values: Mapping[str, Any] | None = None, *,
     ParameterError
         Naming the key, the value and the allowed range.
     """
-    return ParamSet(validate(SCHEMA, values or {}, allow_unknown=allow_unknown))
+    checked = validate(SCHEMA, values or {}, allow_unknown=allow_unknown)
+    check_consistency(checked)
+    return ParamSet(checked)
+
+
+def check_consistency(values: Mapping[str, Any]) -> None:
+    """Cross-parameter checks that per-key ranges cannot express.
+
+    Raises
+    ------
+    ParameterError
+        Naming the keys and values (e.g. a cable thicker than a pulley).
+    """
+    radii, wraps = values['guide_pulley_radii'], values['guide_pulley_wrap_angles']
+    if len(radii) != len(wraps):
+        raise ParameterError(
+            f"'guide_pulley_radii' has {len(radii)} entries but 'guide_pulley_wrap_angles' has "
+            f'{len(wraps)}; give one radius and one wrap angle per guide pulley')
+    if values['cable_radius'] >= min(radii):
+        raise ParameterError(
+            f"'cable_radius' {values['cable_radius']} m must be smaller than every guide pulley "
+            f"radius (smallest 'guide_pulley_radii' = {min(radii)} m)")
+    if values['jaw_angle_min'] >= values['jaw_angle_max']:
+        raise ParameterError(f"'jaw_angle_min' {values['jaw_angle_min']} rad must be below "
+                             f"'jaw_angle_max' {values['jaw_angle_max']} rad")
 
 
 def read_params_yaml(path: str | Path) -> dict[str, Any]:
