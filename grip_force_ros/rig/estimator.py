@@ -1,0 +1,480 @@
+"""Jaw torque from motor-side signals only: a friction-aware cable transmission observer.
+
+What a robot has on its motor side, and nothing else, goes in (:data:`ALLOWED_INPUTS`):
+measured current, the back-end command, the input-disk and motor encoders (and
+their derivatives). The jaw torque sensor, the jaw encoder, the input-disk
+torque sensor and the resisting (front-end) motor are never read
+(:func:`motor_side_inputs` copies only the allowed columns; a test corrupts the
+others and checks the prediction does not move).
+
+The physics (docs/real_data.md): the current the motor needs is
+
+    I = alpha(s) * tau + b0 + b1 * s + k(x) + c * v            (forward model)
+
+with tau the jaw torque (N*m), s in [-1, 1] the direction of the cable friction
+(+1 while the motor drives closing, -1 while the load back-drives it), x the disk
+angle (rad), v the motor velocity (rad/s):
+
+* direction-dependent efficiency: alpha(+1) = 1/(G*eta) while driving, alpha(-1) =
+  eta/G while back-driven (capstan friction proportional to tension loses in the
+  driving direction and helps in the back-driven one; eta is the one-way efficiency,
+  G the loss-free gain in N*m/A);
+* Coulomb friction b1 (A, tension-independent part), offset b0 (A);
+* k(x): a position-dependent spring (cable pretension and jaw), Legendre terms;
+* c: viscous friction (A*s/rad).
+
+s follows the motor angle like a Dahl friction model (it moves towards the sign
+of each displacement, exponentially over ``hysteresis_width`` rad), so it is
+known only while the motor slides: at a reversal the motor sticks while its
+current swings from one friction branch to the other, and the jaw torque cannot
+be told from the current. The observer therefore inverts the forward model
+only while sliding (|s| high, |v| above the stick speed) and holds its last
+estimate otherwise, averaging with a first-order gain (noise of the current).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Mapping, Sequence
+
+import numpy as np
+from scipy.signal import butter, lfilter, lfilter_zi
+
+#: Columns an estimator may read: the robot's motor side.
+ALLOWED_INPUTS = ('t', 'current', 'current_command', 'motor_angle', 'motor_shaft_angle')
+#: Columns it must never read (jaw side, the input-disk torque sensor, the resisting motor).
+FORBIDDEN_INPUTS = ('jaw_torque', 'jaw_angle', 'disk_torque', 'load_command', 'grip_force')
+#: The target.
+TARGET = 'jaw_torque'
+
+
+class EstimatorError(ValueError):
+    """Bad estimator input (missing motor-side column) or an estimator used before fitting."""
+
+
+def motor_side_inputs(source) -> dict[str, np.ndarray]:
+    """Copy only the motor-side columns of a run or a log (the one input gate).
+
+    Parameters
+    ----------
+    source : RigRun or mapping of str to array
+        Needs ``t`` (s), ``current`` (A), ``motor_angle`` (rad, input disk);
+        ``motor_shaft_angle`` (rad) and ``current_command`` (A) when present.
+
+    Returns
+    -------
+    dict of str to ndarray
+        float64 copies of :data:`ALLOWED_INPUTS` that exist in ``source``.
+
+    Raises
+    ------
+    EstimatorError
+        When ``t``, ``current`` or ``motor_angle`` is missing.
+    """
+    get = source.get if isinstance(source, Mapping) else (lambda k: getattr(source, k, None))
+    out = {}
+    for name in ALLOWED_INPUTS:
+        value = get(name)
+        if value is not None:
+            out[name] = np.array(value, dtype=np.float64, copy=True)
+    missing = [c for c in ('t', 'current', 'motor_angle') if c not in out]
+    if missing:
+        raise EstimatorError(f'motor-side input lacks {", ".join(missing)}')
+    return out
+
+
+def _target(source) -> np.ndarray:
+    get = source.get if isinstance(source, Mapping) else (lambda k: getattr(source, k, None))
+    value = get(TARGET)
+    if value is None:
+        raise EstimatorError(f'training data lacks the target column {TARGET!r}')
+    return np.asarray(value, dtype=np.float64)
+
+
+def _sample_period(t: np.ndarray) -> float:
+    return float(np.median(np.diff(t))) if t.size > 1 else 1e-3
+
+
+def causal_lowpass(x: np.ndarray, cutoff_hz: float, dt: float) -> np.ndarray:
+    """Second-order Butterworth low-pass, causal, started at rest on the first sample."""
+    nyquist = 0.5 / dt
+    if cutoff_hz <= 0 or cutoff_hz >= nyquist:
+        return x.copy()
+    b, a = butter(2, cutoff_hz / nyquist)
+    y, _ = lfilter(b, a, x, zi=lfilter_zi(b, a) * x[0])
+    return y
+
+
+def causal_velocity(angle: np.ndarray, dt: float, window_s: float, cutoff_hz: float) -> np.ndarray:
+    """Backward difference over ``window_s`` then the causal low-pass (rad/s)."""
+    n = max(1, int(round(window_s / dt)))
+    v = np.zeros_like(angle)
+    if angle.size > n:
+        v[n:] = (angle[n:] - angle[:-n]) / (n * dt)
+    k = np.arange(1, min(n, angle.size))
+    v[k] = (angle[k] - angle[0]) / (k * dt)
+    return causal_lowpass(v, cutoff_hz, dt)
+
+
+def dahl_direction(angle: np.ndarray, width: float, start: float = 0.0) -> np.ndarray:
+    """Friction direction state s in [-1, 1] driven by displacement (Dahl model).
+
+    Each displacement dx moves s towards sign(dx) by the fraction
+    1 - exp(-|dx|/width): no motion, no change (the state sticks).
+
+    Parameters
+    ----------
+    angle : ndarray
+        Motor-side angle (rad), positive closing.
+    width : float
+        Angle (rad) over which the friction reverses (e-folding).
+    start : float
+        Initial state.
+    """
+    if width <= 0:
+        raise EstimatorError(f'hysteresis width must be > 0 rad, got {width!r}')
+    dx = np.diff(angle, prepend=angle[0])
+    decay = np.exp(-np.abs(dx) / width)
+    target = np.sign(dx)
+    out = np.empty(angle.size)
+    s = float(start)
+    for i, (d, g, tgt) in enumerate(zip(dx.tolist(), decay.tolist(), target.tolist())):
+        if d != 0.0:
+            s = tgt + (s - tgt) * g
+        out[i] = s
+    return out
+
+
+def hold_observer(measurement: np.ndarray, weight: np.ndarray, gain: float,
+                  initial: float) -> np.ndarray:
+    """First-order observer that holds while ``weight`` is 0.
+
+    estimate[k] = estimate[k-1] + g[k] * (measurement[k] - estimate[k-1]) with
+    g[k] = max(gain * weight[k], weight[k] / W[k]), W the weight seen so far: a
+    running mean of the first measurements, then an exponential average. Before
+    the first measurement with weight > 0 the estimate is ``initial`` (the
+    training mean: nothing is known yet).
+    """
+    out = np.empty(measurement.size)
+    est = float(initial)
+    seen = 0.0
+    for i, (z, w) in enumerate(zip(measurement.tolist(), weight.tolist())):
+        if w > 0.0:
+            seen += w
+            g = max(gain * w, w / seen)
+            est += g * (z - est)
+        out[i] = est
+    return out
+
+
+@dataclass(frozen=True)
+class ObserverSettings:
+    """Structure and fixed settings of :class:`CableFrictionObserver`.
+
+    The effect switches name the DESIGN.md vocabulary they model; turning one off
+    is how the analysis measures what each effect is worth on held-out runs.
+
+    Attributes
+    ----------
+    efficiency : bool
+        tension_dependent_friction: direction-dependent efficiency alpha(s).
+    coulomb : bool
+        pivot_coulomb_friction: constant friction b1 * s.
+    hysteresis : bool
+        cable_hysteresis: Dahl state and stick-hold observer. Off: s = sign(v),
+        the model is inverted at every sample (no hold, no averaging).
+    viscous : bool
+        viscous_friction: c * v.
+    spring_order : int
+        Legendre order of the position spring k(x) (0 = none).
+    friction_map_order : int
+        Legendre order of a position-dependent friction s * m(x) (pulley and
+        cable ripple along the stroke; 0 = none).
+    backlash_angle : str
+        Angle that drives the friction state: ``'motor_shaft_angle'`` (gearbox
+        output; the backlash of the coupling lies between it and the disk) or
+        ``'motor_angle'`` (input disk, after the backlash).
+    current_delay_s : float
+        sensor_delay: the current is used this much later (s); 0 = as logged.
+    hysteresis_width : float
+        Dahl width (rad).
+    slow_hysteresis_width : float
+        viscoelastic_creep: width (rad) of a second, slower friction state that
+        lets the friction settle over a longer stroke after a reversal (0 = none).
+    sliding_threshold : float
+        |s| above which the friction direction counts as known.
+    stick_speed : float
+        |v| (rad/s) below which the motor counts as stuck.
+    observer_time_constant : float
+        Averaging time constant (s) of the observer while sliding.
+    current_filter_hz : float
+        Causal low-pass of the measured current and the velocity (Hz).
+    velocity_window_s : float
+        Backward-difference window of the velocity (s).
+    """
+
+    efficiency: bool = True
+    coulomb: bool = True
+    hysteresis: bool = True
+    viscous: bool = True
+    spring_order: int = 2
+    friction_map_order: int = 0
+    backlash_angle: str = 'motor_shaft_angle'
+    current_delay_s: float = 0.0
+    hysteresis_width: float = 0.02
+    slow_hysteresis_width: float = 0.0
+    sliding_threshold: float = 0.9
+    stick_speed: float = 0.1
+    observer_time_constant: float = 0.1
+    current_filter_hz: float = 10.0
+    velocity_window_s: float = 0.02
+
+    def __post_init__(self):
+        if self.backlash_angle not in ('motor_shaft_angle', 'motor_angle'):
+            raise EstimatorError(f'backlash_angle must be motor_shaft_angle or motor_angle, '
+                                 f'got {self.backlash_angle!r}')
+        if not 0.0 <= self.sliding_threshold < 1.0:
+            raise EstimatorError(f'sliding_threshold must be in [0, 1), got {self.sliding_threshold!r}')
+        if self.spring_order < 0 or self.observer_time_constant < 0 or self.current_delay_s < 0:
+            raise EstimatorError('spring_order, observer_time_constant and current_delay_s must be >= 0')
+
+
+@dataclass
+class _Signals:
+    current: np.ndarray         # A, filtered (and delayed)
+    velocity: np.ndarray        # rad/s
+    direction: np.ndarray       # s in [-1, 1]
+    slow_direction: np.ndarray | None   # second, slower Dahl state (or None)
+    position: np.ndarray        # rad, disk angle scaled to [-1, 1] for the Legendre terms
+    sliding: np.ndarray         # 0..1 confidence that the friction direction is known
+
+
+#: Disk angle range used to scale the spring's Legendre argument (rad): the rig
+#: sweeps the input disk over [-1.05, 0] rad (a 30 degree amplitude sine).
+POSITION_RANGE = (-1.05, 0.0)
+
+
+def _signals(inputs: Mapping[str, np.ndarray], settings: ObserverSettings) -> _Signals:
+    t = inputs['t']
+    dt = _sample_period(t)
+    current = inputs['current']
+    if settings.current_delay_s > 0:
+        shift = int(round(settings.current_delay_s / dt))
+        current = np.concatenate([np.full(shift, current[0]), current[:-shift] if shift else current])
+    current = causal_lowpass(current, settings.current_filter_hz, dt)
+    angle = inputs.get(settings.backlash_angle, inputs['motor_angle'])
+    velocity = causal_velocity(angle, dt, settings.velocity_window_s, settings.current_filter_hz)
+    if settings.hysteresis:
+        direction = dahl_direction(angle, settings.hysteresis_width)
+        known = np.clip((np.abs(direction) - settings.sliding_threshold)
+                        / (1.0 - settings.sliding_threshold), 0.0, 1.0)
+        sliding = known * (np.abs(velocity) > settings.stick_speed)
+    else:
+        direction = np.sign(velocity)
+        sliding = np.ones_like(velocity)
+    slow = dahl_direction(angle, settings.slow_hysteresis_width) \
+        if settings.slow_hysteresis_width > 0 else None
+    lo, hi = POSITION_RANGE
+    position = 2.0 * (inputs['motor_angle'] - lo) / (hi - lo) - 1.0
+    return _Signals(current, velocity, direction, slow, position, sliding)
+
+
+def _nuisance_columns(sig: _Signals, settings: ObserverSettings) -> tuple[list[str], np.ndarray]:
+    """Columns of the forward model that do not multiply the jaw torque (units of A)."""
+    names, cols = ['offset'], [np.ones_like(sig.current)]
+    if settings.coulomb:
+        names.append('coulomb')
+        cols.append(sig.direction)
+    if sig.slow_direction is not None:
+        names.append('coulomb_slow')
+        cols.append(sig.slow_direction)
+    for order in range(1, settings.spring_order + 1):
+        names.append(f'spring_P{order}')
+        cols.append(np.polynomial.legendre.legval(sig.position, [0.0] * order + [1.0]))
+    for order in range(1, settings.friction_map_order + 1):
+        names.append(f'friction_P{order}')
+        cols.append(sig.direction * np.polynomial.legendre.legval(sig.position, [0.0] * order + [1.0]))
+    if settings.viscous:
+        names.append('viscous')
+        cols.append(sig.velocity)
+    return names, np.column_stack(cols)
+
+
+@dataclass
+class FitResult:
+    """Fitted forward-model coefficients and their jackknife uncertainty.
+
+    Attributes
+    ----------
+    names : list of str
+        Coefficient names: ``alpha0`` (A/(N*m)), ``alpha1`` (A/(N*m), efficiency
+        term), then the nuisance columns (A, or A*s/rad for ``viscous``).
+    values, std : ndarray
+        Estimates and leave-one-run-out jackknife standard errors.
+    physical : dict of str to (value, std)
+        Interpretable parameters: ``gain_Nm_per_A`` G, ``efficiency`` eta,
+        ``coulomb_Nm`` (at the jaw), ``offset_Nm``, ``viscous_Nms_per_rad``,
+        ``spring_span_Nm`` (peak-to-peak of k(x) over the disk range).
+    training_samples : int
+        Sliding samples the fit used.
+    """
+
+    names: list
+    values: np.ndarray
+    std: np.ndarray
+    physical: dict = field(default_factory=dict)
+    training_samples: int = 0
+
+
+def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
+    coef = dict(zip(names, values))
+    a0, a1 = coef['alpha0'], coef.get('alpha1', 0.0)
+    a_drive, a_back = a0 + a1, a0 - a1
+    if a_drive > 0 and a_back > 0:
+        gain = 1.0 / math.sqrt(a_drive * a_back)         # G = 1/sqrt(alpha_c*alpha_o), N*m/A
+        eff = math.sqrt(a_back / a_drive)                 # eta = sqrt(alpha_o/alpha_c)
+    else:
+        gain, eff = float('nan'), float('nan')
+    out = {'gain_Nm_per_A': gain, 'efficiency': eff, 'offset_Nm': -coef['offset'] * gain}
+    if 'coulomb' in coef:
+        out['coulomb_Nm'] = coef['coulomb'] * gain
+    if 'viscous' in coef:
+        out['viscous_Nms_per_rad'] = coef['viscous'] * gain
+    spring = [k for k in names if k.startswith('spring_P')]
+    if spring:
+        grid = np.linspace(-1, 1, 101)
+        shape = sum(coef[k] * np.polynomial.legendre.legval(grid, [0.0] * int(k[8:]) + [1.0])
+                    for k in spring)
+        out['spring_span_Nm'] = float(np.ptp(shape)) * gain
+    return out
+
+
+class CableFrictionObserver:
+    """Interpretable jaw torque estimator (see the module docstring for the physics).
+
+    >>> est = CableFrictionObserver().fit(train_runs)          # doctest: +SKIP
+    >>> tau = est.predict(test_run)       # N*m, reads motor-side columns only  # doctest: +SKIP
+    """
+
+    name = 'cable_friction_observer'
+
+    def __init__(self, settings: ObserverSettings | None = None, **changes):
+        self.settings = replace(settings or ObserverSettings(), **changes)
+        self.fit_result: FitResult | None = None
+        self._prior = 0.0
+
+    # -- fitting ---------------------------------------------------------------------
+    def _design(self, source, cache: dict | None = None):
+        key = (id(source), self.settings)
+        if cache is not None and key in cache:
+            return cache[key]
+        inputs = motor_side_inputs(source)
+        sig = _signals(inputs, self.settings)
+        names, nuisance = _nuisance_columns(sig, self.settings)
+        dt = _sample_period(inputs['t'])
+        if cache is not None:
+            cache[key] = (sig, names, nuisance, dt)
+        return sig, names, nuisance, dt
+
+    def _rows(self, source, cache=None):
+        sig, names, nuisance, _ = self._design(source, cache)
+        tau = _target(source)
+        mask = sig.sliding > 0
+        torque_cols = [tau[mask]]
+        coef_names = ['alpha0']
+        if self.settings.efficiency:
+            torque_cols.append(tau[mask] * sig.direction[mask])
+            coef_names.append('alpha1')
+            if sig.slow_direction is not None:
+                torque_cols.append(tau[mask] * sig.slow_direction[mask])
+                coef_names.append('alpha2')
+        a = np.column_stack(torque_cols + [nuisance[mask]])
+        return coef_names + names, a, sig.current[mask], tau
+
+    def fit(self, runs: Sequence, *, cache: dict | None = None) -> 'CableFrictionObserver':
+        """Fit the forward model on the sliding samples of ``runs`` (least squares).
+
+        Parameter uncertainty: leave-one-run-out jackknife over ``runs``.
+        ``cache``: a dict the caller keeps to reuse per-run signals across fits
+        (keyed by the run object's id and the settings; keep the runs alive).
+        """
+        if not runs:
+            raise EstimatorError('fit needs at least one run')
+        parts = [self._rows(r, cache) for r in runs]
+        names = parts[0][0]
+        blocks = [(a.T @ a, a.T @ y, a.shape[0]) for _, a, y, _ in parts]
+        ata = sum(b[0] for b in blocks)
+        aty = sum(b[1] for b in blocks)
+        values = np.linalg.solve(ata, aty)
+        n = len(parts)
+        if n > 2:
+            jack = np.array([np.linalg.solve(ata - b[0], aty - b[1]) for b in blocks])
+            std = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(0)) ** 2, axis=0))
+            phys_jack = [_physical(names, j) for j in jack]
+        else:
+            std, phys_jack = np.full(values.size, np.nan), []
+        phys = _physical(names, values)
+        physical = {}
+        for key, value in phys.items():
+            spread = [p[key] for p in phys_jack]
+            sd = math.sqrt((n - 1) / n * np.sum((np.array(spread) - np.mean(spread)) ** 2)) \
+                if spread else float('nan')
+            physical[key] = (value, sd)
+        self.fit_result = FitResult(names, values, std, physical, sum(b[2] for b in blocks))
+        self._prior = float(np.mean(np.concatenate([p[3] for p in parts])))
+        return self
+
+    # -- prediction ------------------------------------------------------------------
+    def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
+        """Jaw torque estimate (N*m) of a run or log, from its motor-side columns only."""
+        if self.fit_result is None:
+            raise EstimatorError('predict before fit')
+        sig, names, nuisance, dt = self._design(source, cache)
+        coef = dict(zip(self.fit_result.names, self.fit_result.values))
+        alpha = coef['alpha0'] + coef.get('alpha1', 0.0) * sig.direction
+        if sig.slow_direction is not None:
+            alpha = alpha + coef.get('alpha2', 0.0) * sig.slow_direction
+        alpha = np.where(np.abs(alpha) < 1e-6, 1e-6, alpha)
+        beta = nuisance @ np.array([coef[k] for k in names])
+        inverted = (sig.current - beta) / alpha       # tau = (I - b(s, x, v)) / alpha(s)
+        if not self.settings.hysteresis:
+            return inverted
+        tc = self.settings.observer_time_constant
+        gain_per_sample = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
+        return hold_observer(inverted, sig.sliding, gain_per_sample, self._prior)
+
+
+class LinearCurrentEstimator:
+    """Baseline: jaw torque = a * current + b, least squares on the raw current."""
+
+    name = 'linear'
+
+    def __init__(self):
+        self.coef: np.ndarray | None = None
+
+    def fit(self, runs: Sequence, *, cache: dict | None = None) -> 'LinearCurrentEstimator':
+        i = np.concatenate([motor_side_inputs(r)['current'] for r in runs])
+        tau = np.concatenate([_target(r) for r in runs])
+        self.coef = np.linalg.lstsq(np.column_stack([i, np.ones_like(i)]), tau, rcond=None)[0]
+        return self
+
+    def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
+        """Jaw torque (N*m) = a * current + b."""
+        if self.coef is None:
+            raise EstimatorError('predict before fit')
+        return self.coef[0] * motor_side_inputs(source)['current'] + self.coef[1]
+
+
+def rmse(estimator, runs: Sequence, *, skip_s: float = 0.0) -> float:
+    """Root-mean-square jaw torque error (N*m) of a fitted estimator over ``runs``.
+
+    ``skip_s`` leaves out the first seconds of each run (start-up), 0 = all samples.
+    """
+    se, n = 0.0, 0
+    for r in runs:
+        err = estimator.predict(r) - _target(r)
+        t = motor_side_inputs(r)['t']
+        err = err[t - t[0] >= skip_s]
+        se += float(np.sum(err ** 2))
+        n += err.size
+    return math.sqrt(se / n)
