@@ -226,3 +226,13 @@ def test_any_effect_mix_stays_bounded_and_deterministic(mix, segments, seed):
         runs.append(np.array(rows))
     assert np.all(np.isfinite(runs[0]))
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_set_params_switches_an_effect_on_without_losing_the_state():
+    p = quiet()
+    sim = InstrumentSim(p, 'needle')
+    loaded = loading_ramp(sim, 0.3)
+    sim.set_params(p.replace(force_sensor_offset=0.5))
+    sim.step(0.3, DT)
+    assert sim.truth()['grip_force'] == pytest.approx(loaded['grip_force'], rel=1e-4)
+    assert sim.measure().grip_force == pytest.approx(sim.truth()['grip_force'] + 0.5, rel=1e-9)

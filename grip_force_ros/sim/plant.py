@@ -53,6 +53,12 @@ from grip_force_ros.sim.effects import EFFECT_NAMES, SimError, effect_overrides
 
 __all__ = ['InstrumentSim', 'SimMeasurement', 'OBJECTS', 'chain_efficiency_scalar']
 
+#: Largest jaw opening (rad): a hard stop, as the jaws touching at 0.
+JAW_OPEN_STOP = math.pi / 2
+#: Initial slope of the Dahl hysteresis moment per unit change of the drive moment (-):
+#: the loop switches sides within about a quarter of its width of tension change.
+DAHL_SLOPE = 4.0
+
 
 @dataclass(frozen=True, slots=True)
 class SimMeasurement:
@@ -238,6 +244,18 @@ class InstrumentSim:
         self._zeta2 = 2.0 * p.contact_damping_ratio
         self._measurement = None
 
+    def set_params(self, params: Any) -> None:
+        """Change parameters at runtime (e.g. an effect strength, noise); the state is kept.
+
+        Geometry changes act from the next step on; a new ``sim_seed`` does not re-seed
+        (use :meth:`reset`).
+        """
+        self.params = params
+        self._setup_constants()
+        self.set_object(self._obj)
+        self._lambda = self._efficiency(self._tension_drum)
+        self._measurement = None
+
     def set_wrist_angle(self, wrist_angle: float) -> None:
         """Set the wrist pitch (rad). The wrist is kinematic: it moves the jaw through the coupling.
 
@@ -334,6 +352,7 @@ class InstrumentSim:
         c_angle, c_k, c_arm = self._contact_angle, self._contact_k, self._contact_arm
         tissue, tissue_exp, tissue_rate = self._tissue, self._tissue_exp, self._tissue_rate
         stop_k, zeta2 = self._stop_k, self._zeta2
+        open_stop = JAW_OPEN_STOP
         alpha = 1.0 - math.exp(-h / self._tau_current) if self._tau_current > 0.0 else 1.0
         theta0, w0, phi, wj, x = self._theta0, self._w0, self._phi, self._wj, self._x
         i_act, hyst, creep = self._i_act, self._hyst, self._creep_moment
@@ -369,8 +388,8 @@ class InstrumentSim:
                 spring -= stop_k * phi
                 k_loc += stop_k
                 c_loc += zeta2 * math.sqrt(stop_k * jj)
-            elif phi > 1.5707963267948966:
-                spring -= stop_k * (phi - 1.5707963267948966)
+            elif phi > open_stop:
+                spring -= stop_k * (phi - open_stop)
                 k_loc += stop_k
                 c_loc += zeta2 * math.sqrt(stop_k * jj)
             drive = -drive_arm * tn + hyst + creep + spring   # opening moments, N*m
@@ -425,9 +444,9 @@ class InstrumentSim:
                 previous_tn = tn
                 if limit > 0.0:
                     if change > 0.0:
-                        hyst += 4.0 * change * (1.0 - hyst / limit)
+                        hyst += DAHL_SLOPE * change * (1.0 - hyst / limit)
                     else:
-                        hyst += 4.0 * change * (1.0 + hyst / limit)
+                        hyst += DAHL_SLOPE * change * (1.0 + hyst / limit)
                     if hyst > limit:
                         hyst = limit
                     elif hyst < -limit:
