@@ -431,7 +431,7 @@ def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw'))
     """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant."""
     import control
     period = 1.0 / params.control_rate
-    grid = _freq_grid(period, 1500)
+    grid = _freq_grid(period, 400)
     reports = []
     for loop in loops:
         for variant in VARIANTS:

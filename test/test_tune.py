@@ -1,0 +1,99 @@
+"""Loop design (control/tune.py, python-control) and `grip-force tune`.
+
+The margins claimed in docs/control.md and in each YAML are checked on the gains the YAML
+carries, for every plant variant (nominal, cable stiffness and pulley friction +-20%).
+"""
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grip_force_ros.control import tune
+from grip_force_ros.params import load_params_file, make_params
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((ROOT / 'config').glob('*.yaml'))
+
+
+@pytest.mark.parametrize('path', CONFIGS, ids=[p.stem for p in CONFIGS])
+def test_yaml_gains_meet_the_claimed_margins(path):
+    params = load_params_file(path)
+    result = tune.analyse(params)
+    assert len(result.reports) == 3 * len(tune.VARIANTS)
+    for r in result.reports:
+        assert r.stable, r
+        assert r.gain_margin_db >= tune.CLAIM_GM_DB, r
+        assert r.phase_margin_deg >= tune.CLAIM_PM_DEG, r
+        assert r.bandwidth_hz > 0.5, r
+
+
+def test_margins_agree_with_closed_loop_poles_and_detect_a_bad_design():
+    params = make_params({})
+    good = tune.analyse(params, loops=('jaw',)).reports[0]
+    assert good.stable and good.phase_margin_deg >= 45
+    # ten times the jaw gain is beyond the gain margin: both tools must say so
+    gm = 10 ** (good.gain_margin_db / 20)
+    bad = params.replace(jaw_kp=params.jaw_kp * gm * 1.5, jaw_kd=params.jaw_kd * gm * 1.5,
+                         jaw_ki=params.jaw_ki * gm * 1.5)
+    r = tune.analyse(bad, loops=('jaw',)).reports[0]
+    assert not r.stable
+
+
+def test_plant_static_gain_matches_the_model():
+    from grip_force_ros.model import GripForceModel
+    params = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
+    d = tune.plant_data(params)
+    m = GripForceModel(params)
+    slope = (m.grip_force_scalar(0.3, 0.0, 0.05, 'needle') - m.grip_force_scalar(0.2, 0.0, 0.05, 'needle')) / 0.1
+    assert d.force_per_amp == pytest.approx(slope, rel=1e-6)
+    # the DC gain of the linear force plant (load cell) is that slope too
+    import control
+    plant = control.ss(*tune.plant_statespace(d, 'force_sensor'))
+    assert float(control.dcgain(plant)) == pytest.approx(slope, rel=1e-3)
+
+
+def test_pid_transfer_function_matches_the_pid_class():
+    """The analysed controller is exactly the one that runs."""
+    import control
+    from grip_force_ros.control import PID
+    kp, ki, kd, tf, T = 0.3, 4.0, 0.002, 0.002, 1e-3
+    pid = PID(kp, ki, kd, tf, T, tracking_time=1e9, integral_limit=1e9)
+    pid.preset(0.0, 0.0, 0.0)          # zero initial state, as the transfer function assumes
+    rng = np.random.default_rng(0)
+    e = rng.standard_normal(200)
+    out = []
+    for x in e:                     # error = setpoint - measurement with measurement = -x
+        u = pid.update(0.0, -x)
+        pid.track(u, u)
+        out.append(u)
+    resp = control.forced_response(tune.pid_tf(kp, ki, kd, tf, T), T=np.arange(200) * T, U=e)
+    assert np.allclose(out, np.asarray(resp.outputs).ravel(), atol=1e-9)
+
+
+def test_design_meets_margins_on_the_paper_instrument():
+    params = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
+    result = tune.design(params)
+    for loop in ('force_sensor', 'force_estimate', 'jaw'):
+        gm, pm = result.worst(loop)
+        assert gm >= tune.CLAIM_GM_DB and pm >= tune.CLAIM_PM_DEG, loop
+    assert result.gains['force_ki'] > 0 and result.gains['jaw_kp'] > 0
+
+
+def test_cli_prints_json_and_writes_the_step_plot(tmp_path, capsys):
+    from grip_force_ros.cli import tune as cli
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(['--config', str(ROOT / 'config' / 'paper_needle_driver.yaml'),
+                              '--json', '--out', str(tmp_path), '--analyse-only'])
+    assert cli.run(args) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc['margins_met'] is True
+    worst_pm = min(v['phase_margin_deg'] for loop in doc['loops'].values() for v in loop.values())
+    assert worst_pm >= tune.CLAIM_PM_DEG
+    png = Path(doc['plot'])
+    assert png.exists() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
+    steps = doc['settling_time_5pct_s']
+    assert math.isfinite(steps['jaw (PID only)']) and steps['jaw (PID only)'] < 0.1
