@@ -28,8 +28,10 @@ Equations of motion (torques in N*m)::
 the tension at the drive pulley, which equals f r_n T0 on the loading branch
 (Tn = lambda T0). Tying it to Tn rather than T0 keeps it local to the drive pulley, so a
 stuck pulley chain holds the jaw moment (with T0 it would rise as the drum tension
-falls). It is not a friction: it does not reverse when the jaw back-drives the cable. Contact moments: needle and rigid object at the tip arm l, tissue at
-(l + l')/2, spring plus damping, never pulling. The load cell reads
+falls). It is not a friction: it does not reverse when the jaw back-drives the cable.
+
+Contact moments: needle and rigid object at the tip arm l, tissue at (l + l')/2,
+spring plus damping, never pulling. The load cell reads
 ``M_contact * G(obj, phi)`` with the model's contact gain G, so the static steady state
 on the loading branch is ``GripForceModel.forward(...)``.
 
@@ -49,7 +51,7 @@ from typing import Any, Mapping
 from grip_force_ros.model import contact as _contact
 from grip_force_ros.model import friction as _friction
 from grip_force_ros.model.contact import OBJECTS
-from grip_force_ros.sim.effects import EFFECT_NAMES, SimError, effect_overrides
+from grip_force_ros.sim.effects import SimError, effect_overrides
 
 __all__ = ['InstrumentSim', 'SimMeasurement', 'OBJECTS', 'chain_efficiency_scalar']
 
