@@ -47,7 +47,8 @@ def run(args) -> int:
         print(json.dumps(doc, indent=1))
         return 0 if ok else 1
     print(f'{params.instrument_name} ({args.config}), control period {result.period * 1e3:.3g} ms')
-    print('gains (controller parameters, paste into the YAML):')
+    print('gains in the YAML (analysed):' if args.analyse_only
+          else 'designed gains (controller parameters, paste into the YAML):')
     for name, value in result.gains.items():
         print(f'    {name}: {value:g}')
     print(f'{"loop":<16}{"plant":<16}{"GM dB":>7}{"PM deg":>8}{"xover Hz":>10}{"BW Hz":>8}  stable')
