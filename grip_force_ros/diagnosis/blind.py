@@ -18,19 +18,22 @@ from typing import Sequence
 
 import numpy as np
 
-from grip_force_ros.diagnosis.effects import EFFECT_NAMES, NONE
+from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE
+
+#: Effects seen only in the jaw-angle channel: their shrink is that of the angle gap.
+ANGLE_ONLY = tuple(name for name, e in EFFECTS.items() if not e.force_params and e.angle_params)
 
 #: Strengths of each effect in the full check (weak, medium, strong), in the sim's units.
 STRENGTHS = {
     'pivot_coulomb_friction': (0.005, 0.01, 0.02),        # N*m
     'viscous_friction': (0.01, 0.02, 0.04),               # N*m*s/rad
-    'cable_hysteresis': (0.05, 0.1, 0.2),                 # -
+    'cable_hysteresis': (0.1, 0.2, 0.3),                  # -
     'backlash': (0.03, 0.06, 0.12),                       # rad
-    'tension_dependent_friction': (0.001, 0.002, 0.004),  # 1/N
-    'viscoelastic_creep': (0.05, 0.1, 0.2),               # -
-    'sensor_delay': (0.01, 0.02, 0.05),                   # s
-    'torque_constant_drift': (0.3, 0.5, 0.8),             # -
-    'force_sensor_offset': (0.15, -0.3, 0.6),             # N
+    'tension_dependent_friction': (0.002, 0.004, 0.008),  # 1/N
+    'viscoelastic_creep': (0.1, 0.2, 0.35),               # -
+    'sensor_delay': (0.02, 0.04, 0.08),                   # s
+    'torque_constant_drift': (0.5, 0.7, 0.9),             # -
+    'force_sensor_offset': (0.3, -0.5, 0.8),              # N
 }
 #: Pairs of effects in the full check (medium strengths).
 PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'force_sensor_offset'),
@@ -80,6 +83,9 @@ def _smooth_noise(rng, n, dt, time_constant):
 def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
     """Current command (A), wrist (rad) and object per sample: seeded, varied segments."""
     n = int(round(duration / dt))
+    # slow intensity envelope: busy and quiet periods (heats and cools the motor)
+    period = rng.uniform(25.0, 50.0)
+    envelope_phase = rng.uniform(0.0, 2.0 * np.pi)
     current = np.empty(n)
     objects = np.empty(n, dtype=object)
     i = 0
@@ -90,7 +96,8 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
         t = np.arange(seg) * dt
         load_t = t[open_n:] - t[open_n]
         span = max(load_t[-1], dt)
-        top = rng.uniform(0.15, 0.9) * max_current
+        envelope = 0.5 + 0.5 * math.sin(2.0 * math.pi * i * dt / period + envelope_phase)
+        top = rng.uniform(0.3, 1.0) * (0.25 + 0.75 * envelope) * 0.9 * max_current
         kind = rng.integers(0, 4)
         if kind == 0:      # triangle ramps up and down, 1-3 cycles
             cycles = rng.integers(1, 4)
@@ -163,7 +170,9 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
     dict
         ``logs`` (count), ``accuracy`` (share named right; a pair is right when
         either of its effects is named), ``median_shrink`` (median held-out
-        1 - gap_after/gap_before over logs with an effect), ``none_accuracy``
+        1 - gap_after/gap_before over logs with an effect, in the channel of the
+        named effect: the jaw angle for backlash, the measured force otherwise),
+        ``median_force_shrink`` (the same, force channel only), ``none_accuracy``
         (share of effect-free logs reported ``none``), ``confusion`` (truth ->
         verdict -> count), ``per_log`` (truth, strengths, verdict, gaps), ``seconds``.
     """
@@ -179,11 +188,15 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
         v = result['verdict']
         truth = case.truth
         right = v['effect'] in truth
+        # shrink in the channel the named effect acts on (the jaw angle for angle-only effects)
+        angle_only = v['effect'] in ANGLE_ONLY
+        shrink = (1.0 - v['angle_gap_after'] / v['angle_gap_before']) if angle_only else v['shrink']
         per_log.append({'truth': list(truth), 'strengths': [s for _, s in case.effects],
                         'verdict': v['effect'], 'right': right, 'gap_before': v['gap_before'],
-                        'gap_after': v['gap_after'], 'shrink': v['shrink'],
+                        'gap_after': v['gap_after'], 'force_shrink': v['shrink'], 'shrink': shrink,
+                        'angle_gap_before': v['angle_gap_before'], 'angle_gap_after': v['angle_gap_after'],
                         'runner_up': v['runner_up']})
-        say(f'[{i + 1}] truth={"+".join(truth)} verdict={v["effect"]} shrink={v["shrink"]:.2f}'
+        say(f'[{i + 1}] truth={"+".join(truth)} verdict={v["effect"]} shrink={shrink:.2f}'
             f' {"ok" if right else "WRONG"}')
     labels = list(EFFECT_NAMES) + [NONE]
     confusion = {t: {p: 0 for p in labels} for t in labels + ['pair']}
@@ -196,6 +209,8 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
             'accuracy': float(np.mean([r['right'] for r in per_log])),
             'median_shrink': float(np.median([r['shrink'] for r in effect_logs])) if effect_logs else None,
             'none_accuracy': float(np.mean([r['right'] for r in none_logs])) if none_logs else None,
+            'median_force_shrink': (float(np.median([r['force_shrink'] for r in effect_logs]))
+                                    if effect_logs else None),
             'confusion': confusion, 'per_log': per_log,
             'settings': {'quick': quick, 'seed': seed, 'duration_s': duration, 'rate_hz': 1000.0},
             'seconds': time.perf_counter() - start}

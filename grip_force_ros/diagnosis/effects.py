@@ -151,7 +151,9 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            (('efficiency_loss_per_amp', '1/A', lambda c, g: -_rel(c, g)),)),
     Effect('viscoelastic_creep', (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0), 'time_constant', 's', _creep,
            ('relaxing_fraction',), (), (('relaxing_fraction', '-', lambda c, g: -_rel(c, g)),)),
-    Effect('sensor_delay', (0.002, 0.005, 0.01, 0.02, 0.035, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3),
+    # below ~10 ms a delay cannot be told from the plant's own mechanical response (cable and
+    # contact dynamics) at a 200 Hz analysis rate
+    Effect('sensor_delay', (0.01, 0.015, 0.02, 0.03, 0.04, 0.055, 0.075, 0.1, 0.15, 0.2, 0.3),
            'delay', 's', _delay),
     Effect('torque_constant_drift', ('linear', 5.0, 20.0, 60.0, 200.0), 'time_constant', 's', _drift,
            ('gain_loss',), (), (('gain_loss', '- (per s if linear)', lambda c, g: -_rel(c, g)),)),

@@ -22,8 +22,13 @@ OBJECT_CODES = ('free', 'rigid', 'tissue', 'needle')
 
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
 SETTLE_TIME = 0.2
-#: Jaw-side free length of the cable (m) assumed for the stick phase of the pulley friction.
+#: Jaw-side free length of the cable (m) for the stick phase of the pulley friction: an
+#: assumption (about 2 cm from the last guide pulley to the jaw of an 8 mm instrument).
 JAW_SIDE_CABLE_LENGTH = 0.02
+#: Current steps (A/s of the 20 ms smoothed current) whose mechanical response (cable and
+#: contact dynamics, ~10 ms) the quasi-static model does not describe; left out for STEP_HOLD s.
+STEP_RATE = 4.0
+STEP_HOLD = 0.05
 
 
 class DiagnosisError(ValueError):
@@ -116,7 +121,8 @@ def play(x: np.ndarray, width: float) -> np.ndarray:
 
 
 def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
-                    jaw_side_change: np.ndarray | None = None) -> np.ndarray:
+                    jaw_side_change: np.ndarray | None = None, *,
+                    tolerance: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
     """Jaw-side cable tension (N) with the pulley friction acting in the direction of slip.
 
     The model's chain efficiency ``lambda`` holds while the drum pulls (loading):
@@ -124,11 +130,23 @@ def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
     ``T0 = lambda Tn``; in between the cable sticks on the pulleys and ``Tn`` stays
     put. So ``Tn`` is ``T0`` passed through a clamp with memory::
 
-        Tn[k] = clip(Tn[k-1], lambda T0[k], T0[k] / lambda)     (bounds ordered)
+        Tn[k] = clip(Tn[k-1] + jaw_side_change[k], lambda T0[k], T0[k] / lambda)
 
-    ``jaw_side_change`` (N per sample) adds what the jaw side does to a stuck
-    cable (the wrist pulling or releasing it) before the clamp. This is the
-    model's own friction; on a loading branch it equals ``GripForceModel.forward``.
+    ``jaw_side_change`` (N per sample) is what the jaw side does to a stuck cable
+    (the wrist pulling or releasing it). This is the model's own friction; on a
+    loading branch it equals ``GripForceModel.forward``.
+
+    Where the tension starts to pull (``T0`` turns positive, e.g. the jaw closing on
+    an object) the stuck tension is unknown anywhere in the band: both extremes are
+    carried through the clamp, and samples where they still differ by more than
+    ``tolerance`` (relative) are flagged.
+
+    Returns
+    -------
+    tension : ndarray
+        Jaw-side tension (N), the loading-side path.
+    uncertain : ndarray of bool
+        True where the stuck tension is not yet determined by the history.
     """
     f0 = np.asarray(drum_tension, float)
     lam = np.broadcast_to(np.asarray(efficiency, float), f0.shape)
@@ -137,21 +155,36 @@ def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
         b = np.where(lam > 0, f0 / lam, f0)
     lo = np.minimum(a, b).tolist()
     hi = np.maximum(a, b).tolist()
-    step = [0.0] * f0.size if jaw_side_change is None else np.asarray(jaw_side_change, float).tolist()
-    out = np.empty(f0.size)
-    tn = lo[0] if f0.size and f0[0] >= 0 else (hi[0] if f0.size else 0.0)
-    for i in range(f0.size):
-        tn += step[i]
-        if tn < lo[i]:
-            tn = lo[i]
-        elif tn > hi[i]:
-            tn = hi[i]
-        out[i] = tn
-    return out
+    n = f0.size
+    step = [0.0] * n if jaw_side_change is None else np.asarray(jaw_side_change, float).tolist()
+    pulling = (f0 > 0).tolist()
+    out = np.empty(n)
+    spread = np.zeros(n)
+    low = high = (lo[0] if n and f0[0] >= 0 else (hi[0] if n else 0.0))
+    was_pulling = False
+    for i in range(n):
+        if pulling[i] and not was_pulling:
+            low, high = lo[i], hi[i]
+        was_pulling = pulling[i]
+        low += step[i]
+        high += step[i]
+        if low < lo[i]:
+            low = lo[i]
+        elif low > hi[i]:
+            low = hi[i]
+        if high < lo[i]:
+            high = lo[i]
+        elif high > hi[i]:
+            high = hi[i]
+        out[i] = low
+        spread[i] = high - low
+    uncertain = spread > tolerance * np.maximum(np.abs(out), 1e-9)
+    return out, uncertain
 
 
 def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = None,
-                default_object: str = 'needle', direction_aware: bool = True) -> dict[str, np.ndarray]:
+                default_object: str = 'needle', direction_aware: bool = True,
+                jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH) -> dict[str, np.ndarray]:
     """Analysis frame of one (decimated) log: signals, nominal prediction and features.
 
     Parameters
@@ -167,6 +200,9 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     direction_aware : bool
         Apply the model's pulley friction in the direction of cable slip
         (:func:`capstan_tension`) instead of the loading direction only.
+    jaw_side_cable_length : float
+        Free cable length (m) between the pulleys and the jaw: sets how fast the wrist
+        moves a stuck cable across the friction band (stiffness E A / length).
 
     Returns
     -------
@@ -219,13 +255,13 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
         # cable pulled in at the jaw a = r_n (c wrist - jaw): a stuck cable's jaw side tension
         # falls by k da (k: jaw-side cable stiffness E A / L, L = JAW_SIDE_CABLE_LENGTH assumed)
         p = model.params
-        k = p.cable_modulus * np.pi * p.cable_radius ** 2 / JAW_SIDE_CABLE_LENGTH      # N/m
+        k = p.cable_modulus * np.pi * p.cable_radius ** 2 / jaw_side_cable_length      # N/m
         pulled = rn * (p.wrist_finger_coupling * lowpass(wrist, dt, 0.02) - lowpass(jaw, dt, 0.02))
         change = -k * np.diff(pulled, prepend=pulled[0])
-        tn = capstan_tension(drum_tension, efficiency, change)
+        tn, uncertain = capstan_tension(drum_tension, efficiency, change)
         torque = torque + arm * (tn - efficiency * drum_tension)
     else:
-        tn = efficiency * drum_tension
+        tn, uncertain = efficiency * drum_tension, np.zeros(t.size, dtype=bool)
     nominal = torque if measured == 'jaw_torque' else np.maximum(torque, 0.0) * gain
     if measured == 'jaw_torque':
         contact = (current > 0).astype(float)
@@ -248,13 +284,18 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
         near[valid] = (t[valid] - t[changes[after[valid]]]) < SETTLE_TIME
     jaw_model = model.jaw_angle(motor, wrist, current)
     current_smooth = lowpass(current, dt, 0.02)
+    current_rate = np.gradient(current_smooth, t)
+    stepping = np.abs(current_rate) > STEP_RATE
+    if stepping.any():
+        hold = max(1, int(round(STEP_HOLD / dt)))
+        stepping = np.convolve(stepping.astype(float), np.ones(hold + 1), mode='full')[:t.size] > 0
     return {'t': t - t[0], 'dt': np.array(dt), 'y': np.asarray(log[measured], float),
             'max_current': np.array(float(model.params.max_current)),
-            'steady': (~near).astype(float),
+            'steady': (~near & ~uncertain & ~stepping).astype(float),
             'torque': torque, 'gain': np.ones(t.size) if measured == 'jaw_torque' else gain,
             'drum_tension': drum_tension, 'jaw_tension': tn,
             'nominal': np.asarray(nominal, float), 'contact': contact, 'current': current,
-            'current_rate': np.gradient(current_smooth, t), 'jaw': jaw, 'wrist': wrist,
+            'current_rate': current_rate, 'jaw': jaw, 'wrist': wrist,
             'motor': motor, 'jaw_velocity': jaw_vel, 'motor_velocity': motor_vel,
             'jaw_model': np.asarray(jaw_model, float), 'load_time': load_time, 'object': codes}
 
