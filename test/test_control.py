@@ -282,3 +282,33 @@ def test_nonfinite_clock_is_safe(params):
     _, t = run_grip(ctrl, inp, n=50)
     out = ctrl.step(math.nan, inp)
     assert out.mode == 'safe' and 'clock' in out.reasons[0]
+
+
+def test_runtime_gain_change_is_bumpless_and_takes_effect(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    out, t = run_grip(ctrl, inp, n=300, master=0.05)
+    before = out.current_command
+    ctrl.update_params(params.replace(force_ki=2 * params.force_ki, grip_force_max=2.0))
+    feed(inp, t, 0.05, 0.04, ctrl.command)
+    out = ctrl.step(t, inp)
+    assert out.mode == 'grip'
+    assert abs(out.current_command - before) <= params.max_current_slew * PERIOD + 1e-12
+    out, _ = run_grip(ctrl, inp, n=400, master=0.05, t0=t + PERIOD)
+    assert ctrl.force_pid.ki == 2 * params.force_ki
+    assert out.target_force == pytest.approx(2.0 * 0.15 / 0.2)      # the new map is used
+    assert out.estimated_force == pytest.approx(out.target_force, rel=0.02)
+
+
+def test_status_for_diagnostics(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    run_grip(ctrl, inp, n=20)
+    inp.set_instrument(1.0, math.nan, 0.1)
+    ctrl.step(0.02, inp)
+    status = ctrl.status(inp)
+    assert status['mode'] == 'safe'
+    assert 'non-finite' in status['reasons']
+    assert status['rejected_inputs'] == '1'
+    assert status['periods'] == '21'
+    assert all(isinstance(v, str) for v in status.values())

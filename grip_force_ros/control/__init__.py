@@ -26,6 +26,9 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
     out.reasons            # tuple of str: why safe, what was clamped; () when all is well
     out.target_jaw_angle   # [rad] jaw target in free motion (measured jaw angle otherwise)
     out.feedforward_current  # [A]
+    ctrl.status(inputs)      # dict[str, str] for /diagnostics: mode, reasons, counters, rejections
+    ctrl.update_params(new_params)  # runtime change (validated ParamSet), bumpless; the node
+                                    # refuses read-only parameters first (ParamSpec.read_only)
 
 Sources are ``'master'``, ``'instrument'``, ``'actuator'`` and ``'force'`` (the last one
 only required when ``force_sensor_enabled``).

@@ -52,8 +52,20 @@ class GripController:
         if model is None:
             from grip_force_ros.model import GripForceModel
             model = GripForceModel(params)
-        self.params = params
         self.model = model
+        self._configure(params)
+        self.command = 0.0              # A, last output
+        self.mode = 'safe'              # starts safe until every input has arrived
+        self.estimated_force = 0.0      # N, last good estimate
+        self.last_now = -math.inf
+        self.safe_steps = 0             # consecutive safe periods
+        self.steps = 0                  # periods run
+        self.limit_steps = 0            # periods in which a limit acted
+        self.last_reasons: tuple = ()   # reasons of the last period
+
+    def _configure(self, params) -> None:
+        """Build the map, PIDs and limiter from ``params`` (state of the loop kept by caller)."""
+        self.params = params
         self.period = 1.0 / params.control_rate                       # s
         self.watchdog_timeout = params.watchdog_timeout               # s
         self.object_kind = params.object_kind
@@ -73,11 +85,36 @@ class GripController:
                            params.jaw_derivative_filter_time, self.period,
                            params.anti_windup_tracking_time, sign=-1.0, integral_limit=bound,
                            bumpless_time=params.bumpless_transfer_time)
-        self.command = 0.0              # A, last output
-        self.mode = 'safe'              # starts safe until every input has arrived
-        self.estimated_force = 0.0      # N, last good estimate
-        self.last_now = -math.inf
-        self.safe_steps = 0             # consecutive safe periods
+
+    def update_params(self, params) -> None:
+        """Apply changed (already validated) parameters at runtime, bumplessly.
+
+        Gains, force map and limits are rebuilt; the last command is kept and the next
+        period starts with a bumpless transfer (as after a mode switch). The node refuses
+        read-only parameters before calling this (the schema marks them).
+        """
+        gripping, contact = self.force_map.gripping, self.force_map.contact_angle
+        self._configure(params)
+        self.force_map.gripping, self.force_map.contact_angle = gripping, contact
+        if self.mode != 'safe':
+            self.mode = 'retuned'       # not a real mode: forces the preset on the next step
+        if abs(self.command) > params.max_current:
+            self.command = math.copysign(params.max_current, self.command)
+
+    def status(self, inputs: ControlInputs | None = None) -> dict:
+        """Key/value strings for /diagnostics (state, counters, limits, rejected inputs)."""
+        out = {'mode': self.mode, 'current_command_A': f'{self.command:.4f}',
+               'estimated_force_N': f'{self.estimated_force:.3f}', 'periods': str(self.steps),
+               'periods_with_limit_hit': str(self.limit_steps),
+               'consecutive_safe_periods': str(self.safe_steps),
+               'reasons': '; '.join(self.last_reasons) or 'ok',
+               'object_kind': self.object_kind,
+               'feedback': 'force sensor' if self.use_sensor else 'model estimate'}
+        if inputs is not None:
+            out['rejected_inputs'] = str(sum(inputs.rejected.values()))
+            for reason, count in sorted(inputs.rejected.items(), key=lambda kv: -kv[1])[:5]:
+                out[f'rejected: {reason}'] = str(count)
+        return out
 
     def new_inputs(self) -> ControlInputs:
         """An empty :class:`ControlInputs` with this instrument's plausibility ranges."""
@@ -125,6 +162,7 @@ class GripController:
         -------
         ControlOutput
         """
+        self.steps += 1
         faults = self._input_faults(now, inputs)
         if _isfinite(now):
             self.last_now = now
@@ -178,6 +216,9 @@ class GripController:
         self.mode = mode
         self.safe_steps = 0
         self.estimated_force = force
+        self.last_reasons = reasons
+        if limits_hit:
+            self.limit_steps += 1
         return ControlOutput(command, target_force, force, self.pull_out_per_force * force,
                              mode, limits_hit, reasons, target_jaw, feedforward)
 
@@ -187,6 +228,9 @@ class GripController:
         self.command = command
         self.mode = 'safe'
         self.safe_steps += 1
+        self.last_reasons = reasons
+        if limits_hit:
+            self.limit_steps += 1
         self.force_map.reset()
         force = self.estimated_force
         jaw = inputs.jaw_angle
