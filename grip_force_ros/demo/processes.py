@@ -62,6 +62,8 @@ def _ros_literal(value: object) -> str:
         return '[' + ','.join(_ros_literal(v) for v in value) + ']'
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, str):   # quoted: '' and 'true' / '1.0' stay strings
+        return "'" + value.replace("'", "''") + "'"
     return str(value)
 
 

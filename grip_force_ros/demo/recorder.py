@@ -104,6 +104,22 @@ class RecorderNode(Node):
         self._discover()
 
     # -- subscriptions -----------------------------------------------------
+    def subscribe_all(self, qos: QoSProfile | None = None) -> None:
+        """Subscribe to every topic now, before its publisher exists.
+
+        Nothing a node publishes after discovery is then lost to the
+        recorder's own polling. ``qos`` must match the publishers (default:
+        RELIABLE, VOLATILE, as the package's nodes publish). The offered QoS
+        written into the bag is still the publisher's, read at the first message.
+        """
+        qos = qos or QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
+        for topic, type_name in self.topic_types.items():
+            if topic not in self._subs:
+                self._subscribe(topic, type_name, qos)
+        self._discovery_timer.cancel()
+
     def _discover(self) -> None:
         for topic, type_name in self.topic_types.items():
             if topic in self._subs:
@@ -112,25 +128,28 @@ class RecorderNode(Node):
                      if i.topic_type == type_name]
             if not infos:
                 continue
-            offered = [i.qos_profile for i in infos]
-            self._subscribe(topic, type_name, subscription_qos(offered), offered)
+            self._subscribe(topic, type_name, subscription_qos([i.qos_profile for i in infos]))
         if len(self._subs) == len(self.topic_types):
             self._discovery_timer.cancel()
 
-    def _subscribe(self, topic: str, type_name: str, qos: QoSProfile,
-                   offered: list[QoSProfile]) -> None:
-        if self._writer is not None:
-            self._connections[topic] = self._writer.add_connection(
-                topic, type_name, typestore=self._typestore, serialization_format='cdr',
-                offered_qos_profiles=[to_bag_qos(q) for q in offered])
+    def _offered_qos(self, topic: str, type_name: str) -> list[Qos]:
+        infos = [i for i in self.get_publishers_info_by_topic(topic) if i.topic_type == type_name]
+        return [to_bag_qos(i.qos_profile) for i in infos] or [to_bag_qos(QoSProfile(depth=10))]
 
+    def _subscribe(self, topic: str, type_name: str, qos: QoSProfile) -> None:
         def callback(data: bytes, topic=topic) -> None:
             now_ns = time.time_ns()
             with self._lock:
                 self._latest[topic] = (now_ns * 1e-9, data)
                 self.counts[topic] += 1
                 if self._writer is not None:
-                    self._writer.write(self._connections[topic], now_ns, data)
+                    conn = self._connections.get(topic)
+                    if conn is None:   # first message: the publishers are known now
+                        conn = self._connections[topic] = self._writer.add_connection(
+                            topic, type_name, typestore=self._typestore,
+                            serialization_format='cdr',
+                            offered_qos_profiles=self._offered_qos(topic, type_name))
+                    self._writer.write(conn, now_ns, data)
 
         self._subs[topic] = self.create_subscription(message_class(type_name), topic, callback,
                                                      qos, raw=True)
@@ -162,10 +181,9 @@ class RecorderNode(Node):
                 return None
             for topic, type_name in self.topic_types.items():
                 if topic not in self._connections:
-                    default = QoSProfile(depth=10)
                     self._connections[topic] = self._writer.add_connection(
                         topic, type_name, typestore=self._typestore,
-                        offered_qos_profiles=[to_bag_qos(default)])
+                        offered_qos_profiles=self._offered_qos(topic, type_name))
             self._writer.close()
             path, self._writer = self._writer.path, None
         return path

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from grip_force_ros import topics
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import values_of
@@ -28,6 +30,11 @@ from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajector
 STARTUP_TIMEOUT = 30.0
 #: Seconds recorded after the master's trajectory ends.
 TAIL = 0.3
+#: Seconds the master holds its first angle before the task starts. The master starts its
+#: trajectory as soon as it runs, and on a loaded machine DDS discovery between a new
+#: process and the controller can take a second or more: without this lead-in the
+#: controller would miss the start of the task.
+LEAD_IN = 1.5
 
 
 def default_duration() -> float:
@@ -66,6 +73,7 @@ class RunSpec:
     sim_overrides: dict = field(default_factory=dict)
     master_overrides: dict = field(default_factory=dict)
     label: str = 'demo'
+    lead_in: float = LEAD_IN
 
     def master_values(self) -> dict[str, Any]:
         """The master parameters: schema defaults, then the YAML, then overrides."""
@@ -120,10 +128,26 @@ class RunResult:
         }
 
 
-def _node_argv(name: str, spec: RunSpec) -> list[str]:
+def lead_in_csv(trajectory: Trajectory, lead_in: float, path: Path, rate: float = 1000.0) -> Path:
+    """Write ``trajectory`` preceded by ``lead_in`` s at its first angle, as a master CSV replay.
+
+    Sampled at ``rate`` (Hz); the master replays it with linear interpolation.
+    """
+    t = np.arange(0.0, trajectory.duration + 0.5 / rate, 1.0 / rate)
+    angle = trajectory.angle(t)
+    rows = [(0.0, float(angle[0]))] if lead_in > 0 else []
+    rows += [(lead_in + float(a), float(b)) for a, b in zip(t, angle)]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text('t,master_angle\n' + ''.join(f'{a:.4f},{b:.6f}\n' for a, b in rows))
+    return path
+
+
+def _node_argv(name: str, spec: RunSpec, master_csv: Path | None = None) -> list[str]:
     if name == 'master':
         overrides = dict(spec.master_values())
         overrides['exit_when_done'] = True
+        if master_csv is not None:
+            overrides.update(trajectory='csv', trajectory_file=str(master_csv.resolve()))
         return node_command('master') + ros_args(spec.config, overrides)
     if name == 'sim_instrument':
         return node_command('sim_instrument') + ros_args(spec.sim_config or spec.config,
@@ -144,9 +168,44 @@ def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float
         time.sleep(0.05)
 
 
+class TaskClock:
+    """Where the master is in its task, for the live view.
+
+    Starts from the arrival of the first master sample plus the lead-in, and
+    re-synchronises once on the master angle leaving its first value (the
+    start of the closing), so that a slow process start does not shift the
+    phases shown.
+    """
+
+    def __init__(self, trajectory: Trajectory, started: float, threshold: float = 0.02):
+        self.trajectory = trajectory
+        self.started = started
+        tt = np.linspace(0.0, trajectory.duration, max(2, int(trajectory.duration * 1000) + 1))
+        aa = trajectory.angle(tt)
+        self.first_angle = float(aa[0])
+        moved = np.flatnonzero(np.abs(aa - aa[0]) > threshold)
+        self.move_time = float(tt[moved[0]]) if moved.size else None
+        self.threshold = threshold
+        self.synced = self.move_time is None
+
+    def observe(self, master_angle: float, now: float | None = None) -> None:
+        """Feed the newest master angle (rad)."""
+        if self.synced or not math.isfinite(master_angle):
+            return
+        if abs(master_angle - self.first_angle) > self.threshold:
+            now = time.monotonic() if now is None else now
+            self.started = now - self.move_time
+            self.synced = True
+
+    def elapsed(self, now: float | None = None) -> float:
+        """Seconds since the task started (negative during the lead-in)."""
+        return (time.monotonic() if now is None else now) - self.started
+
+
 def live_status(recorder, trajectory: Trajectory, elapsed: float) -> dict[str, Any]:
     """The newest values of the force and state topics, and the task phase."""
-    status: dict[str, Any] = {'t': elapsed, 'phase': trajectory.phase(elapsed),
+    phase = trajectory.phase(elapsed) if elapsed >= 0 else 'lead-in'
+    status: dict[str, Any] = {'t': elapsed, 'phase': phase,
                               'duration': trajectory.duration}
     for topic in (topics.MASTER_JS, topics.TARGET_FORCE, topics.ESTIMATED_FORCE,
                   topics.MEASURED_FORCE, topics.SERVO_CURRENT):
@@ -241,25 +300,29 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     group = ProcessGroup(env, log_dir=out_dir / 'logs')
     try:
         recorder = RecorderNode(bag_path, context=context)
+        recorder.subscribe_all()
         spinner = SpinThread(recorder).start()
         with group:
             group.start('sim_instrument', _node_argv('sim_instrument', spec))
             group.start('controller', _node_argv('controller', spec))
             needed = [topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.SERVO_CURRENT]
-            _wait_for(lambda: all(t in recorder.subscribed for t in needed)
-                      and all(recorder.count(t) > 0 for t in needed),
+            _wait_for(lambda: all(recorder.count(t) > 0 for t in needed),
                       group, startup_timeout, 'the simulated instrument and the controller')
-            master = group.start('master', _node_argv('master', spec))
-            _wait_for(lambda: topics.MASTER_JS in recorder.subscribed, group, startup_timeout,
+            master_csv = None
+            if spec.lead_in > 0:
+                master_csv = lead_in_csv(trajectory, spec.lead_in, out_dir / 'master_task.csv')
+            master = group.start('master', _node_argv('master', spec, master_csv))
+            _wait_for(lambda: recorder.count(topics.MASTER_JS) > 0, group, startup_timeout,
                       'the master')
-            started = time.monotonic()
-            end = trajectory.duration + TAIL
-            while True:
-                elapsed = time.monotonic() - started
+            clock = TaskClock(trajectory, time.monotonic() + max(spec.lead_in, 0.0))
+            # the master exits (exit_when_done) shortly after its task: that ends the run
+            deadline = clock.started + trajectory.duration + TAIL + startup_timeout
+            while master.alive() and time.monotonic() < deadline:
+                item = recorder.latest(topics.MASTER_JS)
+                if item is not None:
+                    clock.observe(values_of(topics.MASTER_JS, item[1])['master_angle'])
                 if progress is not None:
-                    progress(live_status(recorder, trajectory, elapsed))
-                if elapsed > end or not master.alive():
-                    break
+                    progress(live_status(recorder, trajectory, clock.elapsed()))
                 group.check_alive()
                 time.sleep(0.05)
             exit_codes = group.stop()
@@ -284,7 +347,13 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
 
     series, _diagnostics = read_bag_series(result.bag)
     raw = resample(series, rate=500.0, t0=0.0)
-    start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
+    try:
+        start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
+    except analysis.AnalysisError:   # the closing was not recorded: first master sample
+        ok = np.isfinite(raw['master_angle'])
+        if not ok.any():
+            raise
+        start = float(raw['t'][ok][0])
     data = dict(raw)
     data['t'] = raw['t'] - start
     windows = analysis.phase_windows(result.trajectory, 0.0)

@@ -12,7 +12,11 @@ from typing import Mapping
 import numpy as np
 
 from grip_force_ros import topics
-from grip_force_ros.demo.messages import FIELDS, diagnostic_summary, values_of
+from grip_force_ros.demo.messages import FIELDS, diagnostic_summary, stamp_seconds, values_of
+
+
+#: Largest median |header stamp - receive time| (s) for which the stamps are trusted.
+STAMP_TOLERANCE = 2.0
 
 
 class BagError(ValueError):
@@ -26,8 +30,10 @@ def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]],
     -------
     series : dict
         Topic (as in topics.py) -> {'t': times [s], <field>: values (SI)}.
-        Times are the recorder's receive times (one clock for every node,
-        whatever clock each node stamps its messages with).
+        Times are the header stamps when a topic's stamps are on the
+        recorder's clock (within :data:`STAMP_TOLERANCE` of the receive
+        times: robust to a recorder that falls behind under load), else the
+        receive times (a node stamping with its own simulated clock).
     diagnostics : list
         (time [s], list of status dicts) per /diagnostics message.
     """
@@ -36,7 +42,8 @@ def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]],
 
     path = Path(path)
     wanted = {('/' + t.lstrip('/')): t for t in FIELDS}
-    rows: dict[str, dict[str, list]] = {t: {'t': [], **{f: [] for f in FIELDS[t]}} for t in FIELDS}
+    rows: dict[str, dict[str, list]] = {t: {'t': [], 'stamp': [], **{f: [] for f in FIELDS[t]}}
+                                        for t in FIELDS}
     diagnostics = []
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
@@ -51,13 +58,20 @@ def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]],
                     continue
                 row = rows[short]
                 row['t'].append(t)
+                row['stamp'].append(stamp_seconds(msg))
                 for name, value in values_of(short, msg).items():
                     row[name].append(value)
     except Exception as exc:  # rosbags raises several types for unreadable bags
         raise BagError(f'{path}: cannot read rosbag2: {exc}') from exc
     series = {}
     for topic, row in rows.items():
-        t = np.asarray(row['t'], dtype=float)
+        received = np.asarray(row.pop('t'), dtype=float)
+        stamps = np.asarray(row.pop('stamp'), dtype=float)
+        t = received
+        if stamps.size and np.all(stamps > 0) and \
+                np.median(np.abs(stamps - received)) < STAMP_TOLERANCE:
+            t = stamps
+        row['t'] = t
         order = np.argsort(t, kind='stable')
         series[topic] = {k: np.asarray(v, dtype=float)[order] for k, v in row.items()}
     return series, diagnostics
