@@ -312,3 +312,11 @@ def test_status_for_diagnostics(params):
     assert status['rejected_inputs'] == '1'
     assert status['periods'] == '21'
     assert all(isinstance(v, str) for v in status.values())
+
+
+def test_controller_cross_parameter_checks():
+    from grip_force_ros.params import ParameterError
+    with pytest.raises(ParameterError, match='master_angle_min'):
+        make_params({'master_angle_min': 1.0, 'master_angle_max': 0.5})
+    with pytest.raises(ParameterError, match='two control periods'):
+        make_params({'watchdog_timeout': 0.002, 'control_rate': 500.0})

@@ -16,7 +16,7 @@ from typing import Any, Iterable, Mapping
 
 import yaml
 
-from grip_force_ros.params.controller import CONTROLLER
+from grip_force_ros.params.controller import CONTROLLER, check_controller
 from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
 from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, validate
 from grip_force_ros.params.sim import EFFECTS, SIM
@@ -69,6 +69,7 @@ def check_consistency(values: Mapping[str, Any]) -> None:
     if values['jaw_angle_min'] >= values['jaw_angle_max']:
         raise ParameterError(f"'jaw_angle_min' {values['jaw_angle_min']} rad must be below "
                              f"'jaw_angle_max' {values['jaw_angle_max']} rad")
+    check_controller(values)
 
 
 def read_params_yaml(path: str | Path) -> dict[str, Any]:

@@ -98,3 +98,22 @@ CONTROLLER = [
        'last value; the difference to the new loop output decays with this time constant.',
        min=1e-3, max=1.0, group=_G),
 ]
+
+
+def check_controller(values) -> None:
+    """Cross-parameter checks of the 'controller' group (called by ``check_consistency``).
+
+    Raises
+    ------
+    ParameterError
+        Naming the keys and values.
+    """
+    from grip_force_ros.params.schema import ParameterError
+    lo, hi = values['master_angle_min'], values['master_angle_max']
+    if lo >= hi:
+        raise ParameterError(f"'master_angle_min' {lo} rad must be below 'master_angle_max' {hi} rad")
+    periods = values['watchdog_timeout'] * values['control_rate']
+    if periods < 2.0:
+        raise ParameterError(
+            f"'watchdog_timeout' {values['watchdog_timeout']} s is less than two control periods "
+            f"at 'control_rate' {values['control_rate']} Hz: every input would be stale")
