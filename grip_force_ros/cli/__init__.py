@@ -22,6 +22,7 @@ COMMANDS = {
     'calibrate': 'calibrate',
     'monitor': 'monitor',
     'import-rig': 'import_rig',
+    'realdata': 'realdata',
     'diagnose': 'diagnose',
     'blindcheck': 'blindcheck',
 }

@@ -400,15 +400,14 @@ class CableFrictionObserver:
         """
         if not runs:
             raise EstimatorError('fit needs at least one run')
-        parts = [self._rows(r, cache) for r in runs]
-        names = parts[0][0]
-        blocks = [(a.T @ a, a.T @ y, a.shape[0]) for _, a, y, _ in parts]
-        ata = sum(b[0] for b in blocks)
-        aty = sum(b[1] for b in blocks)
+        blocks = [self._normal_equations(r, cache) for r in runs]
+        names = blocks[0][0]
+        ata = sum(b[1] for b in blocks)
+        aty = sum(b[2] for b in blocks)
         values = np.linalg.solve(ata, aty)
-        n = len(parts)
+        n = len(blocks)
         if n > 2:
-            jack = np.array([np.linalg.solve(ata - b[0], aty - b[1]) for b in blocks])
+            jack = np.array([np.linalg.solve(ata - b[1], aty - b[2]) for b in blocks])
             std = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(0)) ** 2, axis=0))
             phys_jack = [_physical(names, j) for j in jack]
         else:
@@ -420,9 +419,20 @@ class CableFrictionObserver:
             sd = math.sqrt((n - 1) / n * np.sum((np.array(spread) - np.mean(spread)) ** 2)) \
                 if spread else float('nan')
             physical[key] = (value, sd)
-        self.fit_result = FitResult(names, values, std, physical, sum(b[2] for b in blocks))
-        self._prior = float(np.mean(np.concatenate([p[3] for p in parts])))
+        self.fit_result = FitResult(names, values, std, physical, sum(b[3] for b in blocks))
+        self._prior = sum(b[4] for b in blocks) / sum(b[5] for b in blocks)   # mean torque
         return self
+
+    def _normal_equations(self, source, cache=None):
+        """(names, A'A, A'y, sliding samples, sum of torque, samples) of one run."""
+        key = (id(source), self.settings, 'normal')
+        if cache is not None and key in cache:
+            return cache[key]
+        names, a, y, tau = self._rows(source, cache)
+        out = (names, a.T @ a, a.T @ y, a.shape[0], float(np.sum(tau)), tau.size)
+        if cache is not None:
+            cache[key] = out
+        return out
 
     # -- prediction ------------------------------------------------------------------
     def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
