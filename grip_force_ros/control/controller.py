@@ -71,6 +71,10 @@ class GripController:
         self.object_kind = params.object_kind
         self.use_sensor = bool(params.force_sensor_enabled)
         self.use_feedforward = bool(params.feedforward_enabled)
+        #: (source, fault attribute, receive-time attribute) of the inputs the loop needs
+        self._required = tuple((src, src + '_fault', src + '_time')
+                               for src in ('master', 'instrument', 'actuator', 'force')
+                               if src != 'force' or self.use_sensor)
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
                                    if params.object_kind == 'needle' else 0.0)
         self.force_map = ForceMap.from_params(params)
@@ -127,11 +131,9 @@ class GripController:
             return (f'controller clock {now!r} not finite',)
         timeout = self.watchdog_timeout
         reasons = None
-        for source in ('master', 'instrument', 'actuator', 'force'):
-            if source == 'force' and not self.use_sensor:
-                continue
-            fault = getattr(inputs, source + '_fault')
-            received = getattr(inputs, source + '_time')
+        for source, fault_attr, time_attr in self._required:
+            fault = getattr(inputs, fault_attr)
+            received = getattr(inputs, time_attr)
             why = None
             if fault is not None:
                 why = f'invalid input: {fault}'
