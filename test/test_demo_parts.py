@@ -1,0 +1,225 @@
+"""Parts of grip-force demo that need no running nodes: processes, analysis, plot, recorder."""
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from grip_force_ros import topics
+from grip_force_ros.demo import analysis
+from grip_force_ros.demo.compare import calibration_csv, plant_scales
+from grip_force_ros.demo.naive_node import closing_share
+from grip_force_ros.demo.processes import (ProcessGroup, domain_in_use, pick_domain_ids,
+                                           ros_args, ros_environment)
+from grip_force_ros.demo.run import TaskClock, lead_in_csv
+from grip_force_ros.params import make_params
+from grip_force_ros.trajectories import needle_grasp, read_csv
+
+
+# ---------------------------------------------------------------- processes
+def test_ros_args_quote_strings_and_format_values():
+    args = ros_args('c.yaml', {'trajectory_file': '', 'trajectory': 'csv', 'flag': True,
+                               'scale': 1.2, 'n': 3, 'v': [0.1, 2]})
+    assert args[:3] == ['--ros-args', '--params-file', 'c.yaml']
+    pairs = [args[i + 1] for i, a in enumerate(args) if a == '-p']
+    assert pairs == ["trajectory_file:=''", "trajectory:='csv'", 'flag:=true', 'scale:=1.2',
+                     'n:=3', 'v:=[0.1,2]']
+
+
+def test_environment_keeps_dds_on_loopback_unless_chosen(monkeypatch):
+    monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    env = ros_environment(17)
+    assert env['ROS_DOMAIN_ID'] == '17' and env['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'SUBNET')
+    assert ros_environment(3)['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SUBNET'
+
+
+def test_a_domain_whose_port_is_bound_is_not_picked():
+    free = pick_domain_ids(1, start=90)[0]
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(('127.0.0.1', 7400 + 250 * free + 11))   # a participant port of that domain
+        assert domain_in_use(free)
+        chosen = pick_domain_ids(2, start=free)
+        assert free not in chosen and len(set(chosen)) == 2
+    finally:
+        sock.close()
+
+
+def test_group_stops_a_process_that_ignores_sigint(tmp_path):
+    stubborn = ('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+                'print("up", flush=True); time.sleep(60)')
+    polite = 'import time\ntry:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    print("bye")'
+    group = ProcessGroup(dict(os.environ), log_dir=tmp_path, grace=0.5)
+    with group:
+        a = group.start('stubborn', [sys.executable, '-c', stubborn])
+        b = group.start('polite', [sys.executable, '-c', polite])
+        time.sleep(1.0)
+        group.check_alive()
+    assert not a.alive() and not b.alive()
+    assert a.popen.returncode == -signal.SIGTERM           # escalated past SIGINT
+    assert b.popen.returncode == 0 and 'bye' in b.log_tail()
+    assert 'up' in (tmp_path / 'stubborn.log').read_text()
+
+
+def test_group_reports_a_dead_process_with_its_output(tmp_path):
+    group = ProcessGroup(dict(os.environ), log_dir=tmp_path)
+    with group:
+        group.start('broken', [sys.executable, '-c', 'raise SystemExit("bad parameter file")'])
+        time.sleep(0.8)
+        with pytest.raises(Exception, match='(?s)broken exited with code 1.*bad parameter file'):
+            group.check_alive()
+
+
+# ---------------------------------------------------------------- trajectories of the demo
+def test_lead_in_csv_replays_the_task_after_the_lead_in(tmp_path):
+    task = needle_grasp(time_scale=0.8)
+    replay = read_csv(lead_in_csv(task, 1.5, tmp_path / 'm.csv'))
+    t = np.linspace(0.0, task.duration, 400)
+    assert np.allclose(replay.angle(t + 1.5), task.angle(t), atol=2e-3)
+    assert np.allclose(replay.angle(np.linspace(0, 1.5, 20)), task.angle(0.0))
+
+
+def test_task_clock_resyncs_on_the_closing():
+    task = needle_grasp()
+    clock = TaskClock(task, started=100.0)
+    clock.observe(task.angle(0.0), now=101.0)                # still open: no change
+    assert clock.elapsed(now=101.0) == pytest.approx(1.0)
+    t_move = clock.move_time
+    assert task.phase(t_move) == 'close'
+    clock.observe(task.angle(0.0) - 0.05, now=200.0)         # closing seen at 200 s
+    assert clock.elapsed(now=200.0) == pytest.approx(t_move)
+
+
+def test_calibration_staircase_crosses_each_force_level():
+    p = make_params()
+    from grip_force_ros.demo import compare
+    import tempfile
+    from pathlib import Path
+    path = calibration_csv(p, Path(tempfile.mkdtemp()) / 'c.csv')
+    traj = read_csv(path)
+    shares = [closing_share(a, p.master_contact_angle, p.master_angle_min) for a in traj.angles]
+    for share in compare.CALIBRATION_SHARES:
+        assert any(abs(s - share) < 1e-6 for s in shares)
+    assert traj.angles[0] == traj.angles[-1] > p.master_contact_angle   # starts and ends open
+    assert np.all(np.diff([s for s in shares if s > 0][:-1]) >= -1e-9)    # only loading
+
+
+def test_plant_scales_alternate_and_are_twenty_percent_off():
+    assert plant_scales(0, 0.2) == {'friction_scale': 1.2, 'stiffness_scale': 0.8}
+    assert plant_scales(1, 0.2) == {'friction_scale': 0.8, 'stiffness_scale': 1.2}
+    assert plant_scales(2, 0.2) == plant_scales(0, 0.2)
+
+
+# ---------------------------------------------------------------- analysis
+def synthetic_run(task, lost=0.3, rate=500.0, offset=0.05, noise=0.01, seed=0):
+    """A run as the analysis sees it: master angle, target and a force that lags a bit."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(-1.0, task.duration + 0.5, 1.0 / rate)
+    master = task.angle(np.clip(t, 0, None))
+    master[t < lost - 1.0] = np.nan                      # the recorder missed the first samples
+    share = np.clip((0.2 - master) / 0.2, 0, 1)
+    target = 4.0 * share
+    force = np.interp(t - 0.02, t, target) + offset + rng.normal(0, noise, t.size)
+    return {'t': t + 10.0, 'master_angle': master, 'target_force': target,
+            'measured_force': force, 'estimated_force': target.copy(),
+            'pull_out_force': 0.6 * target, 'current_command': 0.07 * target}
+
+
+def test_alignment_finds_the_task_start_despite_missing_samples():
+    task = needle_grasp()
+    data = synthetic_run(task)
+    start = analysis.trajectory_start(data['t'], data['master_angle'], task)
+    assert start == pytest.approx(10.0, abs=0.005)
+
+
+def test_force_metrics_measure_a_known_offset():
+    task = needle_grasp()
+    data = synthetic_run(task, offset=0.05)
+    data['t'] = data['t'] - 10.0
+    windows = analysis.phase_windows(task, 0.0)
+    m = analysis.force_metrics(data, windows)
+    assert m['target_force'] == pytest.approx(4.0)
+    assert m['hold_error_mean'] == pytest.approx(0.05, abs=0.003)
+    assert m['hold_error_rms'] == pytest.approx(np.hypot(0.05, 0.01), abs=0.003)
+    assert m['steady_ratio'] == pytest.approx(1.0125, abs=0.001)
+    assert m['pull_out_force'] == pytest.approx(2.4, abs=0.01)
+    assert m['estimate_error_rms'] == pytest.approx(np.hypot(0.05, 0.01), abs=0.003)
+    assert m['peak_current'] == pytest.approx(0.28)
+    assert 0.0 <= m['settling_time'] < 0.1
+
+
+def test_spread_is_max_minus_min_and_nan_when_a_run_failed():
+    assert analysis.spread([1.0, 0.97, 1.02]) == pytest.approx(0.05)
+    assert np.isnan(analysis.spread([1.0, float('nan')]))
+
+
+def test_summary_plot_is_written(tmp_path):
+    from grip_force_ros.demo.plot import summary_plot
+    task = needle_grasp()
+    data = synthetic_run(task)
+    data['t'] = data['t'] - 10.0
+    windows = analysis.phase_windows(task, 0.0)
+    path = summary_plot(data, windows, analysis.force_metrics(data, windows), tmp_path / 's.png')
+    assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and path.stat().st_size > 30_000
+
+
+# ---------------------------------------------------------------- recorder
+@pytest.mark.ros
+def test_recorder_writes_an_mcap_bag_that_rosbags_reads(tmp_path):
+    import rclpy
+    from rclpy.context import Context
+    from geometry_msgs.msg import WrenchStamped
+    from sensor_msgs.msg import JointState
+    from rosbags.highlevel import AnyReader
+
+    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.demo.series import read_bag_series
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
+    try:
+        recorder = RecorderNode(tmp_path / 'bag', context=ctx)
+        recorder.subscribe_all()
+        spin = SpinThread(recorder).start()
+        node = rclpy.create_node('fake_nodes', context=ctx)
+        master = node.create_publisher(JointState, topics.MASTER_JS, 10)
+        force = node.create_publisher(WrenchStamped, topics.MEASURED_FORCE, 10)
+        deadline = time.monotonic() + 10
+        while recorder.count(topics.MASTER_JS) == 0 and time.monotonic() < deadline:
+            master.publish(JointState(name=[topics.MASTER_JOINT], position=[0.8]))
+            time.sleep(0.02)
+        for k in range(200):
+            stamp = node.get_clock().now().to_msg()
+            js = JointState(name=[topics.MASTER_JOINT], position=[0.8 - 0.004 * k])
+            js.header.stamp = stamp
+            master.publish(js)
+            w = WrenchStamped()
+            w.header.stamp = stamp
+            w.wrench.force.z = 0.01 * k
+            force.publish(w)
+            time.sleep(0.002)
+        time.sleep(0.3)
+        spin.stop()
+        recorder.close()
+        node.destroy_node()
+        recorder.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)
+    bag = tmp_path / 'bag'
+    assert (bag / 'metadata.yaml').exists() and list(bag.glob('*.mcap'))
+    with AnyReader([bag]) as reader:
+        found = {c.topic: (c.msgtype, c.msgcount) for c in reader.connections}
+    assert set(found) == {'/' + t.lstrip('/') for t in topics.RECORDED}
+    assert found['/master/gripper/measured_js'][0] == 'sensor_msgs/msg/JointState'
+    assert found['/master/gripper/measured_js'][1] >= 200
+    assert found['/grip/measured_force'] == ('geometry_msgs/msg/WrenchStamped', 200)
+    meta = (bag / 'metadata.yaml').read_text()
+    assert 'reliability: reliable' in meta and 'storage_identifier: mcap' in meta
+    series, _ = read_bag_series(bag)
+    assert series[topics.MEASURED_FORCE]['measured_force'][-1] == pytest.approx(1.99)
+    assert np.all(np.diff(series[topics.MASTER_JS]['t']) >= 0)
