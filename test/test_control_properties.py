@@ -183,3 +183,21 @@ def test_hypothesis_input_sequences(samples, seed):
         inp.set_actuator(t, ctrl.command)
         inp.set_force(t, float(rng.uniform(0.0, 10.0)))
         check.check(ctrl.step(t + 1e-3, inp))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.floats(-0.5, 2.0), st.floats(-0.2, 1.6), st.floats(-5.0, 5.0)),
+                min_size=1, max_size=60),
+       st.floats(0.0, 50.0), st.floats(0.2, 5.0), st.floats(-0.3, 1.0))
+def test_force_map_bounded_and_monotone(samples, force_max, exponent, contact):
+    from grip_force_ros.control import ForceMap
+    fm = ForceMap(master_angle_min=0.0, master_contact_angle=contact, master_to_jaw_gain=1.2,
+                  jaw_angle_max=1.5, force_max=force_max, exponent=exponent)
+    for master, jaw, jaw_velocity in samples:
+        gripping, target = fm.update(master, jaw, jaw_velocity)
+        if gripping:
+            assert 0.0 <= target <= force_max
+            # closing the master further never lowers the target
+            assert fm.force_target(master - 0.01) >= target
+        else:
+            assert 0.0 <= target <= 1.5                       # a jaw angle inside its range
