@@ -320,3 +320,10 @@ def test_controller_cross_parameter_checks():
         make_params({'master_angle_min': 1.0, 'master_angle_max': 0.5})
     with pytest.raises(ParameterError, match='two control periods'):
         make_params({'watchdog_timeout': 0.002, 'control_rate': 500.0})
+
+
+def test_unset_zero_stamps_are_not_duplicates(params):
+    inp = ControlInputs.from_params(params)
+    for k in range(3):
+        assert inp.set_master(0.001 * k, 0.5, stamp=0.0) is None
+        assert inp.master_time == 0.001 * k                    # every sample refreshes

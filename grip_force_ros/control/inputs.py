@@ -42,7 +42,8 @@ class ControlInputs:
     was rejected. A rejected sample is not stored; the source is marked faulted (its
     ``*_fault`` attribute holds the reason) until the next accepted sample. A sample whose
     stamp equals the previous stamp is a duplicate: ignored (returns None) without
-    refreshing the receive time.
+    refreshing the receive time. A stamp of NaN or 0.0 (an unset ROS header) skips the
+    stamp checks.
     """
 
     __slots__ = (
@@ -116,7 +117,7 @@ class ControlInputs:
         """None if the times are acceptable, 'duplicate', or a rejection reason."""
         if not _isfinite(receive_time):
             return f'receive time {receive_time!r} not finite'
-        if stamp != stamp:           # nan: the source has no stamp, skip stamp checks
+        if stamp != stamp or stamp == 0.0:   # nan, or 0 = unset header stamp: no stamp checks
             return None
         if not _isfinite(stamp):
             return f'stamp {stamp!r} not finite'
