@@ -70,13 +70,10 @@ def cases(quick: bool = False, seed: int = 0, none_logs: int | None = None) -> l
 
 
 def _smooth_noise(rng, n, dt, time_constant):
-    x = rng.normal(size=n)
+    """Unit-std noise through two first-order low-passes (smooth: its rate is bounded too)."""
+    from scipy.signal import lfilter
     a = math.exp(-dt / time_constant)
-    y = np.empty(n)
-    acc = 0.0
-    for i, v in enumerate(x.tolist()):
-        acc = a * acc + (1 - a) * v
-        y[i] = acc
+    y = lfilter([1 - a], [1, -a], lfilter([1 - a], [1, -a], rng.normal(size=n)))
     return y / (np.std(y) + 1e-12)
 
 
@@ -84,7 +81,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
     """Current command (A), wrist (rad) and object per sample: seeded, varied segments."""
     n = int(round(duration / dt))
     # slow intensity envelope: busy and quiet periods (heats and cools the motor)
-    period = rng.uniform(25.0, 50.0)
+    period = rng.uniform(30.0, 60.0)
     envelope_phase = rng.uniform(0.0, 2.0 * np.pi)
     current = np.empty(n)
     objects = np.empty(n, dtype=object)
@@ -97,7 +94,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
         load_t = t[open_n:] - t[open_n]
         span = max(load_t[-1], dt)
         envelope = 0.5 + 0.5 * math.sin(2.0 * math.pi * i * dt / period + envelope_phase)
-        top = rng.uniform(0.3, 1.0) * (0.25 + 0.75 * envelope) * 0.9 * max_current
+        top = rng.uniform(0.5, 1.0) * (0.2 + 0.8 * envelope) * max_current
         kind = rng.integers(0, 4)
         if kind == 0:      # triangle ramps up and down, 1-3 cycles
             cycles = rng.integers(1, 4)
@@ -111,7 +108,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
             f = rng.uniform(0.2, 1.5)
             prof = top * (0.55 + 0.4 * np.sin(2 * np.pi * f * load_t + rng.uniform(0, 6.28)))
         else:              # smoothed noise
-            prof = top * np.clip(0.5 + 0.25 * _smooth_noise(rng, load_t.size, dt, rng.uniform(0.1, 0.6)),
+            prof = top * np.clip(0.5 + 0.25 * _smooth_noise(rng, load_t.size, dt, rng.uniform(0.15, 0.5)),
                                  0.02, 1.0)
         open_current = -rng.uniform(0.03, 0.12)
         block = np.concatenate([np.full(open_n, open_current), prof])[: n - i]
@@ -179,7 +176,7 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
     from grip_force_ros.diagnosis.engine import diagnose
 
     say = progress or (lambda msg: None)
-    duration = duration or (40.0 if quick else 60.0)
+    duration = duration or (60.0 if quick else 90.0)
     start = time.perf_counter()
     per_log = []
     for i, case in enumerate(cases(quick, seed)):

@@ -25,12 +25,12 @@ from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, OBJECT_CODES,
 
 #: Held-out score margin for naming an effect: the mean-square error (both channels
 #: summed in log) must fall by at least this fraction, beyond the parameter penalty.
-MIN_IMPROVEMENT = 0.3
+MIN_IMPROVEMENT = 0.2
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
 PARAM_PENALTY = 0.01
 #: Default split of a log into time blocks when no test logs are given.
 BLOCKS = 6
-TEST_BLOCKS = (1, 4)
+FOLDS = 3
 
 UNITS = {'grip_force': 'N', 'jaw_torque': 'N*m'}
 
@@ -76,11 +76,16 @@ def _concat(frames, key):
 class _Data:
     """Frames of all logs, concatenated, with the train/test masks."""
 
-    def __init__(self, frames, train_masks):
+    def __init__(self, frames, fold_tests):
         self.frames = frames
         steady = _concat(frames, 'steady') > 0
-        self.train = np.concatenate(train_masks) & steady
-        self.test = ~np.concatenate(train_masks) & steady
+        #: (train, test) masks of each fold; the test parts are disjoint
+        self.folds = [(~test & steady, test & steady) for test in fold_tests]
+        self.test = np.zeros(steady.size, dtype=bool)
+        for _, test in self.folds:
+            self.test |= test
+        #: what the reported parameters are fitted on: every steady sample the fits may see
+        self.train = steady & ~self.test if len(self.folds) == 1 else steady.copy()
         self.transient_share = float(1.0 - steady.mean())
         for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
                     'jaw_velocity', 'load_time', 'object', 't'):
@@ -103,25 +108,55 @@ class _Data:
         return Xf, Xa
 
 
-def _fit_channels(data: _Data, Xf, Xa):
-    tr, te = data.train, data.test
+def _fold_fit(data: _Data, Xf, Xa, fold: int):
+    tr, te = data.folds[fold]
     cf = _lstsq(Xf[tr], data.y[tr])
     ca = _lstsq(Xa[tr], data.angle_target[tr])
-    rf = data.y - Xf @ cf
-    ra = data.angle_target - Xa @ ca
-    return {'coef_force': cf, 'coef_angle': ca,
-            'train_mse_f': float(np.mean(rf[tr] ** 2)), 'train_mse_a': float(np.mean(ra[tr] ** 2)),
-            'test_mse_f': float(np.mean(rf[te] ** 2)), 'test_mse_a': float(np.mean(ra[te] ** 2)),
-            'resid_f': rf, 'resid_a': ra}
+    mse_f = float(np.mean((data.y[tr] - Xf[tr] @ cf) ** 2))
+    mse_a = float(np.mean((data.angle_target[tr] - Xa[tr] @ ca) ** 2))
+    objective = math.log(max(mse_f, 1e-300)) + math.log(max(mse_a, 1e-300))
+    return objective, data.y[te] - Xf[te] @ cf, data.angle_target[te] - Xa[te] @ ca
+
+
+def _evaluate(data: _Data, designs, grid):
+    """Fit every grid value on each fold's training part; keep each fold's best by its own
+    training objective; held-out residuals come from the fold that did not see them.
+
+    Returns held-out residual arrays (force, angle; zero outside the held-out part), the
+    pooled held-out MSEs, and the grid value chosen by most folds.
+    """
+    best = [None] * len(data.folds)
+    for value in grid:
+        Xf, Xa = designs(value)
+        for k in range(len(data.folds)):
+            objective, rf, ra = _fold_fit(data, Xf, Xa, k)
+            if best[k] is None or objective < best[k][0]:
+                best[k] = (objective, value, rf, ra)
+    resid_f = np.zeros(data.y.size)
+    resid_a = np.zeros(data.y.size)
+    for (_, te), (_, _, rf, ra) in zip(data.folds, best):
+        resid_f[te] = rf
+        resid_a[te] = ra
+    te = data.test
+    values = [b[1] for b in best]
+    chosen = max(values, key=lambda v: (values.count(v), -values.index(v)))
+    return {'resid_f': resid_f, 'resid_a': resid_a, 'value': chosen,
+            'test_mse_f': float(np.mean(resid_f[te] ** 2)), 'test_mse_a': float(np.mean(resid_a[te] ** 2))}
+
+
+def _full_fit(data: _Data, Xf, Xa, rng):
+    """Coefficients on every sample the fits may see, with block-bootstrap std."""
+    tr = data.train
+    cf = _lstsq(Xf[tr], data.y[tr])
+    ca = _lstsq(Xa[tr], data.angle_target[tr])
+    return (cf, ca, _block_bootstrap_std(Xf[tr], data.y[tr], rng),
+            _block_bootstrap_std(Xa[tr], data.angle_target[tr], rng),
+            float(np.mean((data.y[tr] - Xf[tr] @ cf) ** 2)))
 
 
 def _score(fit, base) -> float:
     return (math.log(max(fit['test_mse_f'], 1e-300) / max(base['test_mse_f'], 1e-300))
             + math.log(max(fit['test_mse_a'], 1e-300) / max(base['test_mse_a'], 1e-300)))
-
-
-def _train_objective(fit) -> float:
-    return math.log(max(fit['train_mse_f'], 1e-300)) + math.log(max(fit['train_mse_a'], 1e-300))
 
 
 def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
@@ -170,24 +205,21 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
     return out
 
 
-def _masks(frames, n_train_logs, have_test_logs, blocks, test_blocks):
+def _fold_tests(frames, n_train_logs, have_test_logs, blocks, folds):
+    """Held-out masks of each fold: the test logs, or interleaved time blocks of every log."""
     if have_test_logs:
-        return [np.full(len(f['t']), i < n_train_logs) for i, f in enumerate(frames)]
-    return _split_masks(frames, blocks, test_blocks)
-
-
-def _split_masks(frames, blocks, test_blocks):
-    masks = []
+        return [np.concatenate([np.full(len(f['t']), i >= n_train_logs) for i, f in enumerate(frames)])]
+    block = []
     for f in frames:
         t = f['t']
-        block = np.minimum((t - t[0]) / max(t[-1] - t[0], 1e-12) * blocks, blocks - 1).astype(int)
-        masks.append(~np.isin(block, test_blocks))
-    return masks
+        block.append(np.minimum((t - t[0]) / max(t[-1] - t[0], 1e-12) * blocks, blocks - 1).astype(int))
+    block = np.concatenate(block)
+    return [(block % folds) == k for k in range(folds)]
 
 
 def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, params=None, *,
                   model=None, analysis_rate: float = 200.0, default_object: str = 'needle',
-                  blocks: int = BLOCKS, test_blocks: Sequence[int] = TEST_BLOCKS,
+                  blocks: int = BLOCKS, folds: int = FOLDS,
                   min_improvement: float = MIN_IMPROVEMENT, param_penalty: float = PARAM_PENALTY,
                   jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH,
                   seed: int = 0, progress=None) -> Diagnosis:
@@ -209,15 +241,15 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     say(f'building frames of {len(logs)} log(s) at {analysis_rate:g} Hz')
     frames = [build_frame(log, model, measured=measured, default_object=default_object,
                           jaw_side_cable_length=jaw_side_cable_length) for log in logs]
-    masks = _masks(frames, len(train_logs), bool(test_logs), blocks, tuple(test_blocks))
-    data = _Data(frames, masks)
+    data = _Data(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
     if test_logs:
-        split = {'method': 'files', 'train_logs': len(train_logs), 'test_logs': len(test_logs)}
+        split = {'method': 'files', 'train_logs': len(train_logs), 'test_logs': len(test_logs),
+                 'description': f'fitted on {len(train_logs)} log(s), judged on {len(test_logs)} other log(s)'}
     else:
-        split = {'method': 'time_blocks', 'blocks': blocks, 'test_blocks': list(test_blocks),
-                 'description': f'each log cut into {blocks} equal time blocks; blocks '
-                                f'{", ".join(str(b) for b in test_blocks)} (0-based) held out, '
-                                'the fit sees only the others'}
+        split = {'method': 'time_blocks', 'blocks': blocks, 'folds': folds,
+                 'description': f'each log cut into {blocks} equal time blocks; {folds}-fold: fold k holds '
+                                f'out blocks b with b % {folds} == k and fits on the others, so every '
+                                'held-out residual comes from a fit that never saw it'}
     if data.train.sum() < 10 or data.test.sum() < 10:
         raise DiagnosisError('too few samples in the training or the held-out part')
     if not np.any(data.contact[data.train] > 0):
@@ -234,27 +266,27 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     # 1. nominal + calibration
     Xf0 = data.nominal[:, None]
     Xa0 = data.angle_base
-    base = _fit_channels(data, Xf0, Xa0)
-    gain = float(base['coef_force'][0])
-    gain_std = float(_block_bootstrap_std(Xf0[data.train], data.y[data.train], rng)[0])
-    a_std = _block_bootstrap_std(Xa0[data.train], data.angle_target[data.train], rng)
+    base = _evaluate(data, lambda _: (Xf0, Xa0), (None,))
+    cf0, ca0, sf0, a_std, _ = _full_fit(data, Xf0, Xa0, rng)
+    gain, gain_std = float(cf0[0]), float(sf0[0])
     raw_gap = _rms(data.y[data.test] - data.nominal[data.test])
     calibration = {
         'force_gain': {'value': gain, 'std': gain_std, 'unit': '-',
                        'meaning': f'measured {measured} / model {measured} (efficiency scale)'},
-        'jaw_angle_offset': {'value': float(base['coef_angle'][0]), 'std': float(a_std[0]),
+        'jaw_angle_offset': {'value': float(ca0[0]), 'std': float(a_std[0]),
                              'unit': 'rad', 'meaning': 'jaw encoder zero'},
-        'jaw_angle_per_drum_tension': {'value': float(base['coef_angle'][1]), 'std': float(a_std[1]),
+        'jaw_angle_per_drum_tension': {'value': float(ca0[1]), 'std': float(a_std[1]),
                                        'unit': 'rad/N', 'meaning': 'cable stretch, drum side'},
-        'jaw_angle_per_jaw_tension': {'value': float(base['coef_angle'][2]), 'std': float(a_std[2]),
+        'jaw_angle_per_jaw_tension': {'value': float(ca0[2]), 'std': float(a_std[2]),
                                       'unit': 'rad/N', 'meaning': 'cable stretch, jaw side'},
-        'jaw_angle_lag': {'value': float(base['coef_angle'][3]), 'std': float(a_std[3]),
+        'jaw_angle_lag': {'value': float(ca0[3]), 'std': float(a_std[3]),
                           'unit': 's', 'meaning': 'jaw angle per jaw velocity (dynamic lag)'},
         'jaw_side_cable_length': {'value': jaw_side_cable_length, 'std': None, 'unit': 'm',
                                   'meaning': 'given (not fitted): cable stiffness E*A/length seen '
                                              'by a stuck cable'},
         'gap_uncalibrated': raw_gap,
-        'note': 'calibrated on the training part as a lab would; not counted as an unmodelled effect',
+        'note': 'calibrated as a lab would (values: fit on all training samples; the held-out gaps use '
+                'per-fold fits); not counted as an unmodelled effect',
     }
 
     # 3. which effect
@@ -263,38 +295,30 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     for name in EFFECT_NAMES:
         effect = EFFECTS[name]
         say(f'fitting {name}')
-        best = None
-        for value in effect.grid:
-            Xf, Xa = data.designs(effect, value)
-            fit = _fit_channels(data, Xf, Xa)
-            obj = _train_objective(fit)
-            if best is None or obj < best[0]:
-                best = (obj, value, fit, Xf, Xa)
-        _, value, fit, Xf, Xa = best
+        fit = _evaluate(data, lambda v, e=effect: data.designs(e, v), effect.grid)
+        value = fit['value']
+        Xf, Xa = data.designs(effect, value)
+        cf, ca, sf, sa, train_mse = _full_fit(data, Xf, Xa, rng)
         fits[name] = fit
         score = _score(fit, base) + param_penalty * effect.n_params
         params_out = {}
-        sf = _block_bootstrap_std(Xf[data.train], data.y[data.train], rng)
-        sa = _block_bootstrap_std(Xa[data.train], data.angle_target[data.train], rng)
-        g = float(fit['coef_force'][0])
+        g = float(cf[0])
         for (pname, punit, transform), coef, std in zip(
-                effect.describe,
-                list(fit['coef_force'][1:]) + list(fit['coef_angle'][4:]),
-                list(sf[1:]) + list(sa[4:])):
+                effect.describe, list(cf[1:]) + list(ca[4:]), list(sf[1:]) + list(sa[4:])):
             val = float(transform(float(coef), g))
             scale = abs(val / coef) if coef else 1.0
             params_out[pname] = {'value': val, 'std': float(std) * scale,
                                  'unit': punit.replace('unit of y', unit)}
         if effect.grid_name:
             params_out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
-                                            'note': 'picked from a grid on the training part'}
+                                            'note': 'picked from a grid on the training parts'}
         ranking.append({'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
                         'holdout_angle_rmse': math.sqrt(fit['test_mse_a']),
-                        'train_rmse': math.sqrt(fit['train_mse_f']),
+                        'train_rmse': math.sqrt(train_mse),
                         'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out})
     ranking.append({'effect': NONE, 'holdout_rmse': math.sqrt(base['test_mse_f']),
                     'holdout_angle_rmse': math.sqrt(base['test_mse_a']),
-                    'train_rmse': math.sqrt(base['train_mse_f']), 'score': math.log(1.0 - min_improvement),
+                    'train_rmse': None, 'score': math.log(1.0 - min_improvement),
                     'n_params': 0, 'gain': gain, 'params': {}})
     ranking.sort(key=lambda r: r['score'])
     winner = ranking[0]['effect']
@@ -324,10 +348,9 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
               'samples': {'train': int(data.train.sum()), 'test': int(data.test.sum())}}
     te = data.test
     series = {'t': data.t[te], 'log_index': data.log_index[te], 'y': data.y[te],
-              'calibrated': gain * data.nominal[te], 'after': (data.y - resid_after)[te],
+              'calibrated': (data.y - base['resid_f'])[te], 'after': (data.y - resid_after)[te],
               'resid_before': base['resid_f'][te], 'resid_after': resid_after[te],
               'jaw': data.jaw[te], 'jaw_before': (data.jaw - base['resid_a'])[te],
-              'jaw_after': (data.jaw - (fits[winner]['resid_a'] if winner != NONE else base['resid_a']))[te],
               'current': data.current[te], 'wrist': data.wrist[te], 'jaw_velocity': data.jaw_velocity[te],
               'load_time': data.load_time[te], 'current_rate': data.current_rate[te]}
     return Diagnosis(result, series)
@@ -346,8 +369,7 @@ def diagnose(train_logs: Sequence, test_logs: Sequence | None = None, params=Non
     params : ParamSet, optional
         Instrument parameters of the nominal model (defaults when omitted).
     **kwargs
-        ``model``, ``analysis_rate`` (Hz), ``default_object``, ``blocks``,
-        ``test_blocks``, ``min_improvement``, ``param_penalty``, ``jaw_side_cable_length``
+        ``model``, ``analysis_rate`` (Hz), ``default_object``, ``blocks``, ``folds``, ``min_improvement``, ``param_penalty``, ``jaw_side_cable_length``
         (m), ``seed``, ``progress``.
 
     Returns
