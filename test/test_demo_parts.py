@@ -110,8 +110,8 @@ def test_calibration_staircase_crosses_each_force_level():
 
 
 def test_plant_scales_alternate_and_are_twenty_percent_off():
-    assert plant_scales(0, 0.2) == {'friction_scale': 1.2, 'stiffness_scale': 0.8}
-    assert plant_scales(1, 0.2) == {'friction_scale': 0.8, 'stiffness_scale': 1.2}
+    assert plant_scales(0, 0.2) == {'friction_scale': 0.8, 'stiffness_scale': 1.2}
+    assert plant_scales(1, 0.2) == {'friction_scale': 1.2, 'stiffness_scale': 0.8}
     assert plant_scales(2, 0.2) == plant_scales(0, 0.2)
 
 

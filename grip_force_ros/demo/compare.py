@@ -39,8 +39,14 @@ CALIBRATION_HOLD = 0.6
 
 
 def plant_scales(index: int, plant_error: float) -> dict[str, float]:
-    """Sim friction/stiffness scales of instrument ``index``: signs alternate per instrument."""
-    sign = 1.0 if index % 2 == 0 else -1.0
+    """Sim friction/stiffness scales of instrument ``index``: signs alternate per instrument.
+
+    The first instrument gets the lower friction (and stiffer cable), the second the
+    higher, and so on. With the shipped configs sorted by name, the lossiest one (the
+    four-pulley driver: 1.78 N at 0.5 A with +20 % friction) comes first, so every
+    plant can still reach the 4 N target.
+    """
+    sign = -1.0 if index % 2 == 0 else 1.0
     return {'friction_scale': round(1.0 + sign * plant_error, 6),
             'stiffness_scale': round(1.0 - sign * plant_error, 6)}
 
@@ -69,6 +75,14 @@ def calibration_csv(params, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text('t,master_angle\n' + ''.join(f'{a:.4f},{b:.6f}\n' for a, b in rows))
     return path
+
+
+def calibration_current(params) -> float:
+    """Current (A) of the top calibration level: grip_force_max per the shipped model,
+    at most max_current."""
+    from grip_force_ros.model import GripForceModel
+    current = float(GripForceModel(params).inverse(params.grip_force_max, 0.0, 0.0, 'needle'))
+    return min(current, params.max_current)
 
 
 def naive_gain(reference_config: Path) -> float:
@@ -165,13 +179,19 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
               f'(friction, stiffness), naive gain {gain:.4f} A, domains {domains}')
 
     # --- 1. calibration grasp on the load cell, per instrument ------------------------------
-    _log(log, 'stage 1/5: calibration grasps (load cell)')
+    # A current staircase (the naive map: current proportional to the master closing, no
+    # feedback), slow ramps up: the pulley friction stays in its loading direction. A force
+    # loop would overshoot and settle from above, where the stick-slip friction holds a
+    # different tension than the model describes.
+    _log(log, 'stage 1/5: calibration grasps (current staircase on the load cell)')
     jobs = []
     for k, config in enumerate(configs):
         params = load_params_file(config)
         csv_path = calibration_csv(params, out_dir / names[k] / 'calibration_master.csv')
         jobs.append({'spec': dict(config=config, duration=0.0, label=f'{names[k]}/calibration',
-                                  controller_overrides={'force_sensor_enabled': True},
+                                  controller='naive',
+                                  controller_overrides={
+                                      'naive_current_closed': calibration_current(params)},
                                   sim_overrides=scales[k],
                                   master_overrides={'trajectory': 'csv',
                                                     'trajectory_file': str(csv_path.resolve())}),
