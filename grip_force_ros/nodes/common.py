@@ -1,0 +1,152 @@
+"""What the three nodes share: QoS, message packing and checking, the main loop.
+
+QoS (documented in docs/ros_interface.md):
+
+* state and command topics (1 kHz and the master stream): publishers
+  RELIABLE, VOLATILE, KEEP_LAST 10 (a recorder that lags a little still gets
+  every sample on loopback); the controller and the sim subscribe with
+  KEEP_LAST 1, because only the newest sample of a state matters to a loop.
+* force topics (estimated, target, measured): as state topics.
+* ``/diagnostics``: RELIABLE, KEEP_LAST 10, as diagnostic_aggregator expects.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+from typing import Callable, Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.task import Future
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from grip_force_ros.params import ParameterError
+
+STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+STATE_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
+DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+
+#: Environment variable choosing the executor of ``main``: 'events' or 'single'.
+EXECUTOR_ENV = 'GRIP_FORCE_EXECUTOR'
+
+
+class InputRejected(ValueError):
+    """A received message is malformed; ``str()`` is the reason for /diagnostics."""
+
+
+def joint_state(stamp, names: Sequence[str], position: Sequence[float] = (),
+                velocity: Sequence[float] = (), effort: Sequence[float] = ()) -> JointState:
+    """Build a JointState (SI: rad, rad/s; effort in the unit the topic documents)."""
+    msg = JointState()
+    msg.header.stamp = stamp
+    msg.name = list(names)
+    msg.position = [float(v) for v in position]
+    msg.velocity = [float(v) for v in velocity]
+    msg.effort = [float(v) for v in effort]
+    return msg
+
+
+def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -> dict[str, tuple]:
+    """Extract ``fields`` of ``joints`` from a JointState, checking everything.
+
+    Parameters
+    ----------
+    msg : JointState
+    joints : sequence of str
+        Joint names that must all be present (other names are an error too:
+        a message for another device on the wrong topic must not be used).
+    fields : sequence of str
+        Any of 'position', 'velocity', 'effort' that must be present and finite.
+
+    Returns
+    -------
+    dict
+        joint name -> tuple of the requested fields, in the order given.
+
+    Raises
+    ------
+    InputRejected
+        Why the message cannot be used (names, lengths, non-finite values).
+    """
+    names = list(msg.name)
+    if len(set(names)) != len(names):
+        raise InputRejected(f'duplicate joint names {names}')
+    unknown = [n for n in names if n not in joints]
+    if unknown:
+        raise InputRejected(f'unknown joint name(s) {unknown}, expected {list(joints)}')
+    missing = [n for n in joints if n not in names]
+    if missing:
+        raise InputRejected(f'missing joint(s) {missing}')
+    arrays = {}
+    for field in fields:
+        values = getattr(msg, field)
+        if len(values) != len(names):
+            raise InputRejected(f'{field} has {len(values)} values for {len(names)} joints')
+        arrays[field] = values
+    out = {}
+    for i, name in enumerate(names):
+        row = []
+        for field in fields:
+            v = float(arrays[field][i])
+            if not math.isfinite(v):
+                raise InputRejected(f'{field} of {name!r} is {v}')
+            row.append(v)
+        out[name] = tuple(row)
+    return out
+
+
+def stamp_seconds(stamp) -> float:
+    """builtin_interfaces/Time as float seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def make_executor():
+    """EventsExecutor (rclpy.experimental) unless GRIP_FORCE_EXECUTOR=single."""
+    if os.environ.get(EXECUTOR_ENV, 'events') == 'single':
+        return SingleThreadedExecutor()
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:  # pragma: no cover - older rclpy
+        return SingleThreadedExecutor()
+    return EventsExecutor()
+
+
+def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
+             args: list[str] | None = None) -> int:
+    """The main loop of an executable node (ros2/demos Jazzy style).
+
+    Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
+    parameters are refused (the reason goes to stderr).
+    """
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = make_node()
+        executor = make_executor()
+        executor.add_node(node)
+        # A node may end itself by completing its ``finished`` Future.
+        finished = getattr(node, 'finished', None) or Future()
+        # EventsExecutor (Jazzy) never returns from spin() or from
+        # spin_until_future_complete without a timeout once a signal has shut
+        # the context down: poll with a timeout.
+        while rclpy.ok() and not finished.done():
+            executor.spin_until_future_complete(finished, timeout_sec=0.5)
+    except ParameterError as exc:
+        print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
