@@ -17,7 +17,7 @@ def add_arguments(parser) -> None:
                         help='write report.md and PNG figures here')
     parser.add_argument('--json', action='store_true', help='print the result as JSON')
     parser.add_argument('--quick', action='store_true',
-                        help='holdout split and leave-one-level-out only (no sensitivity sweep)')
+                        help='fewer splits: estimators on holdout + leave-one-level-out, effects on holdout only')
 
 
 def _summary(result) -> str:

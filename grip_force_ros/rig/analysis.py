@@ -268,7 +268,8 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
     ----------
     runs : sequence of RigRun
     quick : bool
-        Only the holdout split and leave-one-level-out (for tests and CI).
+        Estimators on the holdout split and leave-one-level-out, effects on the
+        holdout split only, no sensitivity sweep (for tests and CI).
     progress : callable, optional
         ``progress(message)`` for long steps.
     """
@@ -312,7 +313,7 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
                 rows.append({k: estimators[0][k] for k in ('name', 'effect', 'description',
                                                              'holdout_rmse_mNm', 'cv_rmse_mNm')})
                 continue
-            row = evaluate(cand, runs, cache, kinds=('level',))
+            row = evaluate(cand, runs, cache, kinds=() if quick else ('level',))
             rows.append({k: row[k] for k in ('name', 'effect', 'description', 'holdout_rmse_mNm',
                                              'cv_rmse_mNm')})
         effects[label] = rows

@@ -140,7 +140,7 @@ def read_run(path, *, rows: int | None = None) -> RigRun:
                 else:
                     break
         raw = np.loadtxt(path, delimiter=',', comments='%', dtype=np.float64, ndmin=2,
-                         max_rows=rows, encoding='latin-1')
+                         skiprows=len(header_lines), max_rows=rows, encoding='latin-1')
     except (OSError, ValueError) as exc:
         raise RigDataError(f'{path}: cannot read rig file: {exc}') from None
     if raw.shape[1] != len(C.RAW_COLUMNS):

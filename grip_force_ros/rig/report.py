@@ -125,7 +125,8 @@ def plot_effects(result: dict, path: Path) -> Path:
     rows = []
     for group in ('ladder', 'drop_one', 'add_one'):
         for r in result['effects'][group]:
-            rows.append((group, r['name'], r['holdout_rmse_mNm'], r['cv_rmse_mNm'].get('level')))
+            rows.append((group, r['name'], r['holdout_rmse_mNm'],
+                         r['cv_rmse_mNm'].get('level', float('nan'))))
     fig, ax = plt.subplots(figsize=(10, 0.35 * len(rows) + 1.5))
     y = np.arange(len(rows))[::-1]
     colours = {'ladder': 'tab:blue', 'drop_one': 'tab:red', 'add_one': 'tab:green'}
