@@ -20,6 +20,10 @@ CONFIGS = sorted((ROOT / 'config').glob('*.yaml'))
 
 @pytest.mark.parametrize('path', CONFIGS, ids=[p.stem for p in CONFIGS])
 def test_yaml_gains_meet_the_claimed_margins(path):
+    from grip_force_ros.params import read_params_yaml
+    assert 'force_ki' in read_params_yaml(path), (
+        f'{path.name} carries no controller gains: run `./dev tune --config config/{path.name}` '
+        'and add the printed gains to the YAML')
     params = load_params_file(path)
     result = tune.analyse(params)
     assert len(result.reports) == 3 * len(tune.VARIANTS)
