@@ -101,3 +101,21 @@ def test_cli_prints_json_and_writes_the_step_plot(tmp_path, capsys):
     assert png.exists() and png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
     steps = doc['settling_time_5pct_s']
     assert math.isfinite(steps['jaw (PID only)']) and steps['jaw (PID only)'] < 0.1
+
+
+def test_margins_agree_with_python_control():
+    """tune.margins (grid + brentq) == control.margin on a dense FRD, every loop and variant."""
+    import warnings
+
+    import control
+    params = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
+    period = 1.0 / params.control_rate
+    for loop in ('force_sensor', 'force_estimate', 'jaw'):
+        for variant in ('nominal', 'stiffness x0.8', 'friction x1.2'):
+            lt = tune.loop_transfer(params, loop, variant)
+            gm_db, pm, _, _ = tune.margins(lt, period)
+            with warnings.catch_warnings():
+                warnings.simplefilter('ignore', UserWarning)
+                gm, pm_ref, _, _ = control.margin(control.frd(lt, tune._freq_grid(period, 400)))
+            assert gm_db == pytest.approx(20 * math.log10(gm), abs=0.05), (loop, variant)
+            assert pm == pytest.approx(pm_ref, abs=0.2), (loop, variant)
