@@ -135,7 +135,7 @@ def _rel(coef, gain):
 
 
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect('pivot_coulomb_friction', (0.002, 0.005, 0.01, 0.02, 0.04), 'friction_torque_grid', 'N*m',
+    Effect('pivot_coulomb_friction', (0.002, 0.005, 0.01, 0.02), 'friction_torque_grid', 'N*m',
            _coulomb,
            ('force_step',), ('angle_step',),
            (('force_step', 'unit of y', lambda c, g: c), ('angle_step', 'rad', lambda c, g: c))),

@@ -154,9 +154,15 @@ def _full_fit(data: _Data, Xf, Xa, rng):
             float(np.mean((data.y[tr] - Xf[tr] @ cf) ** 2)))
 
 
-def _score(fit, base) -> float:
-    return (math.log(max(fit['test_mse_f'], 1e-300) / max(base['test_mse_f'], 1e-300))
-            + math.log(max(fit['test_mse_a'], 1e-300) / max(base['test_mse_a'], 1e-300)))
+#: Resolution floors (mean square) below which a channel's error counts as zero: 0.1 mrad of
+#: jaw angle; for the measured column, FORCE_FLOOR times its RMS.
+ANGLE_FLOOR_MS = 1e-8
+FORCE_FLOOR = 1e-3
+
+
+def _score(fit, base, force_floor_ms: float) -> float:
+    return (math.log((fit['test_mse_f'] + force_floor_ms) / (base['test_mse_f'] + force_floor_ms))
+            + math.log((fit['test_mse_a'] + ANGLE_FLOOR_MS) / (base['test_mse_a'] + ANGLE_FLOOR_MS)))
 
 
 def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
@@ -290,6 +296,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     }
 
     # 3. which effect
+    force_floor_ms = (FORCE_FLOOR * _rms(data.y[data.test])) ** 2
     ranking = []
     fits = {}
     for name in EFFECT_NAMES:
@@ -300,7 +307,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         Xf, Xa = data.designs(effect, value)
         cf, ca, sf, sa, train_mse = _full_fit(data, Xf, Xa, rng)
         fits[name] = fit
-        score = _score(fit, base) + param_penalty * effect.n_params
+        score = _score(fit, base, force_floor_ms) + param_penalty * effect.n_params
         params_out = {}
         g = float(cf[0])
         for (pname, punit, transform), coef, std in zip(

@@ -1,0 +1,213 @@
+"""Diagnosis engine: the direction-aware nominal, the effect fits, the JSON contract, the CLI."""
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from grip_force_ros.diagnosis import (EFFECT_NAMES, DiagnosisError, build_frame, capstan_tension,
+                                      diagnose, load_decimated, run_diagnosis, write_report)
+from grip_force_ros.diagnosis.frame import decimate, play
+from grip_force_ros.logs import read_log, write_csv
+from grip_force_ros.model import GripForceModel
+from grip_force_ros.params import make_params
+
+
+# --- pieces -----------------------------------------------------------------------------------
+
+def test_capstan_tension_loading_unloading_and_stick():
+    lam = 0.6
+    f0 = np.r_[np.linspace(0, 100, 50), np.linspace(100, 20, 80), np.linspace(20, 60, 40)]
+    tn, _ = capstan_tension(f0, lam)
+    np.testing.assert_allclose(tn[:50], lam * f0[:50])                  # loading: Tn = lambda T0
+    k = 50 + np.argmax(f0[50:130] < lam * 100 * lam)                      # stuck until T0 = lambda Tn
+    assert np.allclose(tn[50:k], lam * 100)                              # stuck: Tn held
+    np.testing.assert_allclose(tn[k + 1:130], f0[k + 1:130] / lam)      # unloading: Tn = T0 / lambda
+    assert tn[130] == pytest.approx(tn[129])                            # reversal: stuck again
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(0.0, 200.0), min_size=2, max_size=60), st.floats(0.3, 0.95))
+def test_capstan_tension_stays_in_the_friction_band(f0, lam):
+    f0 = np.array(f0)
+    tn, _ = capstan_tension(f0, lam, np.sin(np.arange(f0.size)) * 30.0)
+    assert np.all(tn >= lam * f0 - 1e-9) and np.all(tn <= f0 / lam + 1e-9)
+
+
+def test_capstan_flags_the_unknown_stuck_tension_after_contact():
+    f0 = np.r_[np.zeros(5), np.full(20, 50.0), np.linspace(50, 200, 20)]
+    _, uncertain = capstan_tension(f0, 0.7)
+    assert uncertain[5:25].all()          # held: could be anywhere in the band
+    assert not uncertain[-5:].any()       # rising slipped both extremes onto the loading branch
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(-5, 5), min_size=2, max_size=80), st.floats(0.01, 2.0))
+def test_play_is_a_direction_with_memory(x, width):
+    d = play(np.array(x), width)
+    assert np.all(np.abs(d) <= 1 + 1e-9)
+    up = play(np.r_[0.0, np.linspace(0, 3 * width, 30)], width)
+    assert up[-1] == pytest.approx(1.0)
+
+
+def test_load_decimated_streams_the_same_as_whole(tmp_path):
+    rng = np.random.default_rng(1)
+    n = 5003
+    log = {'t': np.arange(n) * 1e-3, 'current': rng.normal(size=n), 'motor_angle': rng.normal(size=n),
+           'wrist_angle': np.zeros(n), 'jaw_angle': np.zeros(n), 'grip_force': rng.normal(size=n)}
+    path = write_csv(tmp_path / 'a.csv', log)
+    streamed = load_decimated(path, 200.0, chunk_rows=777)
+    whole = decimate(read_log(path), 5)
+    for k in log:
+        np.testing.assert_allclose(streamed[k], whole[k], rtol=1e-9, atol=1e-12)
+
+
+# --- synthetic logs: the model's own nominal plus one known augmentation -----------------------
+
+PARAMS = make_params()
+MODEL = GripForceModel(PARAMS)
+
+
+def _inputs(seed=0, seconds=60.0, dt=5e-3):
+    """Varied inputs at the analysis rate: ramps, holds and steps of current; a slow wrist."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds / dt)) * dt
+    knots = np.arange(0, seconds + 2, 1.5)
+    levels = rng.uniform(0.05, 0.45, knots.size)
+    current = np.interp(t, knots, levels)
+    current[(t % 10.0) > 8.5] = -0.05          # the jaw opens now and then: nothing to grip
+    wrist = 0.3 * np.sin(2 * np.pi * t / 17.0)
+    jaw = np.full(t.size, PARAMS.needle_contact_angle if 'needle_contact_angle' in PARAMS else 0.04)
+    motor = MODEL.motor_angle(jaw, wrist, current)
+    return {'t': t, 'current': current, 'motor_angle': motor, 'wrist_angle': wrist, 'jaw_angle': jaw,
+            'object': np.full(t.size, 'needle')}
+
+
+def _with(log, y, column='grip_force'):
+    out = dict(log)
+    out[column] = y
+    return out
+
+
+def _nominal(log, measured='grip_force'):
+    return build_frame(_with(log, np.zeros(log['t'].size), measured), MODEL)['nominal']
+
+
+def test_offset_is_named_with_its_value_and_the_gap_shrinks():
+    log = _inputs(1)
+    rng = np.random.default_rng(2)
+    y = 0.97 * _nominal(log) + 0.4 + rng.normal(0, 0.02, log['t'].size)
+    result = diagnose([_with(log, y)], params=PARAMS)
+    v = result['verdict']
+    assert v['effect'] == 'force_sensor_offset'
+    entry = next(r for r in result['ranking'] if r['effect'] == 'force_sensor_offset')
+    offset = entry['params']['offset']
+    assert offset['value'] == pytest.approx(0.4, abs=0.03)
+    assert offset['std'] < 0.05
+    assert entry['gain'] == pytest.approx(0.97, abs=0.01)     # the gain refitted beside the offset
+    assert v['gap_after'] < 0.2 * v['gap_before']
+
+
+def test_delay_is_named_and_located_in_time():
+    log = _inputs(3)
+    nominal = _nominal(log)
+    y = np.interp(log['t'] - 0.05, log['t'], nominal) + np.random.default_rng(4).normal(0, 0.02, nominal.size)
+    result = diagnose([_with(log, y)], params=PARAMS)
+    assert result['verdict']['effect'] == 'sensor_delay'
+    delay = next(r for r in result['ranking'] if r['effect'] == 'sensor_delay')['params']['delay']['value']
+    assert delay == pytest.approx(0.05, abs=0.016)
+
+
+def test_tension_dependent_efficiency_is_named():
+    log = _inputs(5)
+    y = _nominal(log) * (1.0 - 0.5 * log['current']) + np.random.default_rng(6).normal(0, 0.02, log['t'].size)
+    result = diagnose([_with(log, y)], params=PARAMS)
+    assert result['verdict']['effect'] == 'tension_dependent_friction'
+    loss = next(r for r in result['ranking'] if r['effect'] == 'tension_dependent_friction')
+    assert loss['params']['efficiency_loss_per_amp']['value'] == pytest.approx(0.5, rel=0.15)
+
+
+def test_a_calibrated_gain_and_noise_alone_is_none():
+    log = _inputs(7)
+    y = 1.15 * _nominal(log) + np.random.default_rng(8).normal(0, 0.05, log['t'].size)
+    result = diagnose([_with(log, y)], params=PARAMS)
+    assert result['verdict']['effect'] == 'none'
+    assert result['verdict']['gap_after'] == result['verdict']['gap_before']
+    assert result['calibration']['force_gain']['value'] == pytest.approx(1.15, abs=0.02)
+
+
+def test_jaw_torque_logs_are_compared_in_newton_metres():
+    log = _inputs(9)
+    y = _nominal(log, 'jaw_torque') - 0.004 + np.random.default_rng(10).normal(0, 2e-4, log['t'].size)
+    result = diagnose([_with(log, y, 'jaw_torque')], params=PARAMS)
+    assert result['unit'] == 'N*m' and result['verdict']['unit'] == 'N*m'
+    assert result['verdict']['effect'] == 'force_sensor_offset'
+    assert result['verdict']['gap_before'] > 0.001
+    assert result['verdict']['gap_after'] < 0.3 * result['verdict']['gap_before']
+
+
+def test_json_contract_and_split_by_files():
+    a, b = _inputs(11), _inputs(12)
+    rng = np.random.default_rng(13)
+    logs = [_with(x, _nominal(x) + 0.3 + rng.normal(0, 0.02, x['t'].size)) for x in (a, b)]
+    result = diagnose([logs[0]], [logs[1]], params=PARAMS)
+    json.dumps(result)                                    # plain JSON
+    assert {'effect', 'gap_before', 'gap_after'} <= set(result['verdict'])
+    assert result['split']['method'] == 'files'
+    names = [r['effect'] for r in result['ranking']]
+    assert sorted(names) == sorted(list(EFFECT_NAMES) + ['none'])
+    assert all('holdout_rmse' in r for r in result['ranking'])
+    assert result['regions'] and all(0.0 <= r['share_of_gap'] <= 1.0 for r in result['regions'])
+    # every region dimension partitions the held-out samples: shares add up to one
+    by_dim = {}
+    for r in result['regions']:
+        by_dim.setdefault(r['dimension'], []).append(r['share_of_gap'])
+    for dim, shares in by_dim.items():
+        if dim != 'direction of motion':
+            assert sum(shares) == pytest.approx(1.0, abs=1e-9), dim
+
+
+def test_time_block_split_is_described():
+    log = _inputs(14)
+    result = diagnose([_with(log, _nominal(log))], params=PARAMS)
+    assert result['split']['method'] == 'time_blocks'
+    assert 'held' in result['split']['description']
+
+
+def test_errors_are_domain_errors():
+    log = _inputs(15, seconds=2.0)
+    with pytest.raises(DiagnosisError):
+        diagnose([], params=PARAMS)
+    free = _with({**log, 'object': np.full(log['t'].size, 'free')}, np.zeros(log['t'].size))
+    with pytest.raises(DiagnosisError, match='no load'):
+        diagnose([free], params=PARAMS)
+
+
+def test_report_writes_markdown_and_figures(tmp_path):
+    log = _inputs(16, seconds=30.0)
+    y = _nominal(log) + 0.3 + np.random.default_rng(17).normal(0, 0.02, log['t'].size)
+    d = run_diagnosis([_with(log, y)], params=PARAMS)
+    path = write_report(d, tmp_path / 'rep')
+    text = path.read_text()
+    assert 'force_sensor_offset' in text
+    for png in ('regions.png', 'residuals.png', 'timeseries.png', 'ranking.png'):
+        assert (tmp_path / 'rep' / png).stat().st_size > 10_000
+        assert png in text
+
+
+def test_cli_diagnose_json_and_report(tmp_path, capsys):
+    from grip_force_ros.cli import main
+    from grip_force_ros.params import load_params_file
+    log = _inputs(18, seconds=30.0)
+    model = GripForceModel(load_params_file('config/paper_needle_driver.yaml'))
+    nominal = build_frame(_with(log, np.zeros(log['t'].size)), model)['nominal']
+    y = nominal - 0.25 + np.random.default_rng(19).normal(0, 0.02, log['t'].size)
+    path = write_csv(tmp_path / 'run.csv', _with(log, y))
+    code = main(['diagnose', str(path), '--config', 'config/paper_needle_driver.yaml', '--json',
+                 '--report', str(tmp_path / 'rep'), '--quiet'])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result['verdict']['effect'] == 'force_sensor_offset'
+    assert (tmp_path / 'rep' / 'report.md').exists()
+    assert main(['diagnose', str(tmp_path / 'missing.csv'), '--config',
+                 'config/paper_needle_driver.yaml', '--quiet']) == 1
