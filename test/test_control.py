@@ -327,3 +327,13 @@ def test_unset_zero_stamps_are_not_duplicates(params):
     for k in range(3):
         assert inp.set_master(0.001 * k, 0.5, stamp=0.0) is None
         assert inp.master_time == 0.001 * k                    # every sample refreshes
+
+
+def test_rejection_counters_stay_bounded(params):
+    inp = ControlInputs.from_params(params)
+    for k in range(5000):                    # every reason text differs by its numbers
+        inp.set_instrument(k * 1e-3, 0.1, 2.0 + k * 1e-3)
+        inp.set_master(k * 1e-3, 0.5, stamp=-k * 1.0)
+    assert sum(inp.rejected.values()) == 5000 + 4999
+    assert len(inp.rejected) <= 3
+    assert inp.rejected['instrument: jaw angle # rad outside [#, #]'] == 5000

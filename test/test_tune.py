@@ -51,7 +51,8 @@ def test_plant_static_gain_matches_the_model():
     params = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
     d = tune.plant_data(params)
     m = GripForceModel(params)
-    slope = (m.grip_force_scalar(0.3, 0.0, 0.05, 'needle') - m.grip_force_scalar(0.2, 0.0, 0.05, 'needle')) / 0.1
+    slope = (m.grip_force_scalar(0.3, 0.0, 0.05, 'needle')
+             - m.grip_force_scalar(0.2, 0.0, 0.05, 'needle')) / 0.1
     assert d.force_per_amp == pytest.approx(slope, rel=1e-6)
     # the DC gain of the linear force plant (load cell) is that slope too
     import control

@@ -8,6 +8,12 @@ controller's clock) so the watchdog is ROS-free.
 from __future__ import annotations
 
 import math
+import re
+
+#: numbers in a rejection reason, replaced by '#' in the counter key (bounded set of keys)
+_NUMBER = re.compile(r'[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|nan|inf', re.IGNORECASE)
+#: largest number of distinct counter keys kept; further kinds count as '<source>: other'
+MAX_REJECTION_KINDS = 64
 
 #: Input sources, in the order the controller checks them.
 SOURCES = ('master', 'instrument', 'actuator', 'force')
@@ -84,7 +90,8 @@ class ControlInputs:
             setattr(self, f'{source}_time', _NAN)    # never received
             setattr(self, f'{source}_stamp', _NAN)
             setattr(self, f'{source}_fault', None)
-        #: reason -> number of samples rejected for it (for /diagnostics)
+        #: reason with its numbers replaced by '#' -> number of samples rejected for it
+        #: (for /diagnostics; at most MAX_REJECTION_KINDS keys + one 'other' per source)
         self.rejected: dict[str, int] = {}
 
     @classmethod
@@ -110,7 +117,11 @@ class ControlInputs:
             raise ValueError(f'unknown input source {source!r}; one of {SOURCES}')
         text = f'{source}: {reason}'
         setattr(self, f'{source}_fault', text)
-        self.rejected[text] = self.rejected.get(text, 0) + 1
+        key = _NUMBER.sub('#', text)
+        counts = self.rejected
+        if key not in counts and len(counts) >= MAX_REJECTION_KINDS:
+            key = f'{source}: other'
+        counts[key] = counts.get(key, 0) + 1
         return text
 
     def _check_times(self, source: str, receive_time: float, stamp: float, last_stamp: float):
@@ -167,7 +178,8 @@ class ControlInputs:
                        jaw_velocity: float = 0.0, stamp: float = _NAN):
         """Wrist pitch (rad), jaw angle (rad, 0 = closed), jaw velocity (rad/s)."""
         try:
-            receive_time, wrist_angle, jaw_angle, jaw_velocity, stamp = float(receive_time), float(wrist_angle), float(jaw_angle), float(jaw_velocity), float(stamp)
+            receive_time, stamp = float(receive_time), float(stamp)
+            wrist_angle, jaw_angle, jaw_velocity = float(wrist_angle), float(jaw_angle), float(jaw_velocity)
         except (TypeError, ValueError):
             return self.reject('instrument', receive_time, 'a value is not a number')
         why = self._check_times('instrument', receive_time, stamp, self.instrument_stamp)
@@ -200,7 +212,9 @@ class ControlInputs:
                      motor_velocity: float = 0.0, stamp: float = _NAN):
         """Measured motor current (A), drum angle (rad), drum velocity (rad/s)."""
         try:
-            receive_time, measured_current, motor_angle, motor_velocity, stamp = float(receive_time), float(measured_current), float(motor_angle), float(motor_velocity), float(stamp)
+            receive_time, stamp = float(receive_time), float(stamp)
+            measured_current = float(measured_current)
+            motor_angle, motor_velocity = float(motor_angle), float(motor_velocity)
         except (TypeError, ValueError):
             return self.reject('actuator', receive_time, 'a value is not a number')
         why = self._check_times('actuator', receive_time, stamp, self.actuator_stamp)
