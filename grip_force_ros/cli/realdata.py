@@ -17,7 +17,8 @@ def add_arguments(parser) -> None:
                         help='write report.md and PNG figures here')
     parser.add_argument('--json', action='store_true', help='print the result as JSON')
     parser.add_argument('--quick', action='store_true',
-                        help='fewer splits: estimators on holdout + leave-one-level-out, effects on holdout only')
+                        help='fewer splits: estimators on holdout + leave-one-level-out, '
+                             'effects on holdout only')
 
 
 def _summary(result) -> str:

@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
 from grip_force_ros.rig import constants as C
-from grip_force_ros.rig.estimator import (ALLOWED_INPUTS, CableFrictionObserver, LinearCurrentEstimator,
-                                          ObserverSettings, _signals, motor_side_inputs)
+from grip_force_ros.rig.estimator import (ALLOWED_INPUTS, CableFrictionObserver,
+                                          LinearCurrentEstimator, ObserverSettings, _signals,
+                                          motor_side_inputs)
 
 #: Seconds at the start of each run reported separately (the observer has seen no sliding yet).
 STARTUP_S = 1.0

@@ -71,7 +71,8 @@ def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
         ax.plot(tau * 1e3, alpha * tau + beta, color=colours[sign], lw=2.5,
                 label=f'{label}: I = {alpha:.2f} A/(N m) * tau {beta:+.3f} A')
     phys = result['estimators'][1]['parameters']['physical']
-    ax.set_title('Friction branches (sliding samples, all runs); lines: fit on the 10/30 % runs at mid-stroke, v = 0\n'
+    ax.set_title('Friction branches (sliding samples, all runs); lines: fit on the 10/30 % runs, '
+                 'mid-stroke, v = 0\n'
                  f"efficiency {phys['efficiency']['value']:.2f} +- {phys['efficiency']['std']:.2f}, "
                  f"gain {phys['gain_Nm_per_A']['value']:.2f} +- {phys['gain_Nm_per_A']['std']:.2f} "
                  f"N m/A, Coulomb {phys['coulomb_Nm']['value'] * 1e3:.0f} mN m at the jaw",
