@@ -48,7 +48,7 @@ MASTER_SPECS = [
     ParamSpec('trajectory_file', 'string', '', '',
               'CSV (t, master_angle) or rosbag2 directory/file to replay for trajectory=csv/rosbag.',
               group='master'),
-    ParamSpec('publish_rate', 'double', 250.0, 'Hz',
+    ParamSpec('master_rate', 'double', 250.0, 'Hz',
               'Rate of master/gripper/measured_js.', min=1.0, max=2000.0, group='master'),
     ParamSpec('master_open_angle', 'double', 0.8, 'rad',
               'Gripper opening of the scripted trajectories when open.', min=0.0, max=1.6,

@@ -108,15 +108,19 @@ def stamp_seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def make_executor():
-    """EventsExecutor (rclpy.experimental) unless GRIP_FORCE_EXECUTOR=single."""
-    if os.environ.get(EXECUTOR_ENV, 'events') == 'single':
-        return SingleThreadedExecutor()
+def make_executor(context=None, kind: str | None = None):
+    """An executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
+
+    ``kind`` defaults to the GRIP_FORCE_EXECUTOR environment variable, else 'events'.
+    """
+    kind = kind or os.environ.get(EXECUTOR_ENV, 'events')
+    if kind == 'single':
+        return SingleThreadedExecutor(context=context)
     try:
         from rclpy.experimental import EventsExecutor
     except ImportError:  # pragma: no cover - older rclpy
-        return SingleThreadedExecutor()
-    return EventsExecutor()
+        return SingleThreadedExecutor(context=context)
+    return EventsExecutor(context=context)
 
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,

@@ -1,7 +1,7 @@
 """Master source node: publishes the master gripper opening (``master``).
 
 Publishes ``master/gripper/measured_js`` (JointState, joint ``gripper``:
-position = opening (rad), velocity (rad/s)) at ``publish_rate`` from a scripted
+position = opening (rad), velocity (rad/s)) at ``master_rate`` from a scripted
 trajectory or a replay (:mod:`grip_force_ros.trajectories`). After a
 non-repeating trajectory ends it keeps publishing the last angle (a silent
 master would trip the controller's watchdog), or exits when
@@ -36,10 +36,10 @@ class MasterNode(Node):
         self._pub = self.create_publisher(JointState, topics.MASTER_JS, STATE_PUB_QOS)
         self._start = time.monotonic()
         self._last_phase = None
-        self._timer = self.create_timer(1.0 / self._param.value('publish_rate'), self._tick)
+        self._timer = self.create_timer(1.0 / self._param.value('master_rate'), self._tick)
         self.get_logger().info(
             f"publishing {self._param.value('trajectory')} ({self.trajectory.duration:.2f} s) "
-            f"at {self._param.value('publish_rate'):.0f} Hz on {topics.MASTER_JS}")
+            f"at {self._param.value('master_rate'):.0f} Hz on {topics.MASTER_JS}")
 
     def _values(self, values=None) -> dict:
         if values is None:
@@ -63,10 +63,10 @@ class MasterNode(Node):
             self.trajectory = self._build(self._values())
             self._start = time.monotonic()
             self._last_phase = None
-        if 'publish_rate' in changed:
+        if 'master_rate' in changed:
             self._timer.cancel()
             self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / self._param.value('publish_rate'), self._tick)
+            self._timer = self.create_timer(1.0 / self._param.value('master_rate'), self._tick)
 
     def elapsed(self) -> float:
         """Time since the trajectory started (s), wrapped when repeating."""

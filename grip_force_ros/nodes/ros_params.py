@@ -11,7 +11,7 @@ What rclpy does not check is checked here, in the schema's own words:
 * at start-up, every value of the parameter file (``--params-file``) is
   validated against the whole schema before anything is declared: unknown keys
   (typos), wrong types, out-of-range values, elements of double arrays, string
-  choices, and the cross-parameter rules of :func:`check_consistency`. A bad
+  choices, and the schema's cross-parameter rules (``params.check_consistency``). A bad
   file raises :class:`~grip_force_ros.params.ParameterError` naming the key,
   the value and the range; the node's ``main`` turns that into a non-zero exit.
 * at runtime, ``add_on_set_parameters_callback`` validates the candidate set
@@ -83,31 +83,6 @@ def plain(value: Any) -> Any:
     if isinstance(value, (array.array, list, tuple)):
         return tuple(value)
     return value
-
-
-def check_consistency(values: Mapping[str, Any]) -> None:
-    """Cross-parameter rules that a single range cannot express.
-
-    Raises
-    ------
-    ParameterError
-        Naming both parameters and their values.
-    """
-    lo, hi = values.get('jaw_angle_min'), values.get('jaw_angle_max')
-    if lo is not None and hi is not None and not lo < hi:
-        raise ParameterError(
-            f"parameters 'jaw_angle_min' ({lo} rad) and 'jaw_angle_max' ({hi} rad): "
-            'jaw_angle_min must be below jaw_angle_max')
-    radii, wraps = values.get('guide_pulley_radii'), values.get('guide_pulley_wrap_angles')
-    if radii is not None and wraps is not None and len(radii) != len(wraps):
-        raise ParameterError(
-            f"parameters 'guide_pulley_radii' ({len(radii)} pulleys) and "
-            f"'guide_pulley_wrap_angles' ({len(wraps)} angles) must have the same length")
-    # The schema may grow its own cross-checks; use them when it has them.
-    from grip_force_ros import params as _params
-    extra = getattr(_params, 'check_consistency', None)
-    if callable(extra):
-        extra(values)
 
 
 class NodeParameters:
@@ -206,8 +181,9 @@ class NodeParameters:
                 if p.type_ == Parameter.Type.NOT_SET:
                     raise ParameterError(f"parameter '{p.name}' cannot be undeclared")
                 candidate[p.name] = spec.check(plain(p.value))
-            self._make_param_set(candidate)
-            self._full_check(candidate)
+            full = dict(self._make_param_set(candidate))
+            full.update((n, candidate[n]) for n in self._extra_names)
+            self._full_check(full)
         except ParameterError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -231,7 +207,7 @@ class NodeParameters:
         return make_params({n: v for n, v in values.items() if n in SPECS})
 
     def _full_check(self, values: Mapping[str, Any]) -> None:
-        check_consistency(values)
+        # make_params has run the schema's own cross-checks (check_consistency).
         if self._check is not None:
             self._check(values)
 

@@ -1,0 +1,236 @@
+"""Grip-force controller node (``controller``): a thin shell around ``GripController``.
+
+Subscribes (KEEP_LAST 1; only the newest sample matters):
+    master/gripper/measured_js        gripper: position (rad)
+    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s, optional)
+    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s), effort = current (A)
+    grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
+Publishes, every control period (``control_rate``, 1 kHz):
+    instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
+    grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
+    grip/target_force                 force.z = target grip force (N)
+and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
+
+A malformed message (unknown or missing joint names, wrong array lengths, NaN)
+is rejected with its reason; the last good input is kept. All the control
+logic, the plausibility checks and the watchdog live in
+:mod:`grip_force_ros.control`.
+"""
+from __future__ import annotations
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+
+from grip_force_ros import topics
+from grip_force_ros.control import ControlInputs, GripController
+from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
+                                         InputRejected, read_joints, run_node, stamp_seconds)
+from grip_force_ros.nodes.ros_params import NodeParameters
+
+GROUPS = ('instrument', 'limits', 'controller')
+#: Periodic /diagnostics rate (Hz); changes are published sooner, at most this often:
+DIAGNOSTICS_RATE = 10.0
+DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
+
+_MASTER_JOINTS = (topics.MASTER_JOINT,)
+_INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
+_ACTUATOR_JOINTS = (topics.DRUM_JOINT,)
+#: The plausibility ranges of ControlInputs (copied on a runtime parameter change).
+_INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance',
+                 'jaw_angle_min', 'jaw_angle_max', 'wrist_angle_limit', 'current_limit',
+                 'force_limit', 'stamp_future_tolerance')
+
+
+class ControllerNode(Node):
+    """Runs :class:`GripController` at ``control_rate`` on the latest inputs."""
+
+    def __init__(self, **kwargs):
+        super().__init__('controller', **kwargs)
+        self.finished = Future()
+        self._param = NodeParameters(self, GROUPS, on_update=self._on_params)
+        params = self._param.params
+        self.controller = GripController(params)
+        self.inputs: ControlInputs = self.controller.new_inputs()
+        self.last_output = None
+        self._now_ns = self.get_clock().now
+        self._sub_qos = STATE_SUB_QOS
+
+        self.create_subscription(JointState, topics.MASTER_JS, self._on_master, STATE_SUB_QOS)
+        self.create_subscription(JointState, topics.INSTRUMENT_JS, self._on_instrument,
+                                 STATE_SUB_QOS)
+        self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_actuator,
+                                 STATE_SUB_QOS)
+        self._force_sub = None
+        self._update_force_subscription(params.force_sensor_enabled)
+
+        self._servo_pub = self.create_publisher(JointState, topics.SERVO_CURRENT, STATE_PUB_QOS)
+        self._estimate_pub = self.create_publisher(WrenchStamped, topics.ESTIMATED_FORCE,
+                                                   STATE_PUB_QOS)
+        self._target_pub = self.create_publisher(WrenchStamped, topics.TARGET_FORCE,
+                                                 STATE_PUB_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
+                                               DIAGNOSTICS_QOS)
+        # Messages reused every period (1 kHz): fill, do not rebuild.
+        self._servo_msg = JointState(name=[topics.DRUM_JOINT], effort=[0.0])
+        self._estimate_msg = WrenchStamped()
+        self._estimate_msg.header.frame_id = topics.JAW_FRAME
+        self._target_msg = WrenchStamped()
+        self._target_msg.header.frame_id = topics.JAW_FRAME
+
+        self._diag_key = None          # (mode, limits_hit, reasons, rejected count) last published
+        self._diag_time = -math.inf    # s, when /diagnostics was last published
+        self._limits_seen: set = set()  # limits hit since the last /diagnostics
+        self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
+        self.get_logger().info(
+            f'{params.instrument_name}: control at {params.control_rate:.0f} Hz, '
+            f"feedback {'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
+            f'object {params.object_kind}')
+
+    # ------------------------------------------------------------------ time
+    def _now(self) -> float:
+        """Controller clock (s), the clock of receive times and of the watchdog."""
+        return self._now_ns().nanoseconds * 1e-9
+
+    # ------------------------------------------------------------------ inputs
+    def _reject(self, source: str, now: float, exc: InputRejected) -> None:
+        reason = self.inputs.reject(source, now, f'malformed message: {exc}')
+        self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
+
+    def _report(self, reason) -> None:
+        if reason is not None:
+            self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
+
+    def _on_master(self, msg: JointState) -> None:
+        now = self._now()
+        try:
+            (angle,), = read_joints(msg, _MASTER_JOINTS, ('position',)).values()
+        except InputRejected as exc:
+            return self._reject('master', now, exc)
+        self._report(self.inputs.set_master(now, angle, stamp_seconds(msg.header.stamp)))
+
+    def _on_instrument(self, msg: JointState) -> None:
+        now = self._now()
+        fields = ('position', 'velocity') if len(msg.velocity) else ('position',)
+        try:
+            joints = read_joints(msg, _INSTRUMENT_JOINTS, fields)
+        except InputRejected as exc:
+            return self._reject('instrument', now, exc)
+        wrist, jaw = joints[topics.WRIST_JOINT], joints[topics.JAW_JOINT]
+        jaw_velocity = jaw[1] if len(jaw) > 1 else 0.0
+        self._report(self.inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity,
+                                                stamp_seconds(msg.header.stamp)))
+
+    def _on_actuator(self, msg: JointState) -> None:
+        now = self._now()
+        fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
+        try:
+            (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
+        except InputRejected as exc:
+            return self._reject('actuator', now, exc)
+        velocity = drum[2] if len(drum) > 2 else 0.0
+        self._report(self.inputs.set_actuator(now, drum[0], drum[1], velocity,
+                                              stamp_seconds(msg.header.stamp)))
+
+    def _on_force(self, msg: WrenchStamped) -> None:
+        self._report(self.inputs.set_force(self._now(), msg.wrench.force.z,
+                                           stamp_seconds(msg.header.stamp)))
+
+    def _update_force_subscription(self, enabled: bool) -> None:
+        if enabled and self._force_sub is None:
+            self._force_sub = self.create_subscription(WrenchStamped, topics.MEASURED_FORCE,
+                                                       self._on_force, STATE_SUB_QOS)
+        elif not enabled and self._force_sub is not None:
+            self.destroy_subscription(self._force_sub)
+            self._force_sub = None
+
+    # ------------------------------------------------------------------ parameters
+    def _on_params(self, params, changed) -> None:
+        """Accepted runtime change: retune bumplessly, keep the latest inputs."""
+        self.controller.update_params(params)
+        fresh = self.controller.new_inputs()
+        for name in _INPUT_RANGES:
+            setattr(self.inputs, name, getattr(fresh, name))
+        self._update_force_subscription(params.force_sensor_enabled)
+        self.get_logger().info(f'parameters changed: {sorted(changed)}')
+
+    # ------------------------------------------------------------------ loop
+    def _tick(self) -> None:
+        stamp = self._now_ns()
+        now = stamp.nanoseconds * 1e-9
+        out = self.controller.step(now, self.inputs)
+        self.last_output = out
+        stamp_msg = stamp.to_msg()
+
+        servo = self._servo_msg
+        servo.header.stamp = stamp_msg
+        servo.effort[0] = out.current_command
+        self._servo_pub.publish(servo)
+
+        est = self._estimate_msg
+        est.header.stamp = stamp_msg
+        est.wrench.force.z = out.estimated_force
+        est.wrench.force.x = out.pull_out_force
+        self._estimate_pub.publish(est)
+
+        target = self._target_msg
+        target.header.stamp = stamp_msg
+        target.wrench.force.z = out.target_force
+        self._target_pub.publish(target)
+
+        if out.limits_hit:
+            self._limits_seen.update(out.limits_hit)
+        key = (out.mode, out.limits_hit, out.reasons, len(self.inputs.rejected))
+        since = now - self._diag_time
+        if since >= 1.0 / DIAGNOSTICS_RATE or (key != self._diag_key
+                                               and since >= DIAGNOSTICS_MIN_INTERVAL):
+            self._publish_diagnostics(stamp_msg, out)
+            self._diag_key, self._diag_time = key, now
+
+    def diagnostic_status(self, out) -> DiagnosticStatus:
+        """The controller's DiagnosticStatus for the last output ``out``."""
+        params = self._param.params
+        if out is None or out.mode == 'safe':
+            level = DiagnosticStatus.ERROR
+        elif out.limits_hit or out.reasons or self._limits_seen:
+            level = DiagnosticStatus.WARN
+        else:
+            level = DiagnosticStatus.OK
+        mode = out.mode if out is not None else 'starting'
+        reasons = '; '.join(out.reasons) if out is not None and out.reasons else 'ok'
+        values = dict(self.controller.status(self.inputs))
+        values['limits_hit'] = ', '.join(sorted(self._limits_seen)) or 'none'
+        values['watchdog'] = ('tripped' if out is not None and out.mode == 'safe'
+                              and any('stale' in r or 'input yet' in r for r in out.reasons) else 'ok')
+        values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
+        faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
+                                                               'force')]
+        values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
+        if out is not None:
+            values['target_force_N'] = f'{out.target_force:.3f}'
+            values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'
+        return DiagnosticStatus(
+            level=level, name='grip_force_ros: controller', message=f'{mode}: {reasons}',
+            hardware_id=params.instrument_name,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+    def _publish_diagnostics(self, stamp_msg, out) -> None:
+        array = DiagnosticArray()
+        array.header.stamp = stamp_msg
+        array.status = [self.diagnostic_status(out)]
+        self._diag_pub.publish(array)
+        self._limits_seen = set()
+
+
+def main(args=None) -> int:
+    """Executable ``controller``."""
+    return run_node(ControllerNode, 'controller', args)
+
+
+if __name__ == '__main__':
+    import sys
+    sys.exit(main())

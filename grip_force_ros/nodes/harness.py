@@ -1,0 +1,185 @@
+"""Run the nodes for tests, benchmarks and fault checks: in-process or as processes.
+
+In-process (:class:`RosRunner`): nodes share one rclpy context and one
+executor spinning in a background thread, so a test can reach into a node
+(e.g. wrap ``controller.step`` to record every period). The spinning thread
+returns to Python every :data:`SPIN_SLICE` seconds: the EventsExecutor holds
+the GIL while it waits, and the test thread needs it too.
+
+As processes (:class:`NodeProcess`): ``python -m grip_force_ros.nodes.<name>
+--ros-args ...``, the same code as the installed executables; each process has
+its own interpreter, which is what a 1 kHz plant next to a 1 kHz controller
+needs on a small machine.
+
+Every process started here inherits ROS_DOMAIN_ID and
+ROS_AUTOMATIC_DISCOVERY_RANGE from the caller (the test's conftest sets them).
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Any, Callable, Mapping, Sequence
+
+import rclpy
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+
+from grip_force_ros.nodes.common import make_executor
+
+#: Longest time the spinning thread stays inside the executor before yielding (s).
+SPIN_SLICE = 0.01
+EXECUTABLES = ('controller', 'sim_instrument', 'master')
+
+
+def ros_arg_value(value: Any) -> str:
+    """A Python value as the YAML text of ``-p name:=value``."""
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (list, tuple)):
+        return '[' + ', '.join(ros_arg_value(v) for v in value) + ']'
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return "'" + value.replace("'", "''") + "'"
+    return str(value)
+
+
+def node_command(executable: str, params_file: str | None = None,
+                 params: Mapping[str, Any] | None = None,
+                 remaps: Mapping[str, str] | None = None,
+                 python: str = sys.executable) -> list[str]:
+    """Command line that runs one of the node executables with this Python."""
+    if executable not in EXECUTABLES:
+        raise ValueError(f'unknown node executable {executable!r}; one of {EXECUTABLES}')
+    cmd = [python, '-m', f'grip_force_ros.nodes.{executable}', '--ros-args']
+    if params_file:
+        cmd += ['--params-file', str(params_file)]
+    for name, value in (params or {}).items():
+        cmd += ['-p', f'{name}:={ros_arg_value(value)}']
+    for src, dst in (remaps or {}).items():
+        cmd += ['-r', f'{src}:={dst}']
+    return cmd
+
+
+class NodeProcess:
+    """One node executable in its own process (stdout/stderr captured to a file or PIPE)."""
+
+    def __init__(self, executable: str, params_file: str | None = None,
+                 params: Mapping[str, Any] | None = None, log_path: str | None = None,
+                 env: Mapping[str, str] | None = None, command: Sequence[str] | None = None):
+        self.executable = executable
+        self.command = list(command) if command else node_command(executable, params_file, params)
+        self._log = open(log_path, 'w') if log_path else subprocess.DEVNULL
+        self.proc = subprocess.Popen(self.command, stdout=self._log, stderr=subprocess.STDOUT,
+                                     env={**os.environ, **(env or {})})
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def pause(self) -> None:
+        """Freeze the process (SIGSTOP): it publishes nothing until :meth:`resume`."""
+        self.proc.send_signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        self.proc.send_signal(signal.SIGCONT)
+
+    def stop(self, timeout: float = 5.0) -> int:
+        """SIGINT, then SIGKILL if it does not exit in ``timeout`` s. Returns the exit code."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGCONT)
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self._log is not subprocess.DEVNULL:
+            self._log.close()
+        return self.proc.returncode
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+class RosRunner:
+    """Nodes in this process on their own rclpy context, spun in a background thread.
+
+    >>> with RosRunner() as ros:                        # doctest: +SKIP
+    ...     ctl = ros.add(ControllerNode, force_sensor_enabled=True)
+    ...     ros.start()
+    ...     ros.wait_for(lambda: ctl.last_output is not None, 2.0)
+    """
+
+    def __init__(self, executor_kind: str = 'events'):
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.executor = make_executor(self.context, executor_kind)
+        self.nodes: list[Node] = []
+        self._stop = Future()
+        self._thread: threading.Thread | None = None
+        self.spin_error: BaseException | None = None
+
+    def add(self, node_cls: Callable[..., Node], **overrides: Any) -> Node:
+        """Create a node with parameter overrides and add it to the executor."""
+        node = node_cls(context=self.context,
+                        parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def plain_node(self, name: str) -> Node:
+        """A bare node (for probes, publishers, parameter clients) on this context."""
+        node = Node(name, context=self.context)
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._spin, name='ros-spin', daemon=True)
+            self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            while not self._stop.done() and self.context.ok():
+                self.executor.spin_until_future_complete(self._stop, timeout_sec=SPIN_SLICE)
+        except BaseException as exc:  # reported by the test, not swallowed
+            self.spin_error = exc
+
+    @staticmethod
+    def wait_for(predicate: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:
+        """Poll ``predicate`` until true or ``timeout`` s passed; returns its last value."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if predicate():
+                return True
+            time.sleep(poll)
+        return bool(predicate())
+
+    def stop(self) -> None:
+        if not self._stop.done():
+            self._stop.set_result(True)
+        if self._thread is not None:
+            self._thread.join(5.0)
+        for node in self.nodes:
+            self.executor.remove_node(node)
+            node.destroy_node()
+        self.nodes = []
+        self.executor.shutdown()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
