@@ -15,7 +15,7 @@ from grip_force_ros.demo.compare import calibration_csv, plant_scales
 from grip_force_ros.demo.naive_node import closing_share
 from grip_force_ros.demo.processes import (ProcessGroup, domain_in_use, pick_domain_ids,
                                            ros_args, ros_environment)
-from grip_force_ros.demo.run import TaskClock, lead_in_csv
+from grip_force_ros.demo.run import TaskClock
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
 
@@ -76,14 +76,6 @@ def test_group_reports_a_dead_process_with_its_output(tmp_path):
 
 
 # ---------------------------------------------------------------- trajectories of the demo
-def test_lead_in_csv_replays_the_task_after_the_lead_in(tmp_path):
-    task = needle_grasp(time_scale=0.8)
-    replay = read_csv(lead_in_csv(task, 1.5, tmp_path / 'm.csv'))
-    t = np.linspace(0.0, task.duration, 400)
-    assert np.allclose(replay.angle(t + 1.5), task.angle(t), atol=2e-3)
-    assert np.allclose(replay.angle(np.linspace(0, 1.5, 20)), task.angle(0.0))
-
-
 def test_task_clock_resyncs_on_the_closing():
     task = needle_grasp()
     clock = TaskClock(task, started=100.0)

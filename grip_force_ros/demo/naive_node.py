@@ -15,6 +15,7 @@ from __future__ import annotations
 import sys
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -47,7 +48,24 @@ class NaiveNode(Node):
         self.sub = self.create_subscription(JointState, topics.MASTER_JS, self._on_master, 10)
         self.pub_current = self.create_publisher(JointState, topics.SERVO_CURRENT, 10)
         self.pub_target = self.create_publisher(WrenchStamped, topics.TARGET_FORCE, 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.timer = self.create_timer(1.0 / rate, self._tick)
+        self.diag_timer = self.create_timer(0.2, self._diagnostics)
+
+    def _diagnostics(self) -> None:
+        """mode 'safe' until the master arrives, then 'free' or 'grip' (as the controller)."""
+        share = 0.0 if self.master_angle is None else closing_share(
+            self.master_angle, self.values['master_contact_angle'], self.values['master_angle_min'])
+        mode = 'safe' if self.master_angle is None else ('grip' if share > 0 else 'free')
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [DiagnosticStatus(
+            level=DiagnosticStatus.OK if self.master_angle is not None else DiagnosticStatus.WARN,
+            name='controller (naive map)', hardware_id='naive',
+            message='no master yet' if self.master_angle is None else 'open loop',
+            values=[KeyValue(key='mode', value=mode),
+                    KeyValue(key='naive_current_closed', value=f'{self.current_closed:.4f}')])]
+        self.pub_diag.publish(msg)
 
     def _get(self, name, default):
         if self.has_parameter(name):

@@ -30,11 +30,15 @@ from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajector
 STARTUP_TIMEOUT = 30.0
 #: Seconds recorded after the master's trajectory ends.
 TAIL = 0.3
-#: Seconds the master holds its first angle before the task starts. The master starts its
-#: trajectory as soon as it runs, and on a loaded machine DDS discovery between a new
-#: process and the controller can take a second or more: without this lead-in the
-#: controller would miss the start of the task.
-LEAD_IN = 1.5
+#: The master starts held: a needle grasp this slow waits open for minutes. When the
+#: controller has the master (DDS discovery of a new process can take seconds on a loaded
+#: machine), the real trajectory parameters are set at runtime, which restarts the task.
+HOLD_MASTER = {'trajectory': 'needle_grasp', 'trajectory_file': '', 'time_scale': 100.0}
+#: Longest wait (s) for the controller to report that it has the master before the task
+#: is started anyway (a controller without /diagnostics).
+READY_TIMEOUT = 4.0
+#: Controller modes (/diagnostics) that mean all its inputs, the master's included, arrive.
+READY_MODES = ('free', 'grip')
 
 
 def default_duration() -> float:
@@ -73,7 +77,6 @@ class RunSpec:
     sim_overrides: dict = field(default_factory=dict)
     master_overrides: dict = field(default_factory=dict)
     label: str = 'demo'
-    lead_in: float = LEAD_IN
 
     def master_values(self) -> dict[str, Any]:
         """The master parameters: schema defaults, then the YAML, then overrides."""
@@ -111,6 +114,7 @@ class RunResult:
     windows: dict | None = None
     metrics: dict | None = None
     plot: Path | None = None
+    timing: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -124,30 +128,14 @@ class RunResult:
             'plot': str(self.plot) if self.plot else None,
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
-            'metrics': self.metrics,
+            'metrics': self.metrics, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
 
-def lead_in_csv(trajectory: Trajectory, lead_in: float, path: Path, rate: float = 1000.0) -> Path:
-    """Write ``trajectory`` preceded by ``lead_in`` s at its first angle, as a master CSV replay.
-
-    Sampled at ``rate`` (Hz); the master replays it with linear interpolation.
-    """
-    t = np.arange(0.0, trajectory.duration + 0.5 / rate, 1.0 / rate)
-    angle = trajectory.angle(t)
-    rows = [(0.0, float(angle[0]))] if lead_in > 0 else []
-    rows += [(lead_in + float(a), float(b)) for a, b in zip(t, angle)]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text('t,master_angle\n' + ''.join(f'{a:.4f},{b:.6f}\n' for a, b in rows))
-    return path
-
-
-def _node_argv(name: str, spec: RunSpec, master_csv: Path | None = None) -> list[str]:
+def _node_argv(name: str, spec: RunSpec) -> list[str]:
     if name == 'master':
         overrides = dict(spec.master_values())
-        overrides['exit_when_done'] = True
-        if master_csv is not None:
-            overrides.update(trajectory='csv', trajectory_file=str(master_csv.resolve()))
+        overrides.update(HOLD_MASTER, exit_when_done=True)
         return node_command('master') + ros_args(spec.config, overrides)
     if name == 'sim_instrument':
         return node_command('sim_instrument') + ros_args(spec.sim_config or spec.config,
@@ -166,6 +154,37 @@ def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float
         if time.monotonic() > deadline:
             raise ProcessError(f'timed out after {timeout:.0f} s waiting for {what}')
         time.sleep(0.05)
+
+
+def controller_ready(recorder) -> bool:
+    """True once the controller's /diagnostics report a mode in :data:`READY_MODES`."""
+    from grip_force_ros.demo.messages import diagnostic_summary
+    from grip_force_ros.demo.monitor import controller_mode
+    item = recorder.latest(topics.DIAGNOSTICS)
+    return item is not None and controller_mode(diagnostic_summary(item[1])) in READY_MODES
+
+
+def _wait_until_ready(recorder, group: ProcessGroup, timeout: float) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not controller_ready(recorder):
+        group.check_alive()
+        time.sleep(0.05)
+
+
+def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.0) -> None:
+    """Start the held master's task now: set its real trajectory parameters at once."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    values = spec.master_values()
+    client = AsyncParameterClient(node, 'master')
+    _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
+    future = client.set_parameters_atomically(
+        [Parameter(name, value=values[name]) for name in HOLD_MASTER])
+    _wait_for(future.done, group, timeout, 'the master to take its trajectory')
+    result = future.result().result
+    if not result.successful:
+        raise ProcessError(f'the master refused its trajectory parameters: {result.reason}')
 
 
 class TaskClock:
@@ -293,6 +312,8 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path = out_dir / 'bag'
     trajectory = spec.trajectory()
+    timing: dict[str, float] = {}
+    t_begin = time.monotonic()
     env = ros_environment(domain_id)
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
@@ -303,18 +324,20 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
         recorder.subscribe_all()
         spinner = SpinThread(recorder).start()
         with group:
+            # all three at once: the master starts held, so nothing happens before it is told
             group.start('sim_instrument', _node_argv('sim_instrument', spec))
             group.start('controller', _node_argv('controller', spec))
-            needed = [topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.SERVO_CURRENT]
+            master = group.start('master', _node_argv('master', spec))
+            needed = [topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.SERVO_CURRENT,
+                      topics.MASTER_JS]
             _wait_for(lambda: all(recorder.count(t) > 0 for t in needed),
-                      group, startup_timeout, 'the simulated instrument and the controller')
-            master_csv = None
-            if spec.lead_in > 0:
-                master_csv = lead_in_csv(trajectory, spec.lead_in, out_dir / 'master_task.csv')
-            master = group.start('master', _node_argv('master', spec, master_csv))
-            _wait_for(lambda: recorder.count(topics.MASTER_JS) > 0, group, startup_timeout,
-                      'the master')
-            clock = TaskClock(trajectory, time.monotonic() + max(spec.lead_in, 0.0))
+                      group, startup_timeout, 'the master, the simulated instrument and the '
+                      'controller')
+            timing['master_up'] = time.monotonic() - t_begin
+            _wait_until_ready(recorder, group, READY_TIMEOUT)
+            _start_master(recorder, spec, group)
+            timing['task_start'] = time.monotonic() - t_begin
+            clock = TaskClock(trajectory, time.monotonic())
             # the master exits (exit_when_done) shortly after its task: that ends the run
             deadline = clock.started + trajectory.duration + TAIL + startup_timeout
             while master.alive() and time.monotonic() < deadline:
@@ -325,7 +348,9 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
                     progress(live_status(recorder, trajectory, clock.elapsed()))
                 group.check_alive()
                 time.sleep(0.05)
+            timing['task_end'] = time.monotonic() - t_begin
             exit_codes = group.stop()
+            timing['stopped'] = time.monotonic() - t_begin
     finally:
         if spinner is not None:
             spinner.stop()
@@ -335,9 +360,11 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             recorder.close()
             recorder.destroy_node()
         rclpy.shutdown(context=context)
-    result = RunResult(spec, out_dir, bag_path, domain_id, counts, exit_codes, trajectory)
+    result = RunResult(spec, out_dir, bag_path, domain_id, counts, exit_codes, trajectory,
+                       timing=timing)
     if analyse:
         analyse_run(result, plot=plot)
+    timing['total'] = time.monotonic() - t_begin
     return result
 
 
