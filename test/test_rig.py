@@ -207,3 +207,22 @@ def test_realdata_command_quick_json(runs, capsys, tmp_path):
     shares = [r['share_of_gap'] for r in result['regions'] if r['family'] == 'motion']
     assert sum(shares) == pytest.approx(1.0, abs=1e-3)
     assert {row['effect'] for row in result['effects']['add_one']} >= {'backlash', 'sensor_delay'}
+
+
+@needs_data
+@pytest.mark.parametrize('changes', [{}, {'current_delay_s': 0.004, 'slow_hysteresis_width': 0.2,
+                                          'friction_map_order': 3, 'backlash_angle': 'motor_angle'},
+                                     {'hysteresis': False}])
+def test_streaming_observer_gives_the_batch_numbers(runs, changes):
+    from grip_force_ros.rig.streaming import StreamingJawTorqueObserver
+    train, test = holdout_split(runs)
+    est = CableFrictionObserver(**changes).fit(train[::3])
+    log = _slice(test[3], 6.0)
+    batch = est.predict(log)
+    live = StreamingJawTorqueObserver(est, dt=C.SAMPLE_PERIOD)
+    stream = np.array([live.step(i, x, xs) for i, x, xs in
+                       zip(log['current'], log['motor_angle'], log['motor_shaft_angle'])])
+    assert np.allclose(stream, batch, rtol=0, atol=1e-9)
+    live.reset()
+    assert live.step(log['current'][0], log['motor_angle'][0], log['motor_shaft_angle'][0]) == \
+        pytest.approx(stream[0], abs=1e-12)

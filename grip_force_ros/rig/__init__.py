@@ -6,6 +6,10 @@ while a second motor resists it at the jaw. No rclpy here.
 
 >>> from grip_force_ros.rig import read_runs, default_data_dir    # doctest: +SKIP
 >>> runs = read_runs(default_data_dir())                          # doctest: +SKIP
+
+Estimator: :mod:`grip_force_ros.rig.estimator` (batch, fit/predict),
+:mod:`grip_force_ros.rig.streaming` (the same observer one sample at a time),
+analysis and report: :mod:`grip_force_ros.rig.analysis`, :mod:`grip_force_ros.rig.report`.
 """
 from grip_force_ros.rig.reader import (EXTRA_COLUMNS, RigDataError, RigRun, default_data_dir,
                                        read_run, read_runs, run_files, to_contract_log)
