@@ -29,7 +29,10 @@ known only while the motor slides: at a reversal the motor sticks while its
 current swings from one friction branch to the other, and the jaw torque cannot
 be told from the current. The observer therefore inverts the forward model
 only while sliding (|s| high, |v| above the stick speed) and holds its last
-estimate otherwise, averaging with a first-order gain (noise of the current).
+estimate otherwise, averaging with a first-order gain (noise of the current)
+and weighting each sample by its information (alpha(s)/alpha_max)^2: the
+back-driven branch, where a current error maps to a larger torque error,
+counts less.
 """
 from __future__ import annotations
 
@@ -451,7 +454,15 @@ class CableFrictionObserver:
             return inverted
         tc = self.settings.observer_time_constant
         gain_per_sample = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
-        return hold_observer(inverted, sig.sliding, gain_per_sample, self._prior)
+        return hold_observer(inverted, sig.sliding * self._information(alpha), gain_per_sample,
+                             self._prior)
+
+    def _information(self, alpha):
+        """Weight (0..1) of an inverted sample: the inversion divides the current noise by
+        alpha(s), so its variance grows as 1/alpha^2; weight = (alpha/alpha_max)^2."""
+        coef = dict(zip(self.fit_result.names, self.fit_result.values))
+        alpha_max = abs(coef['alpha0']) + abs(coef.get('alpha1', 0.0)) + abs(coef.get('alpha2', 0.0))
+        return (alpha / alpha_max) ** 2
 
 
 class LinearCurrentEstimator:

@@ -62,6 +62,7 @@ class StreamingJawTorqueObserver:
         self.settings, self.dt = s, float(dt)
         coef = dict(zip(estimator.fit_result.names, (float(v) for v in estimator.fit_result.values)))
         self._alpha = (coef['alpha0'], coef.get('alpha1', 0.0), coef.get('alpha2', 0.0))
+        self._alpha_max = sum(abs(a) for a in self._alpha)
         self._offset, self._coulomb = coef['offset'], coef.get('coulomb', 0.0)
         self._coulomb_slow, self._viscous = coef.get('coulomb_slow', 0.0), coef.get('viscous', 0.0)
         # sum of Legendre terms as one power series in the scaled position (Horner below)
@@ -171,9 +172,10 @@ class StreamingJawTorqueObserver:
         inverted = (i_f - beta) / alpha               # tau = (I - b(s, x, v)) / alpha(s)
         if not s.hysteresis:
             return inverted
-        if sliding > 0.0:
-            self._seen += sliding
-            g = max(self._gain * sliding, sliding / self._seen)
+        weight = sliding * (alpha / self._alpha_max) ** 2      # information of this sample
+        if weight > 0.0:
+            self._seen += weight
+            g = max(self._gain * weight, weight / self._seen)
             self._estimate += g * (inverted - self._estimate)
         return self._estimate
 
