@@ -32,6 +32,7 @@ from grip_force_ros import topics
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node)
 from grip_force_ros.nodes.ros_params import NodeParameters
+from grip_force_ros.params import ParameterError
 from grip_force_ros.sim import InstrumentSim
 
 GROUPS = ('instrument', 'sim', 'effects')
@@ -48,7 +49,11 @@ class SimInstrumentNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim_instrument', **kwargs)
         self.finished = Future()
-        self._param = NodeParameters(self, GROUPS, on_update=self._on_params)
+        try:
+            self._param = NodeParameters(self, GROUPS, on_update=self._on_params)
+        except ParameterError:
+            self.destroy_node()     # no half-made node left in the graph
+            raise
         params = self._param.params
         self.sim = InstrumentSim(params, obj=None, seed=params.sim_seed)
         self.current_command = 0.0       # A, last accepted command
