@@ -49,7 +49,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     Cable-pulley friction sticks: once the cable stops, the tension it holds
     depends on the way it got there. The model describes the loading
     direction (motor driving the jaw), so by default only the slices up to
-    the largest force of the log count (a staircase up, as a lab records it).
+    the steady slice with the largest force count (a staircase up, as a lab
+    records it).
 
     Parameters
     ----------
@@ -63,7 +64,7 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     max_force_cv, max_current_cv : float
         Largest std/mean within a slice for it to count as steady.
     loading_only : bool
-        Keep only the slices up to the time of the largest force.
+        Keep only the steady slices up to the one with the largest force.
 
     Raises
     ------
@@ -82,13 +83,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     bounds = np.concatenate([[0], edges, [t.size]])
     cols = {c: np.asarray(log[c], float) for c in ('current', 'wrist_angle', 'jaw_angle',
                                                     'grip_force')}
-    if loading_only:
-        force = np.where(np.isfinite(cols['grip_force']), cols['grip_force'], -np.inf)
-        peak_time = t[int(np.argmax(force))]
     rows = []
     for a, b in zip(bounds[:-1], bounds[1:]):
-        if loading_only and t[a] > peak_time:
-            break
         if b - a < 5:
             continue
         seg = {c: v[a:b] for c, v in cols.items()}
@@ -106,6 +102,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
         raise CalibrationError('no steady plateau with force above '
                                f'{min_force} N in the calibration log')
     arr = np.asarray(rows)
+    if loading_only:   # up to the steadiest largest force (an impact spike is not steady)
+        arr = arr[:int(np.argmax(arr[:, 4])) + 1]
     return Plateaus(*(arr[:, k] for k in range(6)))
 
 

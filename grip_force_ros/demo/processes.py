@@ -6,6 +6,7 @@ domain ids and environment variables.
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -32,8 +33,14 @@ def node_command(name: str) -> list[str]:
     """The command that runs node ``name``: its console script, else ``python -m``.
 
     The console script next to the running interpreter is preferred (a plain
-    ``master`` on the PATH might be someone else's program).
+    ``master`` on the PATH might be someone else's program). The environment
+    variable ``GRIP_FORCE_NODE_<NAME>`` (e.g. ``GRIP_FORCE_NODE_SIM_INSTRUMENT``)
+    replaces the command, e.g. to run the demo against another build or a
+    hardware driver; ``--ros-args ...`` is appended to it.
     """
+    override = os.environ.get(f'GRIP_FORCE_NODE_{name.upper()}')
+    if override:
+        return shlex.split(override)
     script = Path(sys.executable).parent / name
     if script.is_file() and os.access(script, os.X_OK):
         return [str(script)]
