@@ -155,8 +155,8 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
     # contact dynamics) at a 200 Hz analysis rate
     Effect('sensor_delay', (0.01, 0.015, 0.02, 0.03, 0.04, 0.055, 0.075, 0.1, 0.15, 0.2, 0.3),
            'delay', 's', _delay),
-    Effect('torque_constant_drift', ('linear', 5.0, 20.0, 60.0, 200.0), 'time_constant', 's', _drift,
-           ('gain_loss',), (), (('gain_loss', '- (per s if linear)', lambda c, g: -_rel(c, g)),)),
+    Effect('torque_constant_drift', (5.0, 10.0, 20.0, 40.0), 'time_constant', 's', _drift,
+           ('gain_loss',), (), (('gain_loss', '- (at full heat)', lambda c, g: -_rel(c, g)),)),
     Effect('force_sensor_offset', (None,), None, '', _offset,
            ('offset',), (), (('offset', 'unit of y', lambda c, g: c),)),
 )}

@@ -26,6 +26,8 @@ from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, OBJECT_CODES,
 #: Held-out score margin for naming an effect: the mean-square error (both channels
 #: summed in log) must fall by at least this fraction, beyond the parameter penalty.
 MIN_IMPROVEMENT = 0.2
+#: Huber threshold in robust standard deviations of the calibrated residual.
+HUBER_K = 2.0
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
 PARAM_PENALTY = 0.01
 #: Default split of a log into time blocks when no test logs are given.
@@ -87,6 +89,8 @@ class _Data:
         #: what the reported parameters are fitted on: every steady sample the fits may see
         self.train = steady & ~self.test if len(self.folds) == 1 else steady.copy()
         self.transient_share = float(1.0 - steady.mean())
+        #: robust scale (N or N*m) of the calibrated nominal residual, for the Huber loss
+        self.force_scale = 0.0
         for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
                     'jaw_velocity', 'load_time', 'object', 't'):
             setattr(self, key, _concat(frames, key))
@@ -108,11 +112,33 @@ class _Data:
         return Xf, Xa
 
 
+def _huber_lstsq(X, y, scale: float, iterations: int = 3):
+    """Least squares with Huber weights (threshold HUBER_K * scale): episodes the nominal
+    model misses (impacts, stuck cables) do not steer an effect's coefficients."""
+    coef = _lstsq(X, y)
+    if not scale > 0:
+        return coef
+    for _ in range(iterations):
+        r = np.abs(y - X @ coef)
+        w = np.sqrt(np.minimum(1.0, HUBER_K * scale / np.maximum(r, 1e-300)))
+        coef = _lstsq(X * w[:, None], y * w)
+    return coef
+
+
+def _huber_ms(r, scale: float) -> float:
+    """Mean Huber loss (as a mean square: quadratic within HUBER_K * scale, linear beyond)."""
+    if not scale > 0:
+        return float(np.mean(r ** 2))
+    c = HUBER_K * scale
+    a = np.abs(r)
+    return float(np.mean(np.where(a <= c, a * a, 2.0 * c * a - c * c)))
+
+
 def _fold_fit(data: _Data, Xf, Xa, fold: int):
     tr, te = data.folds[fold]
-    cf = _lstsq(Xf[tr], data.y[tr])
+    cf = _huber_lstsq(Xf[tr], data.y[tr], data.force_scale)
     ca = _lstsq(Xa[tr], data.angle_target[tr])
-    mse_f = float(np.mean((data.y[tr] - Xf[tr] @ cf) ** 2))
+    mse_f = _huber_ms(data.y[tr] - Xf[tr] @ cf, data.force_scale)
     mse_a = float(np.mean((data.angle_target[tr] - Xa[tr] @ ca) ** 2))
     objective = math.log(max(mse_f, 1e-300)) + math.log(max(mse_a, 1e-300))
     return objective, data.y[te] - Xf[te] @ cf, data.angle_target[te] - Xa[te] @ ca
@@ -141,13 +167,14 @@ def _evaluate(data: _Data, designs, grid):
     values = [b[1] for b in best]
     chosen = max(values, key=lambda v: (values.count(v), -values.index(v)))
     return {'resid_f': resid_f, 'resid_a': resid_a, 'value': chosen,
-            'test_mse_f': float(np.mean(resid_f[te] ** 2)), 'test_mse_a': float(np.mean(resid_a[te] ** 2))}
+            'test_mse_f': float(np.mean(resid_f[te] ** 2)), 'test_mse_a': float(np.mean(resid_a[te] ** 2)),
+            'test_loss_f': _huber_ms(resid_f[te], data.force_scale)}
 
 
 def _full_fit(data: _Data, Xf, Xa, rng):
     """Coefficients on every sample the fits may see, with block-bootstrap std."""
     tr = data.train
-    cf = _lstsq(Xf[tr], data.y[tr])
+    cf = _huber_lstsq(Xf[tr], data.y[tr], data.force_scale)
     ca = _lstsq(Xa[tr], data.angle_target[tr])
     return (cf, ca, _block_bootstrap_std(Xf[tr], data.y[tr], rng),
             _block_bootstrap_std(Xa[tr], data.angle_target[tr], rng),
@@ -161,7 +188,7 @@ FORCE_FLOOR = 1e-3
 
 
 def _score(fit, base, force_floor_ms: float) -> float:
-    return (math.log((fit['test_mse_f'] + force_floor_ms) / (base['test_mse_f'] + force_floor_ms))
+    return (math.log((fit['test_loss_f'] + force_floor_ms) / (base['test_loss_f'] + force_floor_ms))
             + math.log((fit['test_mse_a'] + ANGLE_FLOOR_MS) / (base['test_mse_a'] + ANGLE_FLOOR_MS)))
 
 
@@ -268,6 +295,12 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                   'transients': 'samples within 0.2 s of the predicted load starting or stopping '
                                 '(impact, fly-off) are left out of every fit and score'})
     rng = np.random.default_rng(seed)
+
+    # robust scale of the residual of the gain-calibrated nominal (MAD of the training samples)
+    tr = data.train
+    g0 = _lstsq(data.nominal[tr, None], data.y[tr])[0]
+    r0 = data.y[tr] - g0 * data.nominal[tr]
+    data.force_scale = float(1.4826 * np.median(np.abs(r0 - np.median(r0))))
 
     # 1. nominal + calibration
     Xf0 = data.nominal[:, None]

@@ -28,7 +28,7 @@ JAW_SIDE_CABLE_LENGTH = 0.02
 #: Current steps (A/s of the 20 ms smoothed current) whose mechanical response (cable and
 #: contact dynamics, ~10 ms) the quasi-static model does not describe; left out for STEP_HOLD s.
 STEP_RATE = 4.0
-STEP_HOLD = 0.02
+STEP_HOLD = 0.05
 
 
 class DiagnosisError(ValueError):
