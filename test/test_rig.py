@@ -226,3 +226,20 @@ def test_streaming_observer_gives_the_batch_numbers(runs, changes):
     live.reset()
     assert live.step(log['current'][0], log['motor_angle'][0], log['motor_shaft_angle'][0]) == \
         pytest.approx(stream[0], abs=1e-12)
+
+
+from hypothesis import given, settings as hyp_settings, strategies as st  # noqa: E402
+
+
+@hyp_settings(max_examples=60, deadline=None)
+@given(steps=st.lists(st.floats(-0.05, 0.05, allow_nan=False), min_size=1, max_size=200),
+       width=st.floats(0.001, 0.1))
+def test_dahl_state_is_bounded_and_moves_with_each_step(steps, width):
+    angle = np.cumsum([0.0] + steps)
+    s = dahl_direction(angle, width)
+    assert np.all(np.abs(s) <= 1.0)
+    ds = np.diff(s)
+    moves = np.diff(angle)
+    # the state moves towards the sign of each displacement and never away from it
+    assert np.all(ds[moves > 0] >= -1e-12) and np.all(ds[moves < 0] <= 1e-12)
+    assert np.all(ds[moves == 0] == 0.0)
