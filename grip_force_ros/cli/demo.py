@@ -76,6 +76,9 @@ def print_report(result: dict, stream=sys.stdout) -> None:
       f"{_fmt(m.get('pull_grip_force'))} (load cell)\n")
     w(f"estimate vs cell  rms {_fmt(m.get('estimate_error_rms'))} over the steady hold\n")
     w(f"peak current      {_fmt(m.get('peak_current'), '.3f', ' A')}\n")
+    events = result.get('safe_state_entries') or []
+    w(f"safe state        {len(events)} entr{'y' if len(events) == 1 else 'ies'} during the task"
+      + (f" (first at {events[0]['t']:.2f} s: {events[0]['reason']})" if events else '') + '\n')
     w(f"bag               {result['bag']} ({sum(result['messages'].values())} messages)\n")
     w(f"plot              {result['plot']}\n")
 

@@ -165,3 +165,36 @@ def spread(ratios: Sequence[float]) -> float:
     if r.size == 0 or not np.all(np.isfinite(r)):
         return float('nan')
     return float(np.max(r) - np.min(r))
+
+
+def safe_state_entries(diagnostics, window: tuple[float, float], offset: float = 0.0,
+                       name_part: str = 'controller') -> list[dict]:
+    """Entries of the controller into its safe state within ``window`` (s, data axis).
+
+    Parameters
+    ----------
+    diagnostics : list
+        (time [s], list of status dicts) as :func:`grip_force_ros.demo.series.read_bag_series`
+        returns them.
+    window : (float, float)
+        Time window on the analysis axis (s).
+    offset : float
+        Subtracted from the diagnostic times to put them on that axis (s).
+
+    Returns
+    -------
+    list of dict
+        {'t': s, 'reason': str} per transition into mode 'safe'.
+    """
+    out, last = [], None
+    for t, statuses in diagnostics:
+        for status in statuses:
+            if name_part not in status['name']:
+                continue
+            mode = status['values'].get('mode')
+            tt = t - offset
+            if mode == 'safe' and last != 'safe' and window[0] <= tt <= window[1]:
+                out.append({'t': round(tt, 3),
+                            'reason': status['values'].get('reasons') or status['message']})
+            last = mode
+    return out

@@ -115,6 +115,7 @@ class RunResult:
     metrics: dict | None = None
     plot: Path | None = None
     timing: dict = field(default_factory=dict)
+    safe_events: list = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -128,7 +129,7 @@ class RunResult:
             'plot': str(self.plot) if self.plot else None,
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
-            'metrics': self.metrics, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
+            'metrics': self.metrics, 'safe_state_entries': self.safe_events, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
 
@@ -372,7 +373,7 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     """Read the run's bag back; phases, figures and (optionally) the summary plot."""
     from grip_force_ros.demo.series import read_bag_series, resample
 
-    series, _diagnostics = read_bag_series(result.bag)
+    series, diagnostics = read_bag_series(result.bag)
     raw = resample(series, rate=500.0, t0=0.0)
     try:
         start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
@@ -386,6 +387,9 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     windows = analysis.phase_windows(result.trajectory, 0.0)
     result.data, result.windows = data, windows
     result.metrics = analysis.force_metrics(data, windows)
+    events = analysis.safe_state_entries(diagnostics, (0.0, result.trajectory.duration), start)
+    result.metrics['safe_state_entries'] = len(events)
+    result.safe_events = events
     if plot:
         from grip_force_ros.demo.plot import summary_plot
         result.plot = summary_plot(data, windows, result.metrics, result.out_dir / 'summary.png',
