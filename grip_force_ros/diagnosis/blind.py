@@ -30,11 +30,13 @@ STRENGTHS = {
     'cable_hysteresis': (0.1, 0.2, 0.3),                  # -
     'backlash': (0.03, 0.06, 0.12),                       # rad
     'tension_dependent_friction': (0.002, 0.004, 0.008),  # 1/N
-    'viscoelastic_creep': (0.1, 0.2, 0.35),               # -
-    'sensor_delay': (0.02, 0.04, 0.08),                   # s
-    'torque_constant_drift': (0.5, 0.7, 0.9),             # -
+    'viscoelastic_creep': (0.15, 0.3, 0.5),               # -
+    'sensor_delay': (0.03, 0.06, 0.1),                    # s
+    'torque_constant_drift': (0.5, 0.8, 0.9),             # -
     'force_sensor_offset': (0.3, -0.5, 0.8),              # N
 }
+#: Extra sim parameters per effect: a small motor's winding heats within seconds.
+EXTRAS = {'torque_constant_drift': (('torque_constant_drift_time_constant', 10.0),)}
 #: Pairs of effects in the full check (medium strengths).
 PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'force_sensor_offset'),
          ('cable_hysteresis', 'torque_constant_drift'), ('backlash', 'tension_dependent_friction'))
@@ -45,6 +47,8 @@ class BlindCase:
     """One blind log: its effects (name -> strength) and seed. Never given to the diagnosis."""
     effects: tuple
     seed: int
+    #: extra sim parameters of the effects (e.g. a time constant), name -> value
+    extras: tuple = ()
 
     @property
     def truth(self) -> tuple[str, ...]:
@@ -58,10 +62,11 @@ def cases(quick: bool = False, seed: int = 0, none_logs: int | None = None) -> l
     levels = (1,) if quick else (0, 1, 2)
     for name in EFFECT_NAMES:
         for lv in levels:
-            out.append(BlindCase(((name, STRENGTHS[name][lv]),), k))
+            out.append(BlindCase(((name, STRENGTHS[name][lv]),), k, EXTRAS.get(name, ())))
             k += 1
     for a, b in (PAIRS[:1] if quick else PAIRS):
-        out.append(BlindCase(((a, STRENGTHS[a][1]), (b, STRENGTHS[b][1])), k))
+        out.append(BlindCase(((a, STRENGTHS[a][1]), (b, STRENGTHS[b][1])), k,
+                             EXTRAS.get(a, ()) + EXTRAS.get(b, ())))
         k += 1
     for _ in range(none_logs if none_logs is not None else (3 if quick else 10)):
         out.append(BlindCase((), k))
@@ -137,7 +142,8 @@ def generate_log(case: BlindCase, *, duration: float = 60.0, dt: float = 1e-3, p
         values = {**{k: params[k] for k in params.keys()}, **values} if hasattr(params, 'keys') else values
     p = make_params(values)
     current, wrist, objects = excitation(rng, duration, dt, p.max_current)
-    sim = InstrumentSim(p, obj=str(objects[0]), effects=dict(case.effects), seed=int(case.seed))
+    sim = InstrumentSim(p, obj=str(objects[0]), effects={**dict(case.effects), **dict(case.extras)},
+                        seed=int(case.seed))
     n = current.size
     cols = {k: np.empty(n) for k in ('t', 'current', 'motor_angle', 'wrist_angle', 'jaw_angle', 'grip_force')}
     last_obj = None

@@ -25,7 +25,7 @@ from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, OBJECT_CODES,
 
 #: Held-out score margin for naming an effect: the mean-square error (both channels
 #: summed in log) must fall by at least this fraction, beyond the parameter penalty.
-MIN_IMPROVEMENT = 0.2
+MIN_IMPROVEMENT = 0.15
 #: Huber threshold in robust standard deviations of the calibrated residual.
 HUBER_K = 2.0
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
