@@ -19,6 +19,7 @@ logic, the plausibility checks and the watchdog live in
 from __future__ import annotations
 
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
@@ -90,6 +91,11 @@ class ControllerNode(Node):
         self._diag_key = None          # (mode, limits_hit, reasons, rejected count) last published
         self._diag_time = -math.inf    # s, when /diagnostics was last published
         self._limits_seen: set = set()  # limits hit since the last /diagnostics
+        # Loop timing (perf_counter s): for /diagnostics and the loop benchmark.
+        self._period = 1.0 / params.control_rate
+        self.timing = {'ticks': 0, 'late': 0, 'period_sum': 0.0, 'period_max': 0.0,
+                       'busy_sum': 0.0, 'busy_max': 0.0}
+        self._last_tick = None
         self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
         self.get_logger().info(
             f'{params.instrument_name}: control at {params.control_rate:.0f} Hz, '
@@ -165,6 +171,24 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _tick(self) -> None:
+        started = time.perf_counter()
+        self._control()
+        timing = self.timing
+        busy = time.perf_counter() - started
+        timing['busy_sum'] += busy
+        if busy > timing['busy_max']:
+            timing['busy_max'] = busy
+        if self._last_tick is not None:
+            period = started - self._last_tick
+            timing['ticks'] += 1
+            timing['period_sum'] += period
+            if period > timing['period_max']:
+                timing['period_max'] = period
+            if period > 1.5 * self._period:
+                timing['late'] += 1
+        self._last_tick = started
+
+    def _control(self) -> None:
         stamp = self._now_ns()
         now = stamp.nanoseconds * 1e-9
         out = self.controller.step(now, self.inputs)
@@ -215,6 +239,13 @@ class ControllerNode(Node):
         faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
                                                                'force')]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
+        timing = self.timing
+        if timing['ticks']:
+            values['period_mean_ms'] = f"{timing['period_sum'] / timing['ticks'] * 1e3:.4f}"
+            values['period_max_ms'] = f"{timing['period_max'] * 1e3:.3f}"
+            values['late_periods'] = str(timing['late'])   # longer than 1.5 periods
+            values['tick_mean_us'] = f"{timing['busy_sum'] / timing['ticks'] * 1e6:.1f}"
+            values['tick_max_us'] = f"{timing['busy_max'] * 1e6:.1f}"
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'
