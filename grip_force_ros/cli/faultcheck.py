@@ -1,0 +1,53 @@
+"""`grip-force faultcheck`: run the fault catalogue against the real controller node."""
+from __future__ import annotations
+
+HELP = 'inject every catalogued fault into a real controller node and check its outcome'
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument('--json', action='store_true',
+                        help='print the report as JSON (with per-case details)')
+    parser.add_argument('--config', default='config/paper_needle_driver.yaml',
+                        help='instrument YAML of the controller under test')
+    parser.add_argument('--only', nargs='*', metavar='PATTERN',
+                        help='run only cases whose name or category contains a pattern')
+    parser.add_argument('--list', action='store_true', help='list the catalogue and exit')
+
+
+def run(args) -> int:
+    import json
+    import sys
+
+    from grip_force_ros.faults.catalogue import OUTCOMES, catalogue, select
+
+    cases = select(catalogue(), args.only)
+    if args.list:
+        for c in cases:
+            print(f'{c.name:40s} {c.category:20s} {c.outcome:13s} {c.description}')
+        print(f'{len(cases)} cases; outcomes:')
+        for key, text in OUTCOMES.items():
+            print(f'  {key:13s} {text}')
+        return 0
+    if not cases:
+        print('no case matches', args.only, file=sys.stderr)
+        return 2
+
+    from grip_force_ros.faults.runner import run_faultcheck
+
+    def progress(detail):
+        if args.json:
+            return
+        mark = 'ok  ' if detail.get('passed') else 'FAIL'
+        extra = f" ({detail['why']})" if not detail.get('passed') else ''
+        print(f"{mark} {detail['name']:40s} {detail['outcome']}{extra}", flush=True)
+
+    report = run_faultcheck(cases, config=args.config, progress=progress)
+    if args.json:
+        print(json.dumps(report, indent=1, default=str))
+    else:
+        summary = {k: report[k] for k in ('cases', 'passed', 'crashes', 'limit_violations',
+                                          'failures', 'seconds')}
+        print(json.dumps(summary))
+    ok = (report['passed'] == report['cases'] and report['crashes'] == 0
+          and report['limit_violations'] == 0)
+    return 0 if ok else 1

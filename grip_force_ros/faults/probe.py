@@ -1,0 +1,276 @@
+"""The fault probe: a plant and a fault injector on real DDS topics (rclpy).
+
+:class:`FaultProbe` is an rclpy node that stands in for the master and the instrument:
+at ``rate`` it steps an :class:`~grip_force_ros.sim.InstrumentSim` with the latest current
+command it received, publishes the master angle, the joint and actuator states (and the
+load cell when asked) over DDS, and passes each sample through the active fault mutator
+of its source (:mod:`grip_force_ros.faults.catalogue`). It records everything the
+controller publishes (command, target and estimated force, /diagnostics) and checks every
+command against the hardware limits as it arrives.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from grip_force_ros import topics
+from grip_force_ros.sim import InstrumentSim
+
+#: Publishers as the real master/sim publish; subscriptions deep enough to miss nothing.
+PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                        reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+_TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
+           'actuator': topics.ACTUATOR_JS, 'force': topics.MEASURED_FORCE}
+
+
+def to_time_msg(seconds: float):
+    """float seconds -> builtin_interfaces/Time (clamped to its representable range)."""
+    from builtin_interfaces.msg import Time
+    seconds = min(max(seconds, 0.0), 2.0 ** 31 - 1.0)
+    sec = int(math.floor(seconds))
+    nanosec = min(int(round((seconds - sec) * 1e9)), 999_999_999)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+class LimitMonitor:
+    """Checks every current command against |I| <= max_current, |dI| <= max_step, finite.
+
+    Parameters
+    ----------
+    max_current : float
+        A.
+    max_step : float
+        Largest change between consecutive commands (A) = max_current_slew / control_rate.
+    """
+
+    def __init__(self, max_current: float, max_step: float):
+        self.max_current = max_current
+        self.max_step = max_step
+        self.previous: float | None = None
+        self.count = 0
+        self.violations: list[str] = []
+
+    def check(self, command: float) -> None:
+        self.count += 1
+        why = None
+        if not math.isfinite(command):
+            why = f'non-finite command {command!r}'
+        elif abs(command) > self.max_current * (1 + 1e-9) + 1e-12:
+            why = f'command {command:.6f} A above max_current {self.max_current} A'
+        elif self.previous is not None and \
+                abs(command - self.previous) > self.max_step * (1 + 1e-6) + 1e-12:
+            why = (f'command step {command - self.previous:+.6f} A beyond the slew limit '
+                   f'{self.max_step:.6f} A per period')
+        if why is not None:
+            self.violations.append(why)
+        self.previous = command if math.isfinite(command) else self.previous
+
+
+class FaultProbe(Node):
+    """Plant + fault injector + recorder (see the module docstring).
+
+    Parameters
+    ----------
+    params : ParamSet
+        The instrument the controller runs (the plant uses the same values).
+    rate : float
+        Publishing (and plant) rate (Hz).
+    sensor : bool
+        Also publish the load-cell force.
+    master_angle : float
+        Master gripper angle held by default (rad); below ``master_contact_angle`` the
+        controller grips.
+    """
+
+    def __init__(self, params, rate: float = 1000.0, sensor: bool = False,
+                 master_angle: float = 0.1, **kwargs):
+        super().__init__('fault_probe', **kwargs)
+        self.params = params
+        self.period = 1.0 / rate
+        self.sensor = sensor
+        self.master_angle = master_angle
+        self.plant = InstrumentSim(params, obj=params.object_kind, seed=0)
+        self.command = 0.0
+        self.lock = threading.RLock()
+        # the active fault: source -> mutator, its tick counter and its end event
+        self.fault: dict = {}
+        self.fault_ticks_left = 0
+        self.fault_k = 0
+        self.fault_done = threading.Event()
+        self.restart_pending = False
+        self.stamp_offset = {s: 0.0 for s in _TOPICS}   # s, permanent offset (sim clock reset)
+        self.last_good_publish = {s: math.nan for s in _TOPICS}  # probe clock of the last good sample
+        self._pubs = {}
+        for source in ('master', 'instrument', 'actuator', 'force'):
+            self._make_pub(source)
+        step = params.max_current_slew / params.control_rate
+        self.limits = LimitMonitor(params.max_current, step)
+        self.force_cap = params.max_grip_force
+        self.force_violations: list[str] = []
+        # records: (probe receive time [s], controller stamp [s], value)
+        self.commands: list[tuple] = []
+        self.targets: list[tuple] = []
+        self.estimates: list[tuple] = []
+        self.diagnostics: list[tuple] = []   # (receive time, text, values dict)
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
+        self.create_subscription(WrenchStamped, topics.TARGET_FORCE, self._on_target, RECORD_QOS)
+        self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, RECORD_QOS)
+        self.ticks = 0
+        self.timer = self.create_timer(self.period, self._tick)
+
+    # ------------------------------------------------------------------ clock
+    def now(self) -> float:
+        """Probe clock (s), the ROS system clock as the controller's."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ------------------------------------------------------------------ faults
+    def inject(self, sources, mutator, ticks: int) -> threading.Event:
+        """Apply ``mutator`` to the samples of ``sources`` for ``ticks`` ticks."""
+        with self.lock:
+            self.fault = {s: mutator for s in sources}
+            self.fault_ticks_left = ticks
+            self.fault_k = 0
+            self.fault_done = threading.Event()
+            return self.fault_done
+
+    def restart_sim(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
+        """Destroy the instrument publishers, stay silent ``ticks`` ticks, reset the plant,
+        publish again from new publishers (stamps shifted by ``stamp_offset`` s from then on)."""
+        with self.lock:
+            self.restart_pending = True
+            self.restart_offset = stamp_offset
+            return self.inject(('instrument', 'actuator'), lambda s, k: [], ticks)
+
+    def _make_pub(self, source: str) -> None:
+        msg_type = WrenchStamped if source == 'force' else JointState
+        self._pubs[source] = self.create_publisher(msg_type, _TOPICS[source], PUB_QOS)
+
+    # ------------------------------------------------------------------ tick
+    def samples(self, now: float) -> dict:
+        """The good samples of this tick (plain dicts) from the plant."""
+        m = self.plant.measure()
+        return {
+            'master': {'stamp': now, 'name': [topics.MASTER_JOINT],
+                       'position': [self.master_angle], 'velocity': [0.0], 'effort': []},
+            'instrument': {'stamp': now, 'name': [topics.WRIST_JOINT, topics.JAW_JOINT],
+                           'position': [m.wrist_angle, m.jaw_angle],
+                           'velocity': [0.0, m.jaw_velocity], 'effort': []},
+            'actuator': {'stamp': now, 'name': [topics.DRUM_JOINT], 'position': [m.motor_angle],
+                         'velocity': [m.motor_velocity], 'effort': [m.current]},
+            'force': {'stamp': now, 'force': m.grip_force},
+        }
+
+    def _tick(self) -> None:
+        self.ticks += 1
+        self.plant.step(self.command, self.period)
+        now = self.now()
+        samples = self.samples(now)
+        with self.lock:
+            fault = self.fault
+            k = self.fault_k
+            if fault:
+                self.fault_k += 1
+                self.fault_ticks_left -= 1
+                if self.fault_ticks_left <= 0:
+                    self.fault = {}
+                    if self.restart_pending:
+                        self._finish_restart()
+                    self.fault_done.set()
+            elif self.restart_pending:   # pragma: no cover - restart without a window
+                self._finish_restart()
+        if fault and self.restart_pending and k == 0:
+            for source in ('instrument', 'actuator'):
+                self.destroy_publisher(self._pubs.pop(source))
+        for source, sample in samples.items():
+            if source == 'force' and not self.sensor:
+                continue
+            if source not in self._pubs:
+                continue
+            sample['stamp'] += self.stamp_offset[source]
+            mutate = fault.get(source) or fault.get('all')
+            out = [sample] if mutate is None else mutate(sample, k)
+            if mutate is None:
+                self.last_good_publish[source] = now
+            pub = self._pubs[source]
+            for s in out:
+                pub.publish(self._message(source, s))
+
+    def _finish_restart(self) -> None:
+        self.restart_pending = False
+        self.plant = InstrumentSim(self.params, obj=self.params.object_kind, seed=1)
+        self.command = 0.0
+        for source in ('instrument', 'actuator'):
+            self.stamp_offset[source] += self.restart_offset
+            if source not in self._pubs:
+                self._make_pub(source)
+
+    @staticmethod
+    def _message(source: str, s: dict):
+        if source == 'force':
+            msg = WrenchStamped()
+            msg.header.stamp = to_time_msg(s['stamp'])
+            msg.header.frame_id = topics.JAW_FRAME
+            msg.wrench.force.z = float(s['force'])
+            return msg
+        msg = JointState()
+        msg.header.stamp = to_time_msg(s['stamp'])
+        msg.name = list(s['name'])
+        msg.position = [float(v) for v in s['position']]
+        msg.velocity = [float(v) for v in s['velocity']]
+        msg.effort = [float(v) for v in s['effort']]
+        return msg
+
+    # ------------------------------------------------------------------ records
+    @staticmethod
+    def _stamp(msg) -> float:
+        return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+    def _on_command(self, msg: JointState) -> None:
+        value = float(msg.effort[0]) if len(msg.effort) else math.nan
+        self.command = value if math.isfinite(value) else 0.0
+        self.limits.check(value)
+        self.commands.append((self.now(), self._stamp(msg), value))
+
+    def _on_target(self, msg: WrenchStamped) -> None:
+        f = msg.wrench.force.z
+        if not (math.isfinite(f) and f <= self.force_cap * (1 + 1e-9) + 1e-12):
+            self.force_violations.append(f'target force {f!r} N above max_grip_force {self.force_cap} N')
+        self.targets.append((self.now(), self._stamp(msg), f))
+
+    def _on_estimate(self, msg: WrenchStamped) -> None:
+        self.estimates.append((self.now(), self._stamp(msg), msg.wrench.force.z))
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        now = self.now()
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            # the current state only: cumulative counters of past rejections stay out
+            text = ' | '.join([status.name, status.message] +
+                              [f'{k}={v}' for k, v in values.items()
+                               if not k.startswith('rejected')])
+            self.diagnostics.append((now, text, values, status.level))
+
+    def clear_records(self) -> None:
+        """Forget what was recorded so far (the limit monitor keeps counting)."""
+        self.commands, self.targets, self.estimates, self.diagnostics = [], [], [], []
+
+
+def wait_until(predicate, timeout: float, poll: float = 0.005) -> bool:
+    """Poll ``predicate()`` until it is true or ``timeout`` s pass."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return bool(predicate())

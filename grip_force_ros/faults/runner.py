@@ -1,0 +1,527 @@
+"""Run the fault catalogue against the real controller node (rclpy, loopback DDS).
+
+* Message, silence and sim-restart faults: the controller node runs in this process
+  (``parameter_overrides`` from the instrument YAML), a :class:`FaultProbe` closes the loop
+  with a simulated instrument and injects each fault over DDS; one executor thread spins both.
+* Runtime parameter faults: the probe calls the controller's parameter services.
+* Parameter-file faults: the ``controller`` executable is started with the bad
+  ``--params-file`` and must exit non-zero naming the problem (no traceback).
+
+:func:`run_faultcheck` returns the report ``{"cases", "passed", "crashes",
+"limit_violations", "failures", "details"}``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from pathlib import Path
+
+from grip_force_ros import topics
+from grip_force_ros.faults.catalogue import FaultCase, bad_params_text, catalogue
+from grip_force_ros.params import load_params_file, read_params_yaml
+
+DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
+#: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
+GRIP_MASTER_ANGLE = 0.1
+#: How long a case may take to recover after its fault window (s).
+RECOVERY_TIMEOUT = 2.0
+#: Longest wait for the controller to grip before a case starts (s).
+READY_TIMEOUT = 5.0
+#: Bumpless resume: the first command after the safe state may differ from the last safe
+#: command by at most this share of one slew step.
+RESUME_JUMP_SHARE = 0.5
+#: Namespace of the controller processes started with bad parameter files.
+ISOLATION_NS = '/faultcheck_param_file'
+#: Extra allowance on the watchdog latency for DDS delivery and timer jitter (s).
+WATCHDOG_SLACK = 0.002
+
+
+def resolve_config(path: str | os.PathLike) -> Path:
+    """An instrument YAML by path, or from the package's config/ directory."""
+    p = Path(path)
+    if p.exists():
+        return p
+    here = Path(__file__).resolve().parents[2] / path
+    if here.exists():
+        return here
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        shared = Path(get_package_share_directory('grip_force_ros')) / 'config' / p.name
+        if shared.exists():
+            return shared
+    except Exception:  # noqa: BLE001 - not in an ament workspace
+        pass
+    raise FileNotFoundError(f'instrument config {path} not found')
+
+
+def controller_class():
+    """The controller node class of ``grip_force_ros.nodes.controller``."""
+    from rclpy.node import Node
+
+    from grip_force_ros.nodes import controller as module
+    for name in ('ControllerNode', 'GripControllerNode', 'Controller'):
+        cls = getattr(module, name, None)
+        if isinstance(cls, type) and issubclass(cls, Node):
+            return cls
+    for value in vars(module).values():
+        if isinstance(value, type) and issubclass(value, Node) and value.__module__ == module.__name__:
+            return value
+    raise ImportError('no rclpy Node class in grip_force_ros.nodes.controller')
+
+
+# ---------------------------------------------------------------------------- session
+class Session:
+    """One in-process controller node and a fault probe, spun by one executor thread.
+
+    Parameters
+    ----------
+    config : Path
+        Instrument YAML (its values become the controller's ``parameter_overrides``).
+    sensor : bool
+        Controller with ``force_sensor_enabled`` and a probe publishing the load cell.
+    """
+
+    def __init__(self, config: Path, sensor: bool = False):
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.parameter import Parameter
+
+        from grip_force_ros.faults.probe import FaultProbe
+
+        values = read_params_yaml(config)
+        if sensor:
+            values['force_sensor_enabled'] = True
+        self.params = load_params_file(config, **({'force_sensor_enabled': True} if sensor else {}))
+        self.context = Context()
+        rclpy.init(context=self.context)
+        overrides = [Parameter(k, value=list(v) if isinstance(v, (list, tuple)) else v)
+                     for k, v in values.items()]
+        self.controller = controller_class()(parameter_overrides=overrides, context=self.context)
+        self.probe = FaultProbe(self.params, rate=self.params.control_rate, sensor=sensor,
+                                master_angle=GRIP_MASTER_ANGLE, context=self.context)
+        self.executor = self._executor()
+        self.executor.add_node(self.controller)
+        self.executor.add_node(self.probe)
+        self.crash: str | None = None
+        self._stop = False
+        self._thread = threading.Thread(target=self._spin, name='faultcheck-spin', daemon=True)
+        self._thread.start()
+
+    def _executor(self):
+        from rclpy.executors import SingleThreadedExecutor
+        if os.environ.get('GRIP_FORCE_EXECUTOR', 'events') != 'single':
+            try:
+                from rclpy.experimental import EventsExecutor
+                return EventsExecutor(context=self.context)
+            except ImportError:  # pragma: no cover
+                pass
+        return SingleThreadedExecutor(context=self.context)
+
+    def _spin(self) -> None:
+        try:
+            while not self._stop and self.context.ok():
+                self.executor.spin_once(timeout_sec=0.05)
+        except Exception:  # noqa: BLE001 - a crash of a node callback is what we count
+            self.crash = traceback.format_exc()
+
+    @property
+    def alive(self) -> bool:
+        return self.crash is None and self._thread.is_alive()
+
+    def close(self) -> None:
+        import rclpy
+        self._stop = True
+        self._thread.join(timeout=2.0)
+        try:
+            self.executor.shutdown(timeout_sec=1.0)
+        except Exception:  # noqa: BLE001
+            pass
+        for node in (self.probe, self.controller):
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001
+                pass
+        rclpy.try_shutdown(context=self.context)
+
+    # ------------------------------------------------------------------ state
+    def gripping(self, since: float, samples: int = 20) -> bool:
+        """The last ``samples`` targets received after ``since`` are all > 0 (grip)."""
+        targets = self.probe.targets[-samples:]
+        return len(targets) == samples and targets[0][0] >= since and all(t[2] > 0 for t in targets)
+
+    def wait_gripping(self, timeout: float = READY_TIMEOUT) -> bool:
+        from grip_force_ros.faults.probe import wait_until
+        start = self.probe.now()
+        return wait_until(lambda: self.gripping(start), timeout)
+
+    # ------------------------------------------------------------------ parameters
+    def set_parameters(self, values: dict, atomic: bool = False, timeout: float = 5.0):
+        """Set parameters of the controller through its services; list of (ok, reason)."""
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
+        client = getattr(self, '_param_client', None)
+        if client is None:
+            client = self._param_client = AsyncParameterClient(self.probe, self.controller.get_name())
+            if not client.wait_for_services(timeout_sec=timeout):
+                raise RuntimeError('controller parameter services not available')
+        params = [Parameter(k, value=v) for k, v in values.items()]
+        future = (client.set_parameters_atomically if atomic else client.set_parameters)(params)
+        done = threading.Event()
+        future.add_done_callback(lambda _f: done.set())
+        if not done.wait(timeout):
+            raise RuntimeError('no answer from the controller parameter service')
+        response = future.result()
+        results = response.results if hasattr(response, 'results') else [response.result]
+        return [(r.successful, r.reason) for r in results]
+
+    def rejected_count(self) -> int:
+        """Samples the controller node has rejected so far (its ControlInputs counters)."""
+        inputs = getattr(self.controller, 'inputs', None)
+        return sum(getattr(inputs, 'rejected', {}).values()) if inputs is not None else 0
+
+    def last_rejection(self) -> str:
+        inputs = getattr(self.controller, 'inputs', None)
+        rejected = getattr(inputs, 'rejected', {}) if inputs is not None else {}
+        return next(reversed(rejected), '') if rejected else ''
+
+    def get_parameter(self, name: str):
+        return self.controller.get_parameter(name).value
+
+
+# ---------------------------------------------------------------------------- analysis
+def _modes(probe, t0: float) -> list[tuple]:
+    """(receive time, stamp, command, target) of commands received after t0, target matched by stamp."""
+    target_at = {stamp: f for _, stamp, f in probe.targets}
+    out = []
+    for recv, stamp, command in probe.commands:
+        if recv >= t0 and stamp in target_at:
+            out.append((recv, stamp, command, target_at[stamp]))
+    return out
+
+
+def _resume_jumps(rows: list[tuple]) -> list[float]:
+    """|first command after the safe state - last safe command| at each resume (A)."""
+    jumps = []
+    for prev, cur in zip(rows, rows[1:]):
+        if prev[3] == 0.0 and cur[3] > 0.0:
+            jumps.append(abs(cur[2] - prev[2]))
+    return jumps
+
+
+def run_message_case(session: Session, case: FaultCase) -> dict:
+    """Inject one message, silence or restart fault and judge its outcome."""
+    from grip_force_ros.faults.probe import wait_until
+    probe, params = session.probe, session.params
+    detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                    'description': case.description}
+    probe.master_angle = GRIP_MASTER_ANGLE if case.master_angle is None else case.master_angle
+    if not session.wait_gripping():
+        detail.update(passed=False, why='controller not gripping before the fault')
+        return detail
+    violations_before = len(probe.limits.violations) + len(probe.force_violations)
+    rejected_before = session.rejected_count()
+    probe.clear_records()
+    t0 = probe.now()
+    if case.kind == 'restart':
+        offset = 0.0
+        if case.mutate is not None:   # the clock-reset variant carries its stamp shift
+            offset = case.mutate({'stamp': 0.0}, 0)[0]['stamp']
+        done = probe.restart_sim(case.ticks, offset)
+    else:
+        sources = ('master', 'instrument', 'actuator', 'force') if case.source == 'all' else (case.source,)
+        done = probe.inject(sources, case.mutate, case.ticks)
+    last_good = dict(probe.last_good_publish)
+    done.wait(case.ticks * probe.period * 20 + 2.0)
+    t1 = probe.now()
+    recovered = wait_until(lambda: session.gripping(t1), RECOVERY_TIMEOUT)
+    pattern = re.compile(case.reason, re.I) if case.reason else None
+    if pattern is not None:   # /diagnostics may come at a lower rate: give it time
+        wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
+    rows = _modes(probe, t0)
+    window = [r for r in rows if r[0] <= t1 + 0.005]
+    safe_rows = [r for r in window if r[3] == 0.0]
+    jumps = _resume_jumps(rows)
+    step = params.max_current_slew / params.control_rate
+    reason_text = next((d[1] for d in probe.diagnostics if pattern and pattern.search(d[1])), None)
+    rejected = session.rejected_count() - rejected_before
+    detail.update(
+        recovered=recovered, safe_periods=len(safe_rows), periods=len(window),
+        reason_seen=reason_text,
+        max_resume_jump=max(jumps) if jumps else 0.0, slew_step=step,
+        limit_violations=len(probe.limits.violations) + len(probe.force_violations) - violations_before,
+    )
+    problems = []
+    if not recovered:
+        problems.append('control did not resume within %.1f s' % RECOVERY_TIMEOUT)
+    if jumps and max(jumps) > RESUME_JUMP_SHARE * step + 1e-9:
+        problems.append(f'current jump {max(jumps):.4f} A at resume (> {RESUME_JUMP_SHARE} slew step)')
+    if case.outcome in ('reject_safe', 'stale_safe', 'clamp') and reason_text is None:
+        problems.append(f'no /diagnostics text matching {case.reason!r}')
+    if case.outcome in ('reject_safe', 'stale_safe') and not safe_rows:
+        problems.append('output never went to the safe state')
+    if case.outcome == 'stale_safe':
+        latency = _watchdog_latency(case, probe, last_good, rows, session)
+        detail['safe_after_last_input_ms'] = None if latency is None else round(latency * 1e3, 3)
+        limit = params.watchdog_timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
+        detail['safe_latency_limit_ms'] = round(limit * 1e3, 3)
+        steps = _steps_to_safe(case, probe, last_good, rows, params.watchdog_timeout)
+        detail['controller_steps_after_timeout'] = steps
+        if latency is None or steps is None:
+            problems.append('no safe output after the last input')
+        elif steps > 2:
+            problems.append(f'safe only at the {steps}th control period after the timeout')
+    if case.outcome in ('clamp', 'ignore'):
+        modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
+        modes = [m for m in modes if m is not None]
+        if modes:   # the controller reports its mode: free motion is not the safe state
+            grip_share = 1.0 - modes.count('safe') / len(modes)
+        else:
+            grip_share = (len(window) - len(safe_rows)) / max(len(window), 1)
+        detail['grip_share'] = round(grip_share, 3)
+        if grip_share < 0.9:
+            problems.append(f'left grip in {1 - grip_share:.0%} of the fault window')
+    detail['rejected_samples'] = rejected
+    if case.outcome == 'ignore' and rejected:
+        problems.append(f'{rejected} samples rejected: {session.last_rejection()}')
+    if case.outcome == 'reject_safe' and not rejected:
+        problems.append('no sample was rejected')
+    if detail['limit_violations']:
+        problems.append('limit violation: ' + (probe.limits.violations + probe.force_violations)[-1])
+    detail['passed'] = not problems
+    if problems:
+        detail['why'] = '; '.join(problems)
+    return detail
+
+
+def _diag_mode(values: dict):
+    """The controller mode in a /diagnostics key-value list ('free', 'grip', 'safe') or None."""
+    for key in ('mode', 'state'):
+        v = values.get(key)
+        v = 'grip' if v == 'retuned' else v
+        if v in ('free', 'grip', 'safe'):
+            return v
+    return None
+
+
+def _watchdog_latency(case, probe, last_good, rows, session):
+    """Time from the last good input of the silenced source to the first safe output (s)."""
+    if case.kind == 'restart':
+        sources = ('instrument', 'actuator')
+    else:
+        sources = (case.source,)
+    # the last good sample went out just before the fault window began
+    last = max(last_good[s] for s in sources if s in last_good)
+    if last != last:
+        return None
+    safe = [r for r in rows if r[3] == 0.0 and r[1] >= last]
+    if not safe:
+        return None
+    return safe[0][1] - last
+
+
+def _steps_to_safe(case, probe, last_good, rows, timeout):
+    """Control periods after the watchdog timeout expired until the first safe output.
+
+    Counts the controller's own outputs stamped after ``last input + timeout`` up to and
+    including the first safe one (1 = the first period after the timeout). Independent of
+    scheduling stalls of a loaded machine, which the wall-clock latency includes.
+    """
+    sources = ('instrument', 'actuator') if case.kind == 'restart' else (case.source,)
+    last = max(last_good[s] for s in sources if s in last_good)
+    if last != last:
+        return None
+    steps = 0
+    for r in rows:
+        if r[1] > last + timeout:
+            steps += 1
+            if r[3] == 0.0:
+                return steps
+        elif r[3] == 0.0 and r[1] >= last:
+            return 0   # safe before the timeout (e.g. another check tripped first)
+    return None
+
+
+def run_param_set_case(session: Session, case: FaultCase) -> dict:
+    """A runtime parameter set: refused with a reason (old value kept), or bounded."""
+    from grip_force_ros.faults.probe import wait_until
+    probe, params = session.probe, session.params
+    detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                    'description': case.description}
+    before = {k: session.get_parameter(k) for k in case.params}
+    violations_before = len(probe.limits.violations) + len(probe.force_violations)
+    problems = []
+    try:
+        results = session.set_parameters(case.params, atomic=len(case.params) > 1)
+    except Exception as exc:  # noqa: BLE001
+        detail.update(passed=False, why=f'parameter service failed: {exc}')
+        return detail
+    after = {k: session.get_parameter(k) for k in case.params}
+    reasons = [r for ok, r in results if not ok]
+    detail['results'] = [{'successful': ok, 'reason': r} for ok, r in results]
+    if case.outcome == 'refuse_set':
+        if not reasons:
+            problems.append('the set was accepted')
+        elif case.reason and not any(re.search(case.reason, r, re.I) for r in reasons):
+            problems.append(f'reason {reasons[0]!r} does not match {case.reason!r}')
+        if after != before:
+            problems.append(f'value changed from {before} to {after}')
+    else:   # bounded: accepted, the output stays within the hardware limits
+        if reasons:
+            problems.append(f'refused: {reasons[0]}')
+        probe.master_angle = case.master_angle if case.master_angle is not None else GRIP_MASTER_ANGLE
+        probe.clear_records()
+        t0 = probe.now()
+        time.sleep(0.6)
+        targets = [f for recv, _, f in probe.targets if recv >= t0]
+        peak = max(targets) if targets else math.nan
+        detail['peak_target_force'] = peak
+        detail['max_grip_force'] = params.max_grip_force
+        if not targets or not peak > 0:
+            problems.append('no grip target after the change')
+        elif peak > params.max_grip_force * (1 + 1e-9):
+            problems.append(f'target {peak:.3f} N above max_grip_force {params.max_grip_force} N')
+        # restore
+        session.set_parameters({k: v for k, v in before.items()})
+        probe.master_angle = GRIP_MASTER_ANGLE
+        wait_until(lambda: session.gripping(probe.now()), RECOVERY_TIMEOUT)
+    detail['limit_violations'] = len(probe.limits.violations) + len(probe.force_violations) - violations_before
+    if detail['limit_violations']:
+        problems.append('limit violation')
+    detail['passed'] = not problems
+    if problems:
+        detail['why'] = '; '.join(problems)
+    return detail
+
+
+def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 30.0) -> list[dict]:
+    """Start the controller executable with each bad parameter file (in parallel)."""
+    base = read_params_yaml(config)
+    tmp = Path(tempfile.mkdtemp(prefix='grip_force_faultcheck_'))
+    procs = []
+    for case in cases:
+        path = tmp / f'{case.name}.yaml'
+        path.write_text(bad_params_text(base, case.params))
+        # In a namespace of its own, /diagnostics too: a node that wrongly starts must not
+        # drive the plant of the in-process cases that run meanwhile.
+        cmd = [sys.executable, '-m', 'grip_force_ros.nodes.controller', '--ros-args',
+               '--params-file', str(path), '-r', f'__ns:={ISOLATION_NS}',
+               '-r', f'{topics.DIAGNOSTICS}:={ISOLATION_NS}/diagnostics']
+        procs.append((case, subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                             text=True, env=dict(os.environ))))
+    details = []
+    deadline = time.monotonic() + timeout
+    for case, proc in procs:
+        detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                  'description': case.description}
+        try:
+            out, err = proc.communicate(timeout=max(0.1, deadline - time.monotonic()))
+            code = proc.returncode
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+            code = None
+        lines = [ln for ln in (err or '').splitlines() if ln.strip()]
+        detail['exit_code'] = code
+        detail['stderr'] = lines[-1][:300] if lines else ''
+        problems = []
+        if code is None:
+            problems.append('the node started with this file (still running)')
+        elif code == 0:
+            problems.append('exit code 0')
+        if case.reason and not re.search(case.reason, err or '', re.I):
+            problems.append(f'stderr does not match {case.reason!r}')
+        if 'Traceback' in (err or ''):
+            problems.append('a Python traceback instead of a clear message')
+        detail['passed'] = not problems
+        if problems:
+            detail['why'] = '; '.join(problems)
+        details.append(detail)
+    return details
+
+
+# ---------------------------------------------------------------------------- all of it
+def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike = DEFAULT_CONFIG,
+                   progress=None) -> dict:
+    """Run ``cases`` (default: the whole catalogue) and return the report.
+
+    Parameters
+    ----------
+    cases : list of FaultCase, optional
+    config : path
+        Instrument YAML of the controller under test.
+    progress : callable, optional
+        ``progress(detail)`` after each case.
+
+    Returns
+    -------
+    dict
+        ``cases``, ``passed``, ``crashes``, ``limit_violations``, ``failures`` (names and
+        why), ``details`` (one dict per case) and ``seconds``.
+    """
+    start = time.monotonic()
+    config = resolve_config(config)
+    cases = catalogue() if cases is None else list(cases)
+    file_cases = [c for c in cases if c.kind == 'param_file']
+    file_thread_result: list = []
+    file_thread = None
+    if file_cases:   # separate processes: run them while the in-process cases run
+        file_thread = threading.Thread(
+            target=lambda: file_thread_result.extend(run_param_file_cases(file_cases, config)),
+            daemon=True)
+        file_thread.start()
+    details: list[dict] = []
+    crashes = 0
+    violations = 0
+    for sensor in (False, True):
+        group = [c for c in cases if c.kind != 'param_file' and c.sensor == sensor]
+        if not group:
+            continue
+        session = None
+        for case in group:
+            if session is None:
+                session = Session(config, sensor=sensor)
+            try:
+                if case.kind == 'param_set':
+                    detail = run_param_set_case(session, case)
+                else:
+                    detail = run_message_case(session, case)
+            except Exception:  # noqa: BLE001 - a harness error fails the case, not the run
+                detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                          'passed': False, 'why': 'harness error: ' + traceback.format_exc(limit=3)}
+            if not session.alive:
+                crashes += 1
+                detail['passed'] = False
+                detail['crash'] = (session.crash or 'executor thread ended')[-800:]
+                detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
+            violations += detail.get('limit_violations', 0) or 0
+            details.append(detail)
+            if progress:
+                progress(detail)
+            if not session.alive or not detail.get('passed'):
+                session.close()   # a fresh controller for the next case
+                session = None
+        if session is not None:
+            session.close()
+    if file_thread is not None:
+        file_thread.join()
+        for detail in file_thread_result:
+            details.append(detail)
+            if progress:
+                progress(detail)
+    failures = [{'name': d['name'], 'why': d.get('why', '')} for d in details if not d.get('passed')]
+    return {
+        'cases': len(details),
+        'passed': sum(bool(d.get('passed')) for d in details),
+        'crashes': crashes,
+        'limit_violations': violations,
+        'failures': failures,
+        'seconds': round(time.monotonic() - start, 1),
+        'details': details,
+    }
