@@ -25,6 +25,7 @@ COMMANDS = {
     'realdata': 'realdata',
     'diagnose': 'diagnose',
     'blindcheck': 'blindcheck',
+    'faultcheck': 'faultcheck',
 }
 
 
