@@ -102,6 +102,16 @@ class _Data:
                                            _concat(frames, 'jaw_tension'), self.jaw_velocity])
         self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
 
+    def shift(self, X, delay: float):
+        """Columns of X delayed by ``delay`` (s), log by log: what a delayed sensor would see."""
+        out = np.empty_like(X)
+        for i in np.unique(self.log_index):
+            sel = self.log_index == i
+            t = self.t[sel]
+            for j in range(X.shape[1]):
+                out[sel, j] = np.interp(t - delay, t, X[sel, j])
+        return out
+
     def designs(self, effect, grid_value):
         parts = [effect.build(f, grid_value) for f in self.frames]
         base = np.concatenate([d.force_base for d in parts])
@@ -185,6 +195,20 @@ def _full_fit(data: _Data, Xf, Xa, rng):
 #: jaw angle; for the measured column, FORCE_FLOOR times its RMS.
 ANGLE_FLOOR_MS = 1e-8
 FORCE_FLOOR = 1e-3
+
+
+def _combine(data, first, other, first_name, other_name, fits):
+    """Design of two effects together: both sets of columns; with a sensor delay the
+    other effect's columns are delayed too (the sensor sees the whole force late)."""
+    (f1, a1), (f2, a2) = first, other
+    if other_name == 'sensor_delay':
+        Xf = data.shift(f1, float(fits[other_name]['value']))
+    elif first_name == 'sensor_delay':
+        Xf = np.column_stack([f1, data.shift(f2[:, 1:], float(fits[first_name]['value']))])
+    else:
+        Xf = np.column_stack([f1, f2[:, 1:]])
+    Xa = np.column_stack([a1, a2[:, 4:]])
+    return Xf, Xa
 
 
 def _score(fit, base, force_floor_ms: float) -> float:
@@ -366,19 +390,40 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     # 4. how far
     gap_before = math.sqrt(base['test_mse_f'])
     angle_before = math.sqrt(base['test_mse_a'])
-    if winner == NONE:
-        gap_after, angle_after, resid_after = gap_before, angle_before, base['resid_f']
-    else:
-        gap_after = math.sqrt(fits[winner]['test_mse_f'])
-        angle_after = math.sqrt(fits[winner]['test_mse_a'])
-        resid_after = fits[winner]['resid_f']
-    verdict = {'effect': winner, 'gap_before': gap_before, 'gap_after': gap_after,
+    named = [] if winner == NONE else [winner]
+    final = base if winner == NONE else fits[winner]
+    first_gap = math.sqrt(final['test_mse_f'])
+    if winner != NONE:
+        # a second effect on top of the first (pairs of effects): same margin, judged against
+        # the first effect's held-out loss
+        say('looking for a second effect')
+        first_design = data.designs(EFFECTS[winner], fits[winner]['value'])
+        best2 = None
+        for name in EFFECT_NAMES:
+            if name == winner:
+                continue
+            other = data.designs(EFFECTS[name], fits[name]['value'])
+            Xf, Xa = _combine(data, first_design, other, winner, name, fits)
+            fit2 = _evaluate(data, lambda _: (Xf, Xa), (None,))
+            score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
+            if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
+                best2 = (score2, name, fit2)
+        if best2 is not None:
+            named.append(best2[1])
+            final = best2[2]
+    gap_after = math.sqrt(final['test_mse_f'])
+    angle_after = math.sqrt(final['test_mse_a'])
+    resid_after = final['resid_f']
+    verdict = {'effect': winner, 'effects': named or [NONE], 'gap_before': gap_before, 'gap_after': gap_after,
+               'gap_after_first': first_gap,
                'shrink': 1.0 - gap_after / gap_before if gap_before > 0 else 0.0,
                'unit': unit, 'measured': measured,
                'angle_gap_before': angle_before, 'angle_gap_after': angle_after, 'angle_unit': 'rad',
                'runner_up': ranking[1]['effect'],
-               'rule': f'an effect is named when its held-out score (log MSE ratio, force + angle, '
-                       f'+{param_penalty} per parameter) is below log(1 - {min_improvement})'}
+               'rule': f'an effect is named when its held-out score (log ratio of the Huber loss of the '
+                       f'force + log ratio of the angle MSE, +{param_penalty} per parameter) is below '
+                       f'log(1 - {min_improvement}); a second effect when it passes the same margin on '
+                       f'top of the first; gap_after is with every named effect'}
 
     # 2. where
     regions = _regions(data, base['resid_f'], unit)
