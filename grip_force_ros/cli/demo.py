@@ -36,9 +36,10 @@ def add_arguments(parser) -> None:
     parser.add_argument('--plant-error', type=float, default=0.2,
                         help='--compare-instruments: relative error of the simulated plant\'s '
                              'friction and cable stiffness vs the YAML (default %(default)s)')
-    parser.add_argument('--sequential', action='store_true',
-                        help='--compare-instruments: one instrument at a time (default: in '
-                             'parallel, one ROS domain each)')
+    parser.add_argument('--parallel', action='store_true',
+                        help='--compare-instruments: run the instruments of each stage at the '
+                             'same time, one ROS domain each (needs a core per instrument: on a '
+                             'loaded machine the controllers miss their 30 ms watchdog)')
     parser.add_argument('--quiet', action='store_true', help='no live progress')
 
 
@@ -79,6 +80,8 @@ def print_report(result: dict, stream=sys.stdout) -> None:
     events = result.get('safe_state_entries') or []
     w(f"safe state        {len(events)} entr{'y' if len(events) == 1 else 'ies'} during the task"
       + (f" (first at {events[0]['t']:.2f} s: {events[0]['reason']})" if events else '') + '\n')
+    for problem in result.get('problems') or []:
+        w(f"WARNING           {problem} (a starved node: the machine is overloaded)\n")
     w(f"bag               {result['bag']} ({sum(result['messages'].values())} messages)\n")
     w(f"plot              {result['plot']}\n")
 
@@ -99,7 +102,7 @@ def run(args) -> int:
             configs = [find_config(c) for c in args.configs] if args.configs else None
             report = compare_instruments(
                 out, configs=configs, plant_error=args.plant_error,
-                parallel=not args.sequential, domain_id=args.domain_id,
+                parallel=args.parallel, domain_id=args.domain_id,
                 log=None if args.quiet else sys.stderr)
             if args.json:
                 print(json.dumps(report, indent=1))

@@ -198,3 +198,31 @@ def safe_state_entries(diagnostics, window: tuple[float, float], offset: float =
                             'reason': status['values'].get('reasons') or status['message']})
             last = mode
     return out
+
+
+def largest_gap(times: np.ndarray, window: tuple[float, float]) -> float:
+    """Longest interval (s) without a sample inside ``window`` (its edges count as samples)."""
+    t = np.asarray(times, float)
+    inside = t[(t > window[0]) & (t < window[1])]
+    edges = np.concatenate([[window[0]], inside, [window[1]]])
+    return float(np.max(np.diff(edges)))
+
+
+def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str]:
+    """Why a run cannot be trusted (empty if it can): stalls and safe-state entries in hold.
+
+    A loaded machine can starve a node for a while; the controller then trips its
+    watchdog. Such a run measures the machine, not the controller.
+    """
+    problems = []
+    gap = metrics.get('largest_gap_hold', 0.0)
+    if gap > max_gap:
+        problems.append(f'a topic went silent for {gap * 1e3:.0f} ms during the hold phase')
+    hold = windows.get('hold')
+    for event in metrics.get('safe_events', []):
+        if hold and hold[0] <= event['t'] <= hold[1]:
+            problems.append(f"safe state at {event['t']:.2f} s: {event['reason']}")
+            break
+    if not metrics.get('target_force', 0.0) > 0:
+        problems.append('no grip force target during the hold phase')
+    return problems

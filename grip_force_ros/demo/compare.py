@@ -95,14 +95,25 @@ def naive_gain(reference_config: Path) -> float:
     return float(GripForceModel(p).inverse(p.grip_force_max, 0.0, jaw, 'needle'))
 
 
+#: Attempts per run: a run whose hold phase a starved node spoiled is done again.
+ATTEMPTS = 3
+
+
 def _run_worker(job: dict[str, Any]) -> dict[str, Any]:
-    """One run in a fresh process (own rclpy, own GIL). Returns a JSON-able summary."""
+    """One run (again if the machine spoiled it). Returns a JSON-able summary."""
     from grip_force_ros.demo.run import RunSpec, run_task
     spec = RunSpec(**job['spec'])
     t0 = time.monotonic()
-    result = run_task(spec, job['out_dir'], job['domain_id'], analyse=job['analyse'],
-                      plot=job['plot'])
+    spoiled = []
+    for attempt in range(1, ATTEMPTS + 1):
+        out_dir = Path(job['out_dir']) if attempt == 1 else Path(f"{job['out_dir']}_retry{attempt - 1}")
+        result = run_task(spec, out_dir, job['domain_id'], analyse=job['analyse'],
+                          plot=job['plot'])
+        if not result.problems:
+            break
+        spoiled.append({'out_dir': str(out_dir), 'problems': result.problems})
     out = result.as_dict()
+    out['spoiled_attempts'] = spoiled
     out['wall_time'] = time.monotonic() - t0
     return out
 
@@ -112,7 +123,7 @@ def _run_all(jobs: list[dict], parallel: bool, log: TextIO | None) -> list[dict]
         results = []
         for job in jobs:
             results.append(_run_worker(job))
-            _log(log, f"  {job['spec']['label']}: done ({results[-1]['wall_time']:.1f} s)")
+            _log(log, _done(job, results[-1]))
         return results
     ctx = multiprocessing.get_context('spawn')
     with cf.ProcessPoolExecutor(max_workers=len(jobs), mp_context=ctx) as pool:
@@ -120,8 +131,21 @@ def _run_all(jobs: list[dict], parallel: bool, log: TextIO | None) -> list[dict]
         results = []
         for job, fut in zip(jobs, futures):
             results.append(fut.result())
-            _log(log, f"  {job['spec']['label']}: done ({results[-1]['wall_time']:.1f} s)")
+            _log(log, _done(job, results[-1]))
         return results
+
+
+def _done(job: dict, result: dict) -> str:
+    ratio = (result.get('metrics') or {}).get('steady_ratio')
+    text = f"  {job['spec']['label']}: done ({result['wall_time']:.1f} s"
+    if ratio is not None:
+        text += f', steady hold force / target {ratio:.3f}'
+    if result['spoiled_attempts']:
+        text += f", {len(result['spoiled_attempts'])} spoiled run(s) redone: " \
+                f"{result['spoiled_attempts'][0]['problems'][0]}"
+    if result.get('problems'):
+        text += f"; STILL SPOILED: {result['problems'][0]}"
+    return text + ')'
 
 
 def _log(stream: TextIO | None, text: str) -> None:
@@ -131,7 +155,7 @@ def _log(stream: TextIO | None, text: str) -> None:
 
 
 def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = None,
-                        plant_error: float = 0.2, parallel: bool = True,
+                        plant_error: float = 0.2, parallel: bool = False,
                         domain_id: int | None = None, task_duration: float = TASK_DURATION,
                         log: TextIO | None = None) -> dict[str, Any]:
     """Calibrate, then run the four conditions on every instrument; return the report.
@@ -146,7 +170,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         Relative friction / stiffness error of each simulated plant.
     parallel : bool
         Run the instruments of a stage at the same time (one process and
-        ROS domain each).
+        ROS domain each). Needs spare cores: each run is three 1 kHz nodes.
     domain_id : int, optional
         First ROS domain id to use (default: free ones).
 
@@ -243,7 +267,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
             per['runs'][condition] = {
                 'steady_ratio': m.get('steady_ratio'), 'target_force': m.get('target_force'),
                 'measured_force': m.get('measured_force'),
-                'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag']}
+                'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag'],
+                'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts']}
         instruments.append(per)
     report: dict[str, Any] = {'instruments': instruments}
     for condition in CONDITIONS:

@@ -116,6 +116,7 @@ class RunResult:
     plot: Path | None = None
     timing: dict = field(default_factory=dict)
     safe_events: list = field(default_factory=list)
+    problems: list = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -129,7 +130,8 @@ class RunResult:
             'plot': str(self.plot) if self.plot else None,
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
-            'metrics': self.metrics, 'safe_state_entries': self.safe_events, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
+            'metrics': self.metrics, 'safe_state_entries': self.safe_events,
+            'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
 
@@ -390,6 +392,13 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     events = analysis.safe_state_entries(diagnostics, (0.0, result.trajectory.duration), start)
     result.metrics['safe_state_entries'] = len(events)
     result.safe_events = events
+    if 'hold' in windows:
+        hold = windows['hold']
+        result.metrics['largest_gap_hold'] = max(
+            analysis.largest_gap(series[t]['t'] - start, hold)
+            for t in (topics.TARGET_FORCE, topics.MEASURED_FORCE, topics.INSTRUMENT_JS,
+                      topics.ACTUATOR_JS))
+    result.problems = analysis.run_problems({**result.metrics, 'safe_events': events}, windows)
     if plot:
         from grip_force_ros.demo.plot import summary_plot
         result.plot = summary_plot(data, windows, result.metrics, result.out_dir / 'summary.png',
