@@ -1,0 +1,364 @@
+"""The bench's own rclpy processes: ping / echo (the middleware floor) and the product probe.
+
+Run by :mod:`grip_force_ros.bench.loop`, one process each::
+
+    python -m grip_force_ros.bench.child ping  --seconds 20 [variant options]
+    python -m grip_force_ros.bench.child echo  [variant options]
+    python -m grip_force_ros.bench.child probe --seconds 20 --period 0.001
+
+``ping`` plays the sim: a 1 kHz timer publishes the actuator state
+(``sensor_msgs/JointState`` on :data:`topics.ACTUATOR_JS`) stamped with the
+wall clock (``time.time_ns``, the clock of rclpy's ROS time); ``echo`` plays the
+controller at its barest: it answers every state in the subscription callback
+with a current command (``JointState`` on :data:`topics.SERVO_CURRENT`) that
+carries the state's stamp. The round trip is the receive time minus that stamp.
+
+``probe`` measures the product: it listens (passively) to the real sim's actuator
+state and the real controller's command. The controller stamps each command with
+the stamp of the actuator state it was computed from, so the command's receive
+time minus its stamp is the sim -> controller -> sim round trip; the gaps between
+commands give the controller's missed periods.
+
+Protocol on stdout (one line each, read by the parent): ``START`` when the
+measurement window opens (after discovery and a warm-up), then one JSON line
+with the figures, then the process exits.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+
+from grip_force_ros import topics
+from grip_force_ros.bench.stats import latency_summary, missed_periods
+
+#: Longest wait for the first answer before giving up (s).
+DISCOVERY_TIMEOUT = 20.0
+
+
+def make_qos(depth: int) -> QoSProfile:
+    """RELIABLE, VOLATILE, KEEP_LAST ``depth`` (the product's state/command QoS)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def make_executor(kind: str):
+    """'events' (rclpy.experimental.EventsExecutor), 'single' or 'multi' (2 threads)."""
+    if kind == 'events':
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    if kind == 'multi':
+        return MultiThreadedExecutor(num_threads=2)
+    return SingleThreadedExecutor()
+
+
+def stamp_ns(stamp) -> int:
+    """builtin_interfaces/Time -> ns."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class _Window:
+    """Discovery, warm-up and measurement window of a measuring process."""
+
+    def __init__(self, node: Node, seconds: float, warmup: float, capacity: int, gc_freeze: bool):
+        self.node = node
+        self.seconds = seconds
+        self.warmup = warmup
+        self.gc_freeze = gc_freeze
+        self.state = 'discover'
+        self.t_state = time.monotonic()
+        self.t_created = self.t_state
+        self.finished = Future()
+        self.capacity = capacity
+        self.ticks = np.zeros(capacity, np.int64)      # ns, perf_counter
+        self.n_ticks = 0
+        self.latencies = np.zeros(capacity, np.int64)  # ns
+        self.n_latencies = 0
+        self.received = 0
+        self.sent = 0
+        self.result: dict = {}
+
+    @property
+    def measuring(self) -> bool:
+        return self.state == 'measure'
+
+    def saw_answer(self) -> None:
+        if self.state == 'discover':
+            self.state, self.t_state = 'warm', time.monotonic()
+
+    def record_tick(self, t_ns: int) -> None:
+        if self.n_ticks < self.capacity:
+            self.ticks[self.n_ticks] = t_ns
+            self.n_ticks += 1
+
+    def record_latency(self, lat_ns: int) -> None:
+        self.received += 1
+        if self.n_latencies < self.capacity:
+            self.latencies[self.n_latencies] = lat_ns
+            self.n_latencies += 1
+
+    def advance(self, summary) -> None:
+        """Move through the states; call it from a periodic callback."""
+        now = time.monotonic()
+        if self.state == 'discover' and now - self.t_created > DISCOVERY_TIMEOUT:
+            self.result = {'error': f'no answer within {DISCOVERY_TIMEOUT:.0f} s (discovery failed?)'}
+            self._finish()
+        elif self.state == 'warm' and now - self.t_state >= self.warmup:
+            if self.gc_freeze:
+                gc.collect()
+                gc.freeze()
+            self.state, self.t_state = 'measure', now
+            print('START', flush=True)
+        elif self.state == 'measure' and now - self.t_state >= self.seconds:
+            self.state = 'done'
+            self.result = summary()
+            self._finish()
+
+    def _finish(self) -> None:
+        print(json.dumps(self.result), flush=True)
+        if not self.finished.done():
+            self.finished.set_result(True)
+
+
+class Ping(Node):
+    """The sim's side of the floor: 1 kHz stamped actuator state out, command back."""
+
+    def __init__(self, opts):
+        super().__init__('bench_ping')
+        self.period = opts.period
+        self.prealloc = opts.prealloc
+        capacity = int((opts.seconds + 5.0) / opts.period) + 1000
+        self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
+        group = _callback_group(opts.callback_groups)
+        sub_group = _callback_group(opts.callback_groups)
+        self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, make_qos(opts.depth))
+        self.sub = self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_answer,
+                                            make_qos(opts.depth), callback_group=sub_group)
+        self.msg = _actuator_state()
+        self.timer = self.create_timer(opts.period, self.on_tick, callback_group=group)
+
+    def on_tick(self) -> None:
+        w = self.window
+        if w.measuring:
+            w.record_tick(time.perf_counter_ns())
+        msg = self.msg if self.prealloc else _actuator_state()
+        t = time.time_ns()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
+        msg.position[0] = (t % 1_000_000) * 1e-6
+        self.pub.publish(msg)
+        if w.measuring:
+            w.sent += 1
+        w.advance(self.summary)
+
+    def on_answer(self, msg: JointState) -> None:
+        lat = time.time_ns() - stamp_ns(msg.header.stamp)
+        w = self.window
+        w.saw_answer()
+        if w.measuring:
+            w.record_latency(lat)
+
+    def summary(self) -> dict:
+        w = self.window
+        out = {'latency': latency_summary(w.latencies[:w.n_latencies]),
+               'periods': missed_periods(w.ticks[:w.n_ticks], self.period),
+               'sent': w.sent, 'received': w.received}
+        out['lost_fraction'] = 1.0 - w.received / w.sent if w.sent else float('nan')
+        return out
+
+
+class Echo(Node):
+    """The controller's side of the floor: answer each state, its stamp carried.
+
+    ``--answer callback`` (the floor) answers in the subscription callback;
+    ``--answer timer`` answers the newest state on its own 1 kHz timer, as the
+    controller node does (the cost of an unsynchronised timer, measured bare).
+    """
+
+    def __init__(self, opts):
+        super().__init__('bench_echo')
+        self.prealloc = opts.prealloc
+        self.pub = self.create_publisher(JointState, topics.SERVO_CURRENT, make_qos(opts.depth))
+        self.sub = self.create_subscription(JointState, topics.ACTUATOR_JS, self.on_state,
+                                            make_qos(opts.depth),
+                                            callback_group=_callback_group(opts.callback_groups))
+        self.msg = _command()
+        self.latest = None
+        self.answer_on_timer = opts.answer == 'timer'
+        if self.answer_on_timer:
+            self.timer = self.create_timer(opts.period, self.on_tick)
+        if opts.gc_freeze:
+            self.freeze_timer = self.create_timer(2.0, self._freeze)
+
+    def _freeze(self) -> None:
+        gc.collect()
+        gc.freeze()
+        self.freeze_timer.cancel()
+
+    def on_state(self, msg: JointState) -> None:
+        if self.answer_on_timer:
+            self.latest = msg
+        else:
+            self.answer(msg)
+
+    def on_tick(self) -> None:
+        if self.latest is not None:
+            self.answer(self.latest)
+
+    def answer(self, msg: JointState) -> None:
+        out = self.msg if self.prealloc else _command()
+        out.header.stamp = msg.header.stamp
+        out.effort[0] = msg.position[0] * 0.5
+        self.pub.publish(out)
+
+
+class Probe(Node):
+    """Listens to the product: actuator states of the sim, current commands of the controller.
+
+    The controller runs on its own 1 kHz timer and stamps each command with its
+    clock at the tick. The state a command answers is the newest actuator state
+    delivered before that tick; the probe takes its own delivery time of each
+    state as the controller's (both are readers of the same publication on this
+    machine). Round trip of a command = its arrival here minus the stamp (the
+    sim's publish time) of the state it answers.
+    """
+
+    def __init__(self, opts):
+        super().__init__('bench_probe')
+        self.period = opts.period
+        capacity = int((opts.seconds + 5.0) / opts.period) + 1000
+        self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
+        qos = make_qos(opts.depth)
+        # ns, wall clock: stamp and arrival of each actuator state and each command
+        self.states = np.zeros((capacity, 2), np.int64)
+        self.n_states = 0
+        self.commands = np.zeros((capacity, 2), np.int64)
+        self.n_commands = 0
+        self.create_subscription(JointState, topics.ACTUATOR_JS, self.on_state, qos)
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_command, qos)
+        self.timer = self.create_timer(0.05, lambda: self.window.advance(self.summary))
+
+    def on_state(self, msg: JointState) -> None:
+        now = time.time_ns()
+        if self.window.measuring and self.n_states < self.window.capacity:
+            self.states[self.n_states] = stamp_ns(msg.header.stamp), now
+            self.n_states += 1
+
+    def on_command(self, msg: JointState) -> None:
+        now = time.time_ns()
+        w = self.window
+        w.saw_answer()
+        if w.measuring and self.n_commands < w.capacity:
+            self.commands[self.n_commands] = stamp_ns(msg.header.stamp), now
+            self.n_commands += 1
+
+    def summary(self) -> dict:
+        return match_commands(self.states[:self.n_states], self.commands[:self.n_commands],
+                              self.period)
+
+
+def match_commands(states: np.ndarray, commands: np.ndarray, period: float) -> dict:
+    """Round trips and controller periods from the probe's records.
+
+    Parameters
+    ----------
+    states : ndarray, shape (n, 2)
+        Actuator states: sim stamp, arrival at the probe (ns, wall clock).
+    commands : ndarray, shape (m, 2)
+        Current commands: controller stamp (its tick), arrival at the probe (ns).
+    period : float
+        Control period (s).
+
+    Returns
+    -------
+    dict
+        ``latency`` (round trip, ms), ``periods`` (missed controller periods, from
+        the command stamps), ``sim_periods`` (from the state stamps), counts.
+    """
+    states = states[np.argsort(states[:, 1], kind='stable')]
+    commands = commands[np.argsort(commands[:, 0], kind='stable')]
+    newest = np.searchsorted(states[:, 1], commands[:, 0], side='right') - 1
+    ok = newest >= 0
+    round_trips = commands[ok, 1] - states[newest[ok], 0]
+    return {'latency': latency_summary(round_trips),
+            'periods': missed_periods(commands[:, 0], period),
+            'sim_periods': missed_periods(np.sort(states[:, 0]), period),
+            'states': int(len(states)), 'commands': int(len(commands)),
+            'stale_answers': int(np.sum(np.diff(newest[ok]) == 0)) if ok.any() else 0}
+
+
+def _callback_group(kind: str):
+    if kind == 'reentrant':
+        return ReentrantCallbackGroup()
+    if kind == 'separate':
+        return MutuallyExclusiveCallbackGroup()
+    return None      # the node's default group
+
+
+def _actuator_state() -> JointState:
+    msg = JointState()
+    msg.name = [topics.DRUM_JOINT]
+    msg.position = [0.0]
+    msg.velocity = [0.0]
+    msg.effort = [0.0]
+    return msg
+
+
+def _command() -> JointState:
+    msg = JointState()
+    msg.name = [topics.DRUM_JOINT]
+    msg.effort = [0.0]
+    return msg
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.child')
+    p.add_argument('role', choices=('ping', 'echo', 'probe'))
+    p.add_argument('--seconds', type=float, default=10.0, help='measurement window (s)')
+    p.add_argument('--warmup', type=float, default=1.0, help='after the first answer (s)')
+    p.add_argument('--period', type=float, default=1e-3, help='loop period (s)')
+    p.add_argument('--executor', choices=('events', 'single', 'multi'), default='events')
+    p.add_argument('--depth', type=int, default=1, help='QoS KEEP_LAST depth')
+    p.add_argument('--gc-freeze', action='store_true', help='gc.freeze() after start-up')
+    p.add_argument('--prealloc', action='store_true', help='reuse one message per publisher')
+    p.add_argument('--answer', choices=('callback', 'timer'), default='callback',
+                   help='echo: answer in the subscription callback or on a 1 kHz timer')
+    p.add_argument('--callback-groups', choices=('default', 'separate', 'reentrant'),
+                   default='default')
+    return p
+
+
+def main(argv=None) -> int:
+    opts = build_parser().parse_args(argv)
+    rclpy.init()
+    node = None
+    try:
+        node = {'ping': Ping, 'echo': Echo, 'probe': Probe}[opts.role](opts)
+        executor = make_executor(opts.executor)
+        executor.add_node(node)
+        window = getattr(node, 'window', None)
+        # EventsExecutor (rclpy 7.1.6) never runs a timer inside an unbounded
+        # spin_until_future_complete(future): spin in bounded slices instead.
+        while rclpy.ok() and (window is None or not window.finished.done()):
+            executor.spin_until_future_complete(window.finished if window else Future(), timeout_sec=0.2)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

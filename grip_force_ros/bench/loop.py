@@ -1,0 +1,214 @@
+"""The 1 kHz loop over DDS: the middleware floor and the product, side by side.
+
+* :func:`run_floor`: bare rclpy ping-pong between two processes (:mod:`.child`
+  ``ping`` and ``echo``), the product's message types, one variant of the
+  settings (executor, QoS depth, gc.freeze, preallocated messages, callback groups).
+* :func:`run_product`: the real ``sim_instrument``, ``controller`` and ``master``
+  executables with an instrument YAML, measured by :mod:`.child` ``probe``.
+
+Both return the same structure: ``latency`` (p50/p99/max round trip, ms),
+``periods`` (missed periods of the 1 kHz timer), ``cpu`` (% of one core per
+process), plus what is particular to each.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from grip_force_ros.bench.procs import BenchError, Child, executable, python_module, ros_env, stop_all
+from grip_force_ros.bench.stats import ratio
+
+CHILD = 'grip_force_ros.bench.child'
+#: Longest wait for discovery plus warm-up before a window opens (s).
+START_TIMEOUT = 60.0
+#: The bench's default instrument for the product run.
+DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Settings of the rclpy processes of one floor run.
+
+    Attributes
+    ----------
+    executor : str
+        'events' (``rclpy.experimental.EventsExecutor``), 'single'
+        (``SingleThreadedExecutor``) or 'multi' (``MultiThreadedExecutor``, 2 threads).
+    depth : int
+        QoS KEEP_LAST depth of the state and command topics.
+    gc_freeze : bool
+        ``gc.collect(); gc.freeze()`` once start-up is over.
+    prealloc : bool
+        One message object per publisher, reused every period.
+    callback_groups : str
+        'default' (the node's group), 'separate' (one mutually exclusive group per
+        callback) or 'reentrant'.
+    answer : str
+        'callback': the echo answers in its subscription callback (the floor);
+        'timer': on its own 1 kHz timer, the newest state (the controller's structure).
+    """
+
+    executor: str = 'events'
+    depth: int = 1
+    gc_freeze: bool = True
+    prealloc: bool = True
+    callback_groups: str = 'default'
+    answer: str = 'callback'
+
+    def args(self) -> list[str]:
+        out = ['--executor', self.executor, '--depth', str(self.depth),
+               '--callback-groups', self.callback_groups, '--answer', self.answer]
+        if self.gc_freeze:
+            out.append('--gc-freeze')
+        if self.prealloc:
+            out.append('--prealloc')
+        return out
+
+    def label(self) -> str:
+        return (f'{self.executor}, depth {self.depth}, gc.freeze {"on" if self.gc_freeze else "off"}, '
+                f'prealloc {"on" if self.prealloc else "off"}, groups {self.callback_groups}, '
+                f'answer on {self.answer}')
+
+
+#: The settings the bench measures the floor with (the winners of the variant runs).
+BEST = Variant()
+
+#: Variants measured by ``grip-force bench --variants``: the baseline and one change at a time.
+VARIANTS = (
+    Variant('single', 10, False, False),
+    Variant('events', 10, False, False),
+    Variant('single', 1, False, False),
+    Variant('single', 10, True, False),
+    Variant('single', 10, False, True),
+    Variant('multi', 10, False, False, 'separate'),
+    Variant('multi', 10, False, False, 'reentrant'),
+    BEST,
+)
+
+
+def _window(measurer: Child, others: list[Child], seconds: float) -> dict:
+    """Wait for START, meter CPU over the window, return the measurer's JSON."""
+    line = measurer.wait_line(lambda line: line == 'START' or line.startswith('{'), START_TIMEOUT)
+    if line != 'START':
+        raise BenchError(f'{measurer.name}: {json.loads(line).get("error", line)}')
+    for c in [measurer] + others:
+        c.cpu_start()
+    line = measurer.wait_line(lambda line: line.startswith('{'), seconds + 30.0)
+    for c in [measurer] + others:
+        c.cpu_stop()
+    result = json.loads(line)
+    if 'error' in result:
+        raise BenchError(f'{measurer.name}: {result["error"]}')
+    result['cpu_percent'] = {c.name: c.cpu_percent for c in [measurer] + others}
+    return result
+
+
+def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: float = 1.0,
+              period: float = 1e-3) -> dict:
+    """Bare rclpy ping-pong at 1 kHz between two processes on loopback.
+
+    Parameters
+    ----------
+    seconds : float
+        Measurement window (s), after discovery and ``warmup`` (s).
+    domain_id : int
+        ROS_DOMAIN_ID of the two processes (nothing else may run in it).
+    variant : Variant
+        Executor and the other settings of both processes.
+    period : float
+        Loop period (s).
+
+    Returns
+    -------
+    dict
+        ``latency`` (ms), ``periods`` (missed periods of the ping timer),
+        ``cpu_percent`` per process, ``lost_fraction``, ``variant``.
+    """
+    env = ros_env(domain_id)
+    common = variant.args() + ['--period', str(period)]
+    children = []
+    try:
+        children.append(Child('echo', python_module(CHILD, 'echo', *common), env))
+        children.append(Child('ping', python_module(CHILD, 'ping', '--seconds', str(seconds),
+                                                    '--warmup', str(warmup), *common), env))
+        result = _window(children[1], children[:1], seconds)
+    finally:
+        stop_all(children)
+    result['variant'] = asdict(variant)
+    return result
+
+
+def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
+                period: float = 1e-3, executor: str | None = None) -> dict:
+    """sim -> controller -> sim round trip at 1 kHz, the real executables.
+
+    Starts ``sim_instrument``, ``controller`` (``--params-file config``) and a
+    ``master`` repeating the needle grasp, then the probe (:mod:`.child` ``probe``)
+    that listens to the actuator state and the current command.
+
+    Parameters
+    ----------
+    seconds : float
+        Measurement window (s).
+    domain_id : int
+        ROS_DOMAIN_ID of the run.
+    config : str
+        Instrument YAML for the sim and the controller.
+    executor : str, optional
+        'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
+
+    Returns
+    -------
+    dict
+        ``latency`` (ms, actuator-state stamp -> command received),
+        ``periods`` (missed controller periods, from the commands' arrival),
+        ``sim_periods``, ``cpu_percent`` per process, ``stale_answers`` (commands
+        that answered the same state as the previous one).
+    """
+    extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
+    env = ros_env(domain_id, extra)
+    config = str(Path(config).resolve())
+    params = ['--ros-args', '--params-file', config, '--log-level', 'warn']
+    children = []
+    try:
+        children.append(Child('sim', [executable('sim_instrument'), *params], env))
+        children.append(Child('controller', [executable('controller'), *params], env))
+        children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
+        probe = Child('probe', python_module(CHILD, 'probe', '--seconds', str(seconds),
+                                             '--warmup', str(warmup), '--period', str(period),
+                                             '--depth', '10'), env)
+        children.append(probe)
+        result = _window(probe, children[:3], seconds)
+        for c in children[:3]:
+            if not c.alive():
+                raise BenchError(f'{c.name} died during the run; last output:\n' + '\n'.join(c.tail))
+    finally:
+        stop_all(children)
+    result['config'] = config
+    result['executor'] = executor or 'node default'
+    return result
+
+
+def compare(floor: dict, product: dict) -> dict:
+    """The ``loop`` section: product/floor ratios beside both runs' figures."""
+    fl, pl = floor['latency'], product['latency']
+    return {
+        'p99_ratio': ratio(pl['p99_ms'], fl['p99_ms']),
+        'p50_ratio': ratio(pl['p50_ms'], fl['p50_ms']),
+        'max_ratio': ratio(pl['max_ms'], fl['max_ms']),
+        'missed_fraction': product['periods']['missed_fraction'],
+        'floor_missed_fraction': floor['periods']['missed_fraction'],
+        'floor': {k: fl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
+        'product': {k: pl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
+        'cpu_percent': {'floor': floor['cpu_percent'], 'product': product['cpu_percent']},
+        'goals': {'p99_ratio': 1.5, 'missed_fraction': 0.001},
+    }
+
+
+def time_it(fn, *args, **kwargs):
+    """``(result, wall seconds)`` of one call."""
+    t0 = time.perf_counter()
+    out = fn(*args, **kwargs)
+    return out, time.perf_counter() - t0

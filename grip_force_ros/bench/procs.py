@@ -1,0 +1,178 @@
+"""Child processes of the bench: start, read their protocol lines, CPU, stop; a free ROS domain.
+
+No rclpy in this module (the parent never joins the DDS domain it measures).
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import queue
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Sequence
+
+import psutil
+
+
+class BenchError(RuntimeError):
+    """A bench part could not run (a child died, discovery failed, no free domain)."""
+
+
+#: ROS domains the bench picks from when ROS_DOMAIN_ID is not set (Fast DDS: 0..232).
+DEFAULT_DOMAINS = range(200, 233)
+
+
+class DomainLock:
+    """An exclusive ROS_DOMAIN_ID for one bench run (a lock file per domain).
+
+    Bench runs on one machine never share a domain: each holds ``flock`` on
+    ``<tmp>/grip_force_bench_domain_<id>.lock`` while it runs. When the
+    environment sets ``ROS_DOMAIN_ID`` that domain is the only candidate (the
+    user's choice, e.g. a CI job's own domain); otherwise the first free one of
+    ``candidates``.
+    """
+
+    def __init__(self, candidates: Sequence[int] | None = None):
+        if candidates is None:
+            env = os.environ.get('ROS_DOMAIN_ID')
+            candidates = [int(env)] if env not in (None, '') else list(DEFAULT_DOMAINS)
+        self.candidates = list(candidates)
+        self.domain_id: int | None = None
+        self._file = None
+
+    def __enter__(self) -> int:
+        for domain in self.candidates:
+            path = Path(tempfile.gettempdir()) / f'grip_force_bench_domain_{domain}.lock'
+            f = open(path, 'w')
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.close()
+                continue
+            self._file, self.domain_id = f, domain
+            return domain
+        raise BenchError(f'no free ROS domain among {self.candidates} (other bench runs hold them)')
+
+    def __exit__(self, *exc) -> None:
+        if self._file is not None:
+            fcntl.flock(self._file, fcntl.LOCK_UN)
+            self._file.close()
+            self._file = None
+
+
+def ros_env(domain_id: int, extra: dict | None = None) -> dict:
+    """Environment of a ROS child: loopback discovery, the given domain, unbuffered output."""
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_DOMAIN_ID'] = str(domain_id)
+    env['PYTHONUNBUFFERED'] = '1'
+    env.update(extra or {})
+    return env
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    """Command line running ``python -m module args`` with this interpreter."""
+    return [sys.executable, '-m', module, *args]
+
+
+def executable(name: str) -> str:
+    """Path of a console script installed beside this interpreter (e.g. ``controller``)."""
+    candidate = Path(sys.executable).parent / name
+    return str(candidate) if candidate.exists() else name
+
+
+class Child:
+    """One child process whose stdout lines are read in the background.
+
+    Parameters
+    ----------
+    name : str
+        Label for reports and errors.
+    cmd : list of str
+        Command line.
+    env : dict
+        Environment (see :func:`ros_env`).
+    """
+
+    def __init__(self, name: str, cmd: list[str], env: dict, cwd: str | None = None):
+        self.name = name
+        self.cmd = cmd
+        self.lines: queue.Queue = queue.Queue()
+        self.tail: list[str] = []
+        self.proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
+        self.ps = psutil.Process(self.proc.pid)
+        self._cpu0: float | None = None
+        self._t0 = 0.0
+        self.cpu_percent = float('nan')
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            line = line.rstrip('\n')
+            self.tail = (self.tail + [line])[-20:]
+            self.lines.put(line)
+        self.lines.put(None)
+
+    def wait_line(self, accept, timeout: float) -> str:
+        """The first stdout line for which ``accept(line)`` is true (BenchError on timeout/exit)."""
+        end = time.monotonic() + timeout
+        while True:
+            left = end - time.monotonic()
+            if left <= 0:
+                raise BenchError(f'{self.name}: timed out after {timeout:.0f} s; last output:\n'
+                                 + '\n'.join(self.tail))
+            try:
+                line = self.lines.get(timeout=left)
+            except queue.Empty:
+                continue
+            if line is None:
+                raise BenchError(f'{self.name} exited (code {self.proc.wait()}); last output:\n'
+                                 + '\n'.join(self.tail))
+            if accept(line):
+                return line
+
+    def cpu_seconds(self) -> float:
+        """User + system CPU time of the process so far (s)."""
+        t = self.ps.cpu_times()
+        return t.user + t.system
+
+    def cpu_start(self) -> None:
+        """Open the CPU measurement window."""
+        self._cpu0, self._t0 = self.cpu_seconds(), time.monotonic()
+
+    def cpu_stop(self) -> float:
+        """Close the window: CPU used as a percentage of one core."""
+        if self._cpu0 is not None and self.proc.poll() is None:
+            wall = time.monotonic() - self._t0
+            self.cpu_percent = 100.0 * (self.cpu_seconds() - self._cpu0) / wall if wall > 0 else float('nan')
+        return self.cpu_percent
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, timeout: float = 5.0) -> int:
+        """SIGINT (a clean rclpy shutdown), then SIGTERM, then SIGKILL; the exit code."""
+        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
+            if self.proc.poll() is not None:
+                break
+            try:
+                self.proc.send_signal(sig)
+            except ProcessLookupError:
+                break
+            try:
+                self.proc.wait(wait)
+            except subprocess.TimeoutExpired:
+                continue
+        return self.proc.wait()
+
+
+def stop_all(children: Sequence[Child]) -> None:
+    """Stop children in reverse start order."""
+    for child in reversed(list(children)):
+        child.stop()
