@@ -18,11 +18,11 @@ from typing import Callable, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.task import Future
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from grip_force_ros.params import ParameterError
 
 STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                            reliability=ReliabilityPolicy.RELIABLE,
@@ -33,6 +33,8 @@ STATE_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.VOLATILE)
+
+_RCLError = _rclpy_impl.RCLError
 
 #: Environment variable choosing the executor of ``main``: 'events' or 'single'.
 EXECUTOR_ENV = 'GRIP_FORCE_EXECUTOR'
@@ -130,11 +132,18 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
     parameters are refused (the reason goes to stderr).
     """
-    rclpy.init(args=args)
-    node = None
-    code = 0
     try:
-        node = make_node()
+        rclpy.init(args=args)
+    except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback
+        print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
+        return 2
+    node = None
+    try:
+        try:
+            node = make_node()
+        except ValueError as exc:   # ParameterError and every domain error: one clear line
+            print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
+            return 2
         executor = make_executor()
         executor.add_node(node)
         # A node may end itself by completing its ``finished`` Future.
@@ -144,13 +153,10 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         # the context down: poll with a timeout.
         while rclpy.ok() and not finished.done():
             executor.spin_until_future_complete(finished, timeout_sec=0.5)
-    except ParameterError as exc:
-        print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
-        code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return code
+    return 0

@@ -133,6 +133,16 @@ class NodeParameters:
         if unknown:
             raise ParameterError(
                 f'unknown parameter(s) {unknown}; known: see `grip-force params`')
+        # An instrument file (it names its instrument) must state every hardware limit
+        # of a node that enforces them: a missing one would silently take the schema
+        # default, which belongs to another instrument.
+        if 'instrument_name' in overrides and any(s.group == 'limits' for s in self._specs.values()):
+            missing = sorted(s.name for s in SCHEMA if s.group == 'limits' and s.name not in overrides)
+            if missing:
+                raise ParameterError(
+                    f"instrument {overrides['instrument_name']!r}: hardware limit(s) {missing} "
+                    'missing from the parameter file; an instrument file must state every '
+                    'read-only limit')
         # The whole file against the whole schema: a node must not start with an
         # invalid instrument file even where the bad key belongs to another node.
         schema_values = {n: v for n, v in overrides.items() if n in SPECS}
