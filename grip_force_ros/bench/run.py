@@ -1,0 +1,140 @@
+"""One bench run: the loop (floor and product), the model, the diagnosis, and the machine."""
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+from importlib import metadata
+
+from grip_force_ros.bench.loop import BEST, DEFAULT_CONFIG, VARIANTS, Variant, compare, run_floor, run_product
+from grip_force_ros.bench.procs import DomainLock
+
+PARTS = ('loop', 'model', 'diagnosis')
+
+
+def machine() -> dict:
+    """What the figures were measured on."""
+    model = platform.processor() or ''
+    try:
+        with open('/proc/cpuinfo') as fh:
+            for line in fh:
+                if line.startswith('model name'):
+                    model = line.split(':', 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    versions = {}
+    for dist in ('ros-jazzy-rclpy', 'numpy'):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = None
+    return {'nproc': os.cpu_count(), 'cpu_model': model, 'python': platform.python_version(),
+            'rclpy': versions['ros-jazzy-rclpy'], 'numpy': versions['numpy'],
+            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'default (rmw_fastrtps_cpp)'),
+            'load_average_1min': os.getloadavg()[0]}
+
+
+def parse_domains(text: str | None) -> list[int] | None:
+    """'70-99' or '70,71' -> list of domain ids; None -> the default choice."""
+    if not text:
+        return None
+    out: list[int] = []
+    for part in text.split(','):
+        if '-' in part:
+            lo, hi = part.split('-')
+            out.extend(range(int(lo), int(hi) + 1))
+        else:
+            out.append(int(part))
+    return out
+
+
+def run_loop(seconds: float, domains=None, config: str = DEFAULT_CONFIG, variant: Variant = BEST,
+             product_executor: str | None = None, say=None) -> dict:
+    """The ``loop`` section: floor then product in one free domain, and their ratios."""
+    say = say or (lambda msg: None)
+    with DomainLock(domains) as domain:
+        say(f'loop: floor ping-pong, {seconds:g} s, ROS_DOMAIN_ID {domain} ({variant.label()})')
+        floor = run_floor(seconds, domain, variant)
+        say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
+        product = run_product(seconds, domain, config, executor=product_executor)
+    out = compare(floor, product)
+    out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
+                'floor_lost_fraction': floor['lost_fraction'],
+                'product_stale_answers': product['stale_answers'],
+                'sim_missed_fraction': product['sim_periods']['missed_fraction'],
+                'product_executor': product['executor']})
+    return out
+
+
+def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> list[dict]:
+    """The floor measured with each variant in turn (same domain, one after the other)."""
+    say = say or (lambda msg: None)
+    rows = []
+    with DomainLock(domains) as domain:
+        for variant in variants:
+            say(f'variant: {variant.label()}')
+            r = run_floor(seconds, domain, variant)
+            rows.append({'variant': r['variant'], 'label': variant.label(),
+                         **{k: r['latency'][k] for k in ('p50_ms', 'p99_ms', 'max_ms')},
+                         'missed_fraction': r['periods']['missed_fraction'],
+                         'lost_fraction': r['lost_fraction'], 'cpu_percent': r['cpu_percent'],
+                         'load_average_1min': os.getloadavg()[0]})
+    return rows
+
+
+def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str = DEFAULT_CONFIG,
+              log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
+              variant_seconds: float | None = None, product_executor: str | None = None,
+              say=None) -> dict:
+    """Everything ``grip-force bench`` measures, as the nested JSON dict.
+
+    Parameters
+    ----------
+    seconds : float
+        Measurement window of each loop run (s).
+    parts : iterable of str
+        Any of :data:`PARTS`.
+    domains : list of int, optional
+        Candidate ROS domains (default: ROS_DOMAIN_ID if set, else 200..232).
+    config : str
+        Instrument YAML of the product run and the model figures.
+    log_minutes : float
+        Length of the diagnosis log at 1 kHz (min).
+    model_size : int
+        Samples per array of the vectorised model figures.
+    variants : bool
+        Also measure the floor with every variant of :data:`VARIANTS`.
+    product_executor : str, optional
+        Executor of the product's nodes ('events' or 'single'); default theirs.
+
+    Returns
+    -------
+    dict
+        ``{"loop": {"p99_ratio", "missed_fraction", ...}, "model": {"forward_ratio",
+        "step_share", ...}, "diagnosis": {"load_ratio", ...}, "machine": {...}}``
+        (only the parts asked for).
+    """
+    say = say or (lambda msg: None)
+    out: dict = {'machine': machine()}
+    started = time.perf_counter()
+    if 'model' in parts:
+        from grip_force_ros.bench.model_speed import run_model
+        say('model: vectorised forward/inverse vs numpy.exp, control step')
+        from grip_force_ros.demo import config_dir
+        nonlinear = config_dir() / 'four_pulley_needle_driver.yaml'
+        out['model'] = run_model(config, size=model_size,
+                                 other_configs=(str(nonlinear),) if nonlinear.is_file() else ())
+    if 'loop' in parts:
+        out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor, say=say)
+    if variants:
+        out['variants'] = run_variants(variant_seconds or seconds, domains, say=say)
+    if 'diagnosis' in parts:
+        from grip_force_ros.bench.diagnosis_speed import run_diagnosis_speed
+        say(f'diagnosis: {log_minutes:g} min log at 1 kHz (built once, cached)')
+        out['diagnosis'] = run_diagnosis_speed(log_minutes)
+    out['machine']['load_average_1min_end'] = os.getloadavg()[0]
+    out['machine']['bench_seconds'] = time.perf_counter() - started
+    out['machine']['argv'] = sys.argv
+    return out

@@ -1,0 +1,125 @@
+"""``grip-force bench``: the 1 kHz loop against the middleware floor, model and diagnosis speed.
+
+Prints figures (ratios measured side by side in one run); asserts nothing. See
+BENCHMARKS.md for the figures of a 60 s run and what was tried.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+HELP = 'benchmark: loop latency vs the rclpy floor, model and diagnosis speed (ratios)'
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument('--json', action='store_true', help='print the figures as JSON')
+    parser.add_argument('--seconds', type=float, default=20.0,
+                        help='measurement window of the floor and of the product loop (s, default 20)')
+    parser.add_argument('--parts', default='loop,model,diagnosis',
+                        help='comma-separated subset of loop,model,diagnosis (default all)')
+    parser.add_argument('--config', default='paper_needle_driver',
+                        help='instrument YAML (path or shipped name) of the product and the model')
+    parser.add_argument('--log-minutes', type=float, default=60.0,
+                        help='length of the diagnosis log at 1 kHz (min, default 60; built once, cached)')
+    parser.add_argument('--model-size', type=int, default=100_000,
+                        help='samples per array of the vectorised model figures')
+    parser.add_argument('--domain-ids', default=None,
+                        help="candidate ROS domains, e.g. '70-99' (default: ROS_DOMAIN_ID if set, "
+                             'else 200-232); the first one no other bench run holds is used')
+    parser.add_argument('--variants', action='store_true',
+                        help='also measure the floor with each executor/QoS/gc/allocation variant')
+    parser.add_argument('--variant-seconds', type=float, default=None,
+                        help='window of each variant run (s, default --seconds)')
+    parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
+                        help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
+
+
+def _f(value, fmt='.3g') -> str:
+    if isinstance(value, (int, float)) and not (isinstance(value, float) and math.isnan(value)):
+        return format(value, fmt)
+    return 'n/a'
+
+
+def _goal(value, goal) -> str:
+    if not isinstance(value, (int, float)) or value != value:
+        return 'n/a'
+    return 'meets goal' if value <= goal else 'MISSES goal'
+
+
+def render(result: dict) -> str:
+    """Human-readable summary of :func:`grip_force_ros.bench.run.run_bench`'s result."""
+    lines = []
+    m = result['machine']
+    lines.append(f"machine: {m['nproc']} cpu ({m['cpu_model']}), python {m['python']}, rclpy {m['rclpy']}, "
+                 f"load {m['load_average_1min']:.1f} -> {m.get('load_average_1min_end', float('nan')):.1f}")
+    loop = result.get('loop')
+    if loop:
+        fl, pr = loop['floor'], loop['product']
+        lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}):")
+        lines.append(f"  floor   ping-pong       p50 {_f(fl['p50_ms'])} ms  p99 {_f(fl['p99_ms'])} ms  "
+                     f"max {_f(fl['max_ms'])} ms  missed {_f(loop['floor_missed_fraction'] * 100)} %")
+        lines.append(f"  product sim->ctrl->sim  p50 {_f(pr['p50_ms'])} ms  p99 {_f(pr['p99_ms'])} ms  "
+                     f"max {_f(pr['max_ms'])} ms  missed {_f(loop['missed_fraction'] * 100)} %")
+        lines.append(f"  p99 ratio {_f(loop['p99_ratio'])} (goal <= 1.5: {_goal(loop['p99_ratio'], 1.5)}); "
+                     f"missed periods {_f(loop['missed_fraction'] * 100)} % "
+                     f"(goal <= 0.1 %: {_goal(loop['missed_fraction'], 0.001)})")
+        cpu = loop['cpu_percent']
+        lines.append('  cpu % of one core: floor ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
+                     + '; product ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['product'].items()))
+    model = result.get('model')
+    if model:
+        lines.append(f"model ({model['config']}):")
+        lines.append(f"  forward {_f(model['forward_ratio'])} x numpy.exp (goal <= 10: "
+                     f"{_goal(model['forward_ratio'], 10)}), inverse {_f(model['inverse_ratio'])} x "
+                     f"({_f(model['forward_ns_per_sample'])} / {_f(model['inverse_ns_per_sample'])} ns per "
+                     f"sample, exp {_f(model['exp_ns_per_sample'])} ns)")
+        lines.append(f"  control step {_f(model['step_us'])} us = {_f(model['step_share'] * 100)} % of "
+                     f"{_f(model['period_ms'])} ms (goal <= 5 %: {_goal(model['step_share'], 0.05)}); "
+                     f"with the input setters {_f(model['step_and_inputs_share'] * 100)} %")
+        for path, r in model.get('other_configs', {}).items():
+            lines.append(f"  {path}: forward {_f(r['forward_ratio'])} x, inverse {_f(r['inverse_ratio'])} x"
+                         + ('' if r['affine'] else ' (nonlinear: inverse solved per sample)'))
+    diag = result.get('diagnosis')
+    if diag:
+        lines.append(f"diagnosis ({diag['minutes']:g} min at 1 kHz, {diag['rows']} rows, {diag['file_mb']:.0f} MB CSV):")
+        lines.append(f"  load {diag['load_s']:.2f} s, diagnose {diag['diagnose_s']:.2f} s: ratio "
+                     f"{_f(diag['load_ratio'])} (goal <= 5: {_goal(diag['load_ratio'], 5)}); peak RSS "
+                     f"load {diag['load_peak_mb']:.0f} MB, diagnose {diag['diagnose_peak_mb']:.0f} MB "
+                     f"(+{diag['diagnose_added_mb']:.0f} MB over its start-up)")
+    for row in result.get('variants', []):
+        lines.append(f"  floor variant [{row['label']}]: p50 {_f(row['p50_ms'])} p99 {_f(row['p99_ms'])} "
+                     f"max {_f(row['max_ms'])} ms, missed {_f(row['missed_fraction'] * 100)} %, cpu "
+                     + ', '.join(f'{k} {v:.0f}' for k, v in row['cpu_percent'].items()))
+    return '\n'.join(lines)
+
+
+def run(args) -> int:
+    from grip_force_ros.bench.procs import BenchError
+    from grip_force_ros.bench.run import PARTS, parse_domains, run_bench
+    from grip_force_ros.demo import find_config
+
+    parts = tuple(p.strip() for p in args.parts.split(',') if p.strip())
+    unknown = [p for p in parts if p not in PARTS]
+    if unknown:
+        print(f'grip-force bench: unknown part(s) {unknown}; choose from {list(PARTS)}', file=sys.stderr)
+        return 2
+    if args.seconds <= 0 or args.log_minutes <= 0:
+        print('grip-force bench: --seconds and --log-minutes must be > 0', file=sys.stderr)
+        return 2
+    try:
+        config = str(find_config(args.config))
+    except FileNotFoundError as exc:
+        print(f'grip-force bench: {exc}', file=sys.stderr)
+        return 2
+    say = (lambda msg: print(f'[bench] {msg}', file=sys.stderr, flush=True))
+    try:
+        result = run_bench(args.seconds, parts, domains=parse_domains(args.domain_ids), config=config,
+                           log_minutes=args.log_minutes, model_size=args.model_size,
+                           variants=args.variants, variant_seconds=args.variant_seconds,
+                           product_executor=args.product_executor, say=say)
+    except BenchError as exc:
+        print(f'grip-force bench: {exc}', file=sys.stderr)
+        return 1
+    print(json.dumps(result, indent=2) if args.json else render(result))
+    return 0
