@@ -189,3 +189,18 @@ def test_executable_exits_non_zero_on_a_bad_file(tmp_path, executable):
     err = proc.stderr + proc.stdout
     assert "'max_current'" in err and '50.0' in err and '[0.0, 20.0]' in err, err
     assert 'Traceback' not in err
+
+
+def test_instrument_file_must_state_every_hardware_limit(ros):
+    values = {k: v for k, v in read_params_yaml(CONFIG).items() if k != 'max_current_slew'}
+    with pytest.raises(ParameterError, match='max_current_slew'):
+        ros.add(ControllerNode, **values)
+
+
+def test_unparsable_parameter_file_exits_non_zero(tmp_path):
+    bad = tmp_path / 'broken.yaml'
+    bad.write_text('/**:\n  ros__parameters: [\n')
+    proc = subprocess.run(node_command('sim_instrument', params_file=str(bad)),
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert 'broken.yaml' in proc.stderr and 'Traceback' not in proc.stderr
