@@ -94,15 +94,19 @@ def run_loop(tmp_path, duration: float, controller: dict | None = None, sim: dic
 
 
 def hold_window(rec: Recorder, target: float, settle: float):
-    """Rows where the target has been constant at ``target`` for longer than ``settle`` s."""
+    """Rows of the longest run with the target constant at ``target``, after ``settle`` s.
+
+    The longest run: a watchdog trip on a loaded machine (target 0 while safe) splits a hold.
+    """
     now, tgt = rec.column('now'), rec.column('target')
-    at = np.isclose(tgt, target, atol=1e-9)
-    if not at.any():
+    at = np.concatenate([[False], np.isclose(tgt, target, atol=1e-9), [False]])
+    edges = np.flatnonzero(np.diff(at.astype(int)))
+    if edges.size == 0:
         return None, None
-    first = np.argmax(at)
-    run_end = first + np.argmin(at[first:]) if not at[first:].all() else len(at)
-    start_time = now[first]
-    idx = np.arange(first, run_end)
+    starts, ends = edges[::2], edges[1::2]
+    longest = np.argmax(ends - starts)
+    idx = np.arange(starts[longest], ends[longest])
+    start_time = now[idx[0]]
     return start_time, idx[now[idx] >= start_time + settle]
 
 
