@@ -141,7 +141,7 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
 
 
 def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
-                period: float = 1e-3, executor: str | None = None) -> dict:
+                period: float = 1e-3, executor: str | None = None, controller: str = 'timer') -> dict:
     """sim -> controller -> sim round trip at 1 kHz, the real executables.
 
     Starts ``sim_instrument``, ``controller`` (``--params-file config``) and a
@@ -158,6 +158,9 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         Instrument YAML for the sim and the controller.
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
+    controller : str
+        'timer': the shipped ``controller`` (steps on its 1 kHz timer); 'event':
+        the bench's :mod:`.event_controller` (steps on each actuator state).
 
     Returns
     -------
@@ -174,7 +177,9 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     children = []
     try:
         children.append(Child('sim', [executable('sim_instrument'), *params], env))
-        children.append(Child('controller', [executable('controller'), *params], env))
+        controller_cmd = ([executable('controller')] if controller == 'timer' else
+                          python_module('grip_force_ros.bench.event_controller'))
+        children.append(Child('controller', [*controller_cmd, *params], env))
         children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
         probe = Child('probe', python_module(CHILD, 'probe', '--seconds', str(seconds),
                                              '--warmup', str(warmup), '--period', str(period),
@@ -188,6 +193,7 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         stop_all(children)
     result['config'] = config
     result['executor'] = executor or 'node default'
+    result['controller'] = controller
     return result
 
 

@@ -119,7 +119,7 @@ def step_share(params, steps: int = 20_000, repeats: int = 3) -> dict:
     # warm up into grip (bumpless transfer, force map state)
     out = None
     for k in range(2000):
-        out = ctrl.step(feed(k), inputs)
+        out = ctrl.step(feed(k % n), inputs)
     step = ctrl.step
     best_step = best_inputs = float('inf')
     for _ in range(repeats):

@@ -1,0 +1,113 @@
+"""Smoke tests of the bench machinery (tiny durations): structure and sane values, no timing goals."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from grip_force_ros.bench.stats import latency_summary, missed_periods, ratio
+
+
+def test_latency_summary_percentiles_in_ms():
+    lat_ns = np.arange(1, 101) * 1_000_000          # 1..100 ms
+    s = latency_summary(lat_ns)
+    assert s['samples'] == 100
+    assert s['p50_ms'] == pytest.approx(50.5)
+    assert s['p99_ms'] == pytest.approx(99.01)
+    assert s['max_ms'] == pytest.approx(100.0)
+    assert math.isnan(latency_summary([])['p99_ms'])
+
+
+def test_missed_periods_counts_gaps_not_jitter():
+    period = 1e-3
+    ticks = np.arange(1000) * 1_000_000                        # ns, perfect 1 kHz
+    ticks[500:] += 3_000_000                                   # one gap of 4 periods: 3 missed
+    ticks[100] += 400_000                                      # late but inside its period: jitter
+    s = missed_periods(ticks, period)
+    assert s['missed'] == 3
+    assert s['expected'] == 1002
+    assert s['missed_fraction'] == pytest.approx(3 / 1002)
+    assert s['interval_max_ms'] == pytest.approx(4.0)
+    assert missed_periods(np.arange(100) * 1_000_000, period)['missed'] == 0
+
+
+def test_ratio_handles_missing_values():
+    assert ratio(3.0, 2.0) == 1.5
+    assert math.isnan(ratio(1.0, 0.0))
+    assert math.isnan(ratio(float('nan'), 1.0))
+
+
+def test_match_commands_takes_newest_delivered_state():
+    from grip_force_ros.bench.child import match_commands
+    ms = 1_000_000
+    # states published every 1 ms at k ms, delivered 0.1 ms later
+    states = np.array([[k * ms, k * ms + ms // 10] for k in range(10)], np.int64)
+    # controller ticks at k + 0.5 ms, command arrives 0.1 ms after its tick
+    commands = np.array([[k * ms + ms // 2, k * ms + ms // 2 + ms // 10] for k in range(10)], np.int64)
+    r = match_commands(states, commands, 1e-3)
+    # each command answers the state published 0.5 ms before its tick: 0.6 ms round trip
+    assert r['latency']['samples'] == 10
+    assert r['latency']['p50_ms'] == pytest.approx(0.6)
+    assert r['latency']['max_ms'] == pytest.approx(0.6)
+    assert r['periods']['missed'] == 0 and r['stale_answers'] == 0
+    # a dropped controller tick is a missed period (the next command still answers its newest state)
+    r = match_commands(states, np.delete(commands, 4, axis=0), 1e-3)
+    assert r['periods']['missed'] == 1
+    # a slow state (delivered after the tick) makes the command answer the previous state
+    late = states.copy()
+    late[5, 1] = 5 * ms + 700_000
+    r = match_commands(late, commands, 1e-3)
+    assert r['latency']['max_ms'] == pytest.approx(1.6)
+    assert r['stale_answers'] == 1
+
+
+def test_model_speed_structure():
+    from grip_force_ros.bench.model_speed import run_model
+    from grip_force_ros.demo import find_config
+    r = run_model(str(find_config('paper_needle_driver')), size=2000, steps=300, repeats=1)
+    assert r['mode'] == 'grip' and r['feedforward']
+    for key in ('forward_ratio', 'inverse_ratio', 'step_share', 'step_and_inputs_share'):
+        assert math.isfinite(r[key]) and r[key] > 0, key
+    assert r['step_and_inputs_share'] > r['step_share']
+    assert r['inverse_round_trip_error_N'] < 1e-9           # the inverse really inverts
+
+
+def test_cli_model_json(capsys):
+    from grip_force_ros.cli import main
+    assert main(['bench', '--json', '--parts', 'model', '--model-size', '2000']) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {'machine', 'model'}
+    assert out['machine']['nproc'] >= 1 and out['machine']['rclpy']
+    assert out['model']['step_share'] > 0
+
+
+def test_cli_rejects_unknown_part(capsys):
+    from grip_force_ros.cli import main
+    assert main(['bench', '--parts', 'loop,warp']) == 2
+    assert 'warp' in capsys.readouterr().err
+
+
+@pytest.mark.timeout(240)
+def test_bench_all_parts_tiny(tmp_path):
+    """Floor, product (real node processes), model and diagnosis in one short run."""
+    from grip_force_ros.bench.run import run_bench
+    from grip_force_ros.cli.bench import render
+    from grip_force_ros.demo import find_config
+    r = run_bench(1.0, config=str(find_config('paper_needle_driver')), log_minutes=1.0,
+                  model_size=2000)
+    json.dumps(r)                                             # serialisable as --json prints it
+    loop, model, diag = r['loop'], r['model'], r['diagnosis']
+    for value in (loop['p99_ratio'], loop['missed_fraction'], model['forward_ratio'],
+                  model['step_share'], diag['load_ratio']):
+        assert math.isfinite(value) and value >= 0
+    for side in ('floor', 'product'):
+        s = loop[side]
+        assert s['samples'] > 100                             # ~1000 round trips in 1 s
+        assert 0 < s['p50_ms'] <= s['p99_ms'] <= s['max_ms'] < 1000
+    assert 0 <= loop['missed_fraction'] <= 1
+    assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
+    assert set(loop['cpu_percent']['product']) == {'probe', 'sim', 'controller', 'master'}
+    assert all(v > 0 for v in loop['cpu_percent']['product'].values())
+    assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
+    text = render(r)
+    assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
