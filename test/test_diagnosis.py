@@ -211,3 +211,14 @@ def test_cli_diagnose_json_and_report(tmp_path, capsys):
     assert (tmp_path / 'rep' / 'report.md').exists()
     assert main(['diagnose', str(tmp_path / 'missing.csv'), '--config',
                  'config/paper_needle_driver.yaml', '--quiet']) == 1
+
+
+def test_missing_values_are_left_out_not_propagated():
+    log = _inputs(20)
+    y = _nominal(log) + 0.3 + np.random.default_rng(21).normal(0, 0.02, log['t'].size)
+    y[100:140] = np.nan
+    log = {**log, 'current': log['current'].copy()}
+    log['current'][500] = np.inf
+    result = diagnose([_with(log, y)], params=PARAMS)
+    assert np.isfinite(result['verdict']['gap_before'])
+    assert result['verdict']['effect'] == 'force_sensor_offset'

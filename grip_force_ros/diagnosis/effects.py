@@ -21,7 +21,7 @@ grid; the coefficients are linear least squares. Each effect's shape:
 | tension_dependent_friction | nominal * current | - | - |
 | viscoelastic_creep | lowpass_tau(nominal) | - | tau |
 | sensor_delay | (base = nominal(t - d)) | - | d |
-| torque_constant_drift | nominal * lowpass_tau(current^2)/I_max^2, or nominal * t | - | tau |
+| torque_constant_drift | nominal * lowpass_tau(current^2)/I_max^2 (heat) | - | tau |
 | force_sensor_offset | 1 | - | - |
 
 ``dir(x)`` is a play operator output in [-1, 1]: the direction of the last motion
@@ -119,8 +119,6 @@ def _delay(f, d):
 
 
 def _drift(f, tau):
-    if tau == 'linear':
-        return Design(f['nominal'], [f['nominal'] * f['t']])
     i_ref = float(f['max_current']) if 'max_current' in f else max(float(np.max(np.abs(f['current']))), 1e-9)
     heat = lowpass((f['current'] / i_ref) ** 2, float(f['dt']), float(tau), initial=0.0)
     return Design(f['nominal'], [f['nominal'] * heat])

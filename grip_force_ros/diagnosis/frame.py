@@ -223,10 +223,13 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     if t.size < 20:
         raise DiagnosisError(f'log too short for a diagnosis ({t.size} samples after averaging)')
     dt = float(np.median(np.diff(t)))
-    current = np.asarray(log['current'], float)
-    wrist = np.asarray(log['wrist_angle'], float)
-    jaw = np.asarray(log['jaw_angle'], float)
-    motor = np.asarray(log['motor_angle'], float)
+    raw = {k: np.asarray(log[k], float) for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
+    # samples with a missing (non-finite) value are carried as 0 and left out of every fit
+    finite = np.logical_and.reduce([np.isfinite(v) for v in raw.values()])
+    if finite.sum() < 20:
+        raise DiagnosisError(f'log has only {int(finite.sum())} samples with every value finite')
+    raw = {k: np.where(finite, v, 0.0) for k, v in raw.items()}
+    current, wrist, jaw, motor = (raw['current'], raw['wrist_angle'], raw['jaw_angle'], raw['motor_angle'])
     jaw_vel = np.gradient(lowpass(jaw, dt, 0.02), t)
     motor_vel = np.gradient(lowpass(motor, dt, 0.02), t)
     objects = np.asarray(log.get(OBJECT_COLUMN, np.full(t.size, default_object)), dtype=str)
@@ -289,9 +292,9 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     if stepping.any():
         hold = max(1, int(round(STEP_HOLD / dt)))
         stepping = np.convolve(stepping.astype(float), np.ones(hold + 1), mode='full')[:t.size] > 0
-    return {'t': t - t[0], 'dt': np.array(dt), 'y': np.asarray(log[measured], float),
+    return {'t': t - t[0], 'dt': np.array(dt), 'y': raw[measured],
             'max_current': np.array(float(model.params.max_current)),
-            'steady': (~near & ~uncertain & ~stepping).astype(float),
+            'steady': (~near & ~uncertain & ~stepping & finite).astype(float),
             'torque': torque, 'gain': np.ones(t.size) if measured == 'jaw_torque' else gain,
             'drum_tension': drum_tension, 'jaw_tension': tn,
             'nominal': np.asarray(nominal, float), 'contact': contact, 'current': current,

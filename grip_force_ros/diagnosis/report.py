@@ -112,7 +112,7 @@ def plot_ranking(d: Diagnosis, path: Path) -> Path:
     ax.barh(y, [r['score'] for r in ranking], color=colours)
     ax.set_yticks(y, [r['effect'] for r in ranking], fontsize=8)
     ax.axvline(0, color='k', lw=0.5)
-    ax.set_xlabel('held-out score: change of log MSE (force + angle) + parameter penalty')
+    ax.set_xlabel('held-out score: log loss ratio (force Huber + angle MSE) + parameter penalty')
     ax.set_title('Which effect (lower = explains more of the held-out gap)')
     fig.tight_layout()
     fig.savefig(path, dpi=110)
