@@ -46,7 +46,8 @@ MASTER_SPECS = [
     ParamSpec('trajectory', 'string', 'needle_grasp', '',
               'Which master trajectory to publish.', choices=KINDS, group='master'),
     ParamSpec('trajectory_file', 'string', '', '',
-              'CSV (t, master_angle) or rosbag2 directory/file to replay for trajectory=csv/rosbag.',
+              'CSV (t, master_angle) or rosbag2 directory/file to replay for '
+              'trajectory=csv/rosbag.',
               group='master'),
     ParamSpec('master_rate', 'double', 250.0, 'Hz',
               'Rate of master/gripper/measured_js.', min=1.0, max=2000.0, group='master'),
@@ -163,7 +164,8 @@ def from_segments(segments: Sequence[Segment]) -> Trajectory:
     times, angles, phases = [0.0], [segments[0].start], []
     for seg in segments:
         if seg.duration <= 0:
-            raise ParameterError(f'trajectory: phase {seg.phase!r} has duration {seg.duration} s <= 0')
+            raise ParameterError(
+                f'trajectory: phase {seg.phase!r} has duration {seg.duration} s <= 0')
         if seg.start != angles[-1]:  # a jump: add a very short blend
             times.append(times[-1] + 1e-3)
             angles.append(seg.start)

@@ -12,7 +12,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -65,7 +64,7 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
     lib = install / PACKAGE / 'lib' / PACKAGE
     config = install / PACKAGE / 'share' / PACKAGE / 'config' / 'paper_needle_driver.yaml'
     site = next((install / PACKAGE / 'lib').glob('python3*/site-packages'))
-    env = {'PYTHONPATH': os.pathsep.join([str(site), os.environ.get('PYTHONPATH', '')])}
+    env = {'PYTHONPATH': os.pathsep.join(p for p in [str(site), os.environ.get('PYTHONPATH')] if p)}
     seen: dict[str, int] = {}
 
     def count(topic):
@@ -96,5 +95,6 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
     assert ok, (seen, logs)
     assert codes == {name: 0 for name in EXECUTABLES}, (codes, logs)
     # the installed copy ran, with the instrument file's values
-    assert 'paper_needle_driver' in logs['controller'] and 'paper_needle_driver' in logs['sim_instrument']
+    assert 'paper_needle_driver' in logs['controller']
+    assert 'paper_needle_driver' in logs['sim_instrument']
     assert 'Traceback' not in ''.join(logs.values())

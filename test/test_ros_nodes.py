@@ -8,7 +8,6 @@ process has its own ROS_DOMAIN_ID (conftest.py).
 """
 from __future__ import annotations
 
-import math
 import time
 from pathlib import Path
 
@@ -53,8 +52,8 @@ class Recorder:
 
     def column(self, name: str) -> np.ndarray:
         i = self.FIELDS.index(name)
-        return np.array([r[i] for r in self.rows], dtype=object if name in ('mode', 'limits', 'reasons')
-                        else float)
+        kind = object if name in ('mode', 'limits', 'reasons') else float
+        return np.array([r[i] for r in self.rows], dtype=kind)
 
 
 def run_loop(tmp_path, duration: float, controller: dict | None = None, sim: dict | None = None,

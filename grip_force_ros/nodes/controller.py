@@ -3,7 +3,8 @@
 Subscribes (KEEP_LAST 1; only the newest sample matters):
     master/gripper/measured_js        gripper: position (rad)
     instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s, optional)
-    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s), effort = current (A)
+    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
+                                      effort = measured current (A)
     grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
 Publishes, every control period (``control_rate``, 1 kHz):
     instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
@@ -233,8 +234,9 @@ class ControllerNode(Node):
         reasons = '; '.join(out.reasons) if out is not None and out.reasons else 'ok'
         values = dict(self.controller.status(self.inputs))
         values['limits_hit'] = ', '.join(sorted(self._limits_seen)) or 'none'
-        values['watchdog'] = ('tripped' if out is not None and out.mode == 'safe'
-                              and any('stale' in r or 'input yet' in r for r in out.reasons) else 'ok')
+        tripped = out is not None and out.mode == 'safe' and any(
+            'stale' in r or 'input yet' in r for r in out.reasons)
+        values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
         faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
                                                                'force')]

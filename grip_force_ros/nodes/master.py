@@ -85,7 +85,9 @@ class MasterNode(Node):
         traj = self.trajectory
         angle = traj.angle(t)
         dt = 1e-3
-        velocity = (traj.angle(t + dt) - traj.angle(t - dt)) / (2 * dt) if 0 < t < traj.duration else 0.0
+        velocity = 0.0
+        if 0.0 < t < traj.duration:
+            velocity = (traj.angle(t + dt) - traj.angle(t - dt)) / (2 * dt)
         self._pub.publish(joint_state(self.get_clock().now().to_msg(), [topics.MASTER_JOINT],
                                       [angle], [velocity]))
         phase = traj.phase(t)

@@ -136,8 +136,10 @@ class NodeParameters:
         # An instrument file (it names its instrument) must state every hardware limit
         # of a node that enforces them: a missing one would silently take the schema
         # default, which belongs to another instrument.
-        if 'instrument_name' in overrides and any(s.group == 'limits' for s in self._specs.values()):
-            missing = sorted(s.name for s in SCHEMA if s.group == 'limits' and s.name not in overrides)
+        enforces_limits = any(s.group == 'limits' for s in self._specs.values())
+        if 'instrument_name' in overrides and enforces_limits:
+            missing = sorted(s.name for s in SCHEMA
+                             if s.group == 'limits' and s.name not in overrides)
             if missing:
                 raise ParameterError(
                     f"instrument {overrides['instrument_name']!r}: hardware limit(s) {missing} "

@@ -82,7 +82,8 @@ class SimInstrumentNode(Node):
         self._timer = self.create_timer(1.0 / params.publish_rate, self._tick)
         self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
         self.get_logger().info(
-            f'{params.instrument_name}: object {self.sim.obj}, friction x{params.friction_scale:g}, '
+            f'{params.instrument_name}: object {self.sim.obj}, '
+            f'friction x{params.friction_scale:g}, '
             f'stiffness x{params.stiffness_scale:g}, stepping at {params.publish_rate:.0f} Hz')
 
     # ------------------------------------------------------------------ input
@@ -141,8 +142,9 @@ class SimInstrumentNode(Node):
     def _publish_diagnostics(self) -> None:
         params = self._param.params
         wall = time.monotonic() - self._started
+        warn = self.rejected or self.capped_steps
         status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if self.rejected or self.capped_steps else DiagnosticStatus.OK,
+            level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
             name='grip_force_ros: sim_instrument',
             message=f'simulating {self.sim.obj}' + (f'; rejected {self.rejected} commands'
                                                       if self.rejected else ''),
