@@ -181,6 +181,12 @@ class Session:
         results = response.results if hasattr(response, 'results') else [response.result]
         return [(r.successful, r.reason) for r in results]
 
+    def receive_times(self) -> dict:
+        """Source -> the controller's receive time (s) of its last accepted sample."""
+        inputs = getattr(self.controller, 'inputs', None)
+        return {s: float(getattr(inputs, f'{s}_time', math.nan))
+                for s in ('master', 'instrument', 'actuator', 'force')}
+
     def rejected_count(self) -> int:
         """Samples the controller node has rejected so far (its ControlInputs counters)."""
         inputs = getattr(self.controller, 'inputs', None)
@@ -238,6 +244,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         sources = ('master', 'instrument', 'actuator', 'force') if case.source == 'all' else (case.source,)
         done = probe.inject(sources, case.mutate, case.ticks)
     last_good = dict(probe.last_good_publish)
+    # the controller's receive time of the last good sample, read inside the window
+    wait_until(lambda: probe.fault_k >= min(10, case.ticks - 1) or done.is_set(), 1.0)
+    last_received = session.receive_times()
     done.wait(case.ticks * probe.period * 20 + 2.0)
     t1 = probe.now()
     recovered = wait_until(lambda: session.gripping(t1), RECOVERY_TIMEOUT)
@@ -271,7 +280,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         detail['safe_after_last_input_ms'] = None if latency is None else round(latency * 1e3, 3)
         limit = params.watchdog_timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
         detail['safe_latency_limit_ms'] = round(limit * 1e3, 3)
-        steps = _steps_to_safe(case, probe, last_good, rows, params.watchdog_timeout)
+        received = _watchdog_latency(case, probe, last_received, rows, session)
+        detail['safe_after_last_receive_ms'] = None if received is None else round(received * 1e3, 3)
+        steps = _steps_to_safe(case, probe, last_received, rows, params.watchdog_timeout)
         detail['controller_steps_after_timeout'] = steps
         if latency is None or steps is None:
             problems.append('no safe output after the last input')
@@ -285,7 +296,13 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         else:
             grip_share = (len(window) - len(safe_rows)) / max(len(window), 1)
         detail['grip_share'] = round(grip_share, 3)
-        if grip_share < 0.9:
+        # A watchdog trip from a scheduling stall of a loaded machine is not this fault's
+        # doing; a safe state for any other reason is.
+        unsafe = [d[1] for d in probe.diagnostics
+                  if d[0] <= t1 + 0.005 and _diag_mode(d[2]) == 'safe' and 'stale' not in d[1]]
+        if unsafe:
+            problems.append(f'went to the safe state: {unsafe[0][:200]}')
+        if grip_share < 0.5:
             problems.append(f'left grip in {1 - grip_share:.0%} of the fault window')
     detail['rejected_samples'] = rejected
     if case.outcome == 'ignore' and rejected:
@@ -329,9 +346,11 @@ def _watchdog_latency(case, probe, last_good, rows, session):
 def _steps_to_safe(case, probe, last_good, rows, timeout):
     """Control periods after the watchdog timeout expired until the first safe output.
 
-    Counts the controller's own outputs stamped after ``last input + timeout`` up to and
+    ``last_good`` holds the controller's receive time of the last sample of each source.
+    Counts the controller's own outputs stamped after ``last receive + timeout`` up to and
     including the first safe one (1 = the first period after the timeout). Independent of
-    scheduling stalls of a loaded machine, which the wall-clock latency includes.
+    DDS delivery and of scheduling stalls of a loaded machine, which the wall-clock
+    latencies include.
     """
     sources = ('instrument', 'actuator') if case.kind == 'restart' else (case.source,)
     last = max(last_good[s] for s in sources if s in last_good)
