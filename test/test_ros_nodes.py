@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 
 from grip_force_ros import topics
@@ -35,6 +36,7 @@ class Recorder:
     def __init__(self, node: ControllerNode):
         self.rows: list[tuple] = []
         self.measured: list[tuple[float, float]] = []    # (controller clock s, load cell N)
+        self.diagnostics: list[DiagnosticStatus] = []     # the controller's, as published
         self._node = node
         inner = node.controller.step
 
@@ -49,6 +51,9 @@ class Recorder:
     def on_measured(self, msg: WrenchStamped) -> None:
         self.measured.append((self._node.get_clock().now().nanoseconds * 1e-9,
                               msg.wrench.force.z))
+
+    def on_diagnostics(self, msg: DiagnosticArray) -> None:
+        self.diagnostics += [s for s in msg.status if s.name.endswith('controller')]
 
     def column(self, name: str) -> np.ndarray:
         i = self.FIELDS.index(name)
@@ -68,6 +73,7 @@ def run_loop(tmp_path, duration: float, controller: dict | None = None, sim: dic
         probe = ros.plain_node('probe')
         probe.create_subscription(WrenchStamped, topics.MEASURED_FORCE, rec.on_measured,
                                   STATE_SUB_QOS)
+        probe.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, rec.on_diagnostics, 50)
         ros.start()
         sim_proc = NodeProcess('sim_instrument', params_file=str(CONFIG), params=sim,
                                log_path=str(tmp_path / 'sim.log'))
@@ -170,6 +176,10 @@ def test_current_and_slew_limits_hold(tmp_path):
     limits = rec.column('limits')
     assert any('current_limit' in hit for hit in limits), 'the current limit never acted'
     assert np.max(command) == pytest.approx(max_current)
+    # and /diagnostics says so: WARN, with the limit named
+    hit = [s for s in rec.diagnostics
+           if 'current_limit' in {kv.key: kv.value for kv in s.values}['limits_hit']]
+    assert hit and all(s.level == DiagnosticStatus.WARN for s in hit if s.message.startswith('grip'))
 
 
 def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path):
@@ -213,8 +223,12 @@ def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path)
     safe_rows = np.arange(safe_since, thaw)
     safe_rows = safe_rows[mode[safe_rows] == 'safe']
     assert np.all(np.diff(np.abs(command[safe_rows])) <= 1e-12)
-    # the watchdog says what went stale
+    # the watchdog says what went stale, in the output and on /diagnostics (ERROR)
     assert any('stale instrument input' in r for r in rec.column('reasons')[first_stale])
+    tripped = [s for s in rec.diagnostics
+               if {kv.key: kv.value for kv in s.values}['watchdog'] == 'tripped'
+               and 'stale instrument input' in s.message]
+    assert tripped and all(s.level == DiagnosticStatus.ERROR for s in tripped)
     # control resumes after the thaw: grip again, and no current jump at the switch
     resumed = np.flatnonzero(mode[thaw:] == 'grip')
     assert resumed.size, 'control did not resume after the inputs came back'
