@@ -74,6 +74,6 @@ def test_docs_list_every_node_parameter():
     from grip_force_ros.trajectories import MASTER_SPECS
     text = DOCS.read_text()
     missing = [s.name for s in list(specs_in()) + MASTER_SPECS if f'`{s.name}`' not in text]
-    assert not missing, f'docs/ros_interface.md lacks {missing}: regenerate its tables'
+    assert not missing, f'docs/ros_interface.md lacks {missing}: python -m grip_force_ros.nodes.docs'
     for topic in topics.RECORDED:
         assert f'`{topic}`' in text
