@@ -16,14 +16,18 @@ import sys
 import time
 from pathlib import Path
 
+#: Length of the demo's needle grasp (s): the scripted task at half speed.
+DEMO_DURATION = 10.0
+
 HELP = 'run the closed-loop needle-grasp demo over ROS 2 (or --compare-instruments)'
 
 
 def add_arguments(parser) -> None:
     parser.add_argument('--config', default='paper_needle_driver',
                         help='instrument YAML (path, or name in config/); default %(default)s')
-    parser.add_argument('--duration', type=float, default=10.0,
-                        help='length of the needle-grasp task in s (default %(default)s)')
+    parser.add_argument('--duration', type=float, default=None,
+                        help='length of the needle-grasp task in s (default 10; 6 per run of '
+                             '--compare-instruments)')
     parser.add_argument('--out', help='output directory (default out/demo/<UTC timestamp>)')
     parser.add_argument('--json', action='store_true', help='print the results as JSON on stdout')
     parser.add_argument('--domain-id', type=int, help='ROS_DOMAIN_ID (default: a free one)')
@@ -92,17 +96,18 @@ def run(args) -> int:
     from grip_force_ros.params import ParameterError, load_params_file
 
     _sigterm_as_interrupt()
-    if args.duration <= 0:
+    if args.duration is not None and args.duration <= 0:
         print('error: --duration must be > 0 s', file=sys.stderr)
         return 2
     try:
         if args.compare_instruments:
-            from grip_force_ros.demo.compare import compare_instruments
+            from grip_force_ros.demo.compare import TASK_DURATION, compare_instruments
             out = Path(args.out) if args.out else _default_out('compare')
             configs = [find_config(c) for c in args.configs] if args.configs else None
             report = compare_instruments(
                 out, configs=configs, plant_error=args.plant_error,
                 parallel=args.parallel, domain_id=args.domain_id,
+                task_duration=args.duration or TASK_DURATION,
                 log=None if args.quiet else sys.stderr)
             if args.json:
                 print(json.dumps(report, indent=1))
@@ -116,7 +121,8 @@ def run(args) -> int:
         params = load_params_file(config)
         out = Path(args.out) if args.out else _default_out('demo')
         domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]
-        spec = RunSpec(config=config, duration=args.duration, label=params.instrument_name)
+        spec = RunSpec(config=config, duration=args.duration or DEMO_DURATION,
+                       label=params.instrument_name)
         progress = None if args.quiet else Progress(sys.stderr)
         if progress is not None:
             sys.stderr.write(f'grip-force demo: {params.instrument_name}, ROS domain {domain}, '

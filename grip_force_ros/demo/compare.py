@@ -31,8 +31,8 @@ from grip_force_ros.demo import comparison_configs
 from grip_force_ros.demo.analysis import spread
 
 CONDITIONS = ('controlled', 'uncalibrated', 'sensor', 'naive')
-#: Master trajectory length of the comparison runs (s): the needle grasp at time_scale 1.
-TASK_DURATION = 5.0
+#: Master trajectory length of the comparison runs (s): the needle grasp at time_scale 1.2.
+TASK_DURATION = 6.0
 #: Calibration staircase: shares of the master travel past contact, each held this long (s).
 CALIBRATION_SHARES = (0.25, 0.5, 0.75, 1.0)
 CALIBRATION_HOLD = 0.6

@@ -182,11 +182,14 @@ class ProcessGroup:
         self.processes.append(proc)
         return proc
 
-    def check_alive(self) -> None:
-        """Raise :class:`ProcessError` naming any process that has exited."""
+    def check_alive(self, may_finish: tuple[str, ...] = ()) -> None:
+        """Raise :class:`ProcessError` naming any process that has exited.
+
+        Processes named in ``may_finish`` may have exited with code 0.
+        """
         for p in self.processes:
             code = p.popen.poll()
-            if code is not None:
+            if code is not None and not (code == 0 and p.name in may_finish):
                 tail = p.log_tail()
                 raise ProcessError(f'{p.name} exited with code {code}'
                                    + (f'; last output:\n{tail}' if tail else ''))

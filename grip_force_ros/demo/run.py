@@ -349,7 +349,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
                     clock.observe(values_of(topics.MASTER_JS, item[1])['master_angle'])
                 if progress is not None:
                     progress(live_status(recorder, trajectory, clock.elapsed()))
-                group.check_alive()
+                group.check_alive(may_finish=('master',))
                 time.sleep(0.05)
             timing['task_end'] = time.monotonic() - t_begin
             exit_codes = group.stop()
