@@ -290,7 +290,12 @@ def match_commands(states: np.ndarray, commands: np.ndarray, period: float) -> d
     newest = np.searchsorted(states[:, 1], commands[:, 0], side='right') - 1
     ok = newest >= 0
     round_trips = commands[ok, 1] - states[newest[ok], 0]
+    worst = np.argsort(round_trips)[-5:][::-1]
+    t0 = commands[0, 0] if len(commands) else 0
     return {'latency': latency_summary(round_trips),
+            # the five longest round trips: (s since the first command, ms)
+            'worst': [(float((commands[ok][i, 0] - t0) * 1e-9), float(round_trips[i] * 1e-6))
+                      for i in worst],
             'periods': missed_periods(commands[:, 0], period),
             'sim_periods': missed_periods(np.sort(states[:, 0]), period),
             'states': int(len(states)), 'commands': int(len(commands)),

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from grip_force_ros.bench.procs import BenchError, Child, executable, python_module, ros_env, stop_all
@@ -48,6 +48,8 @@ class Variant:
     answer : str
         'callback': the echo answers in its subscription callback (the floor);
         'timer': on its own 1 kHz timer, the newest state (the controller's structure).
+    rt_priority : int
+        0: normal scheduling; 1..99: both processes under SCHED_FIFO at this priority.
     """
 
     executor: str = 'events'
@@ -56,6 +58,7 @@ class Variant:
     prealloc: bool = True
     callback_groups: str = 'default'
     answer: str = 'callback'
+    rt_priority: int = 0
 
     def args(self) -> list[str]:
         out = ['--executor', self.executor, '--depth', str(self.depth),
@@ -69,22 +72,28 @@ class Variant:
     def label(self) -> str:
         return (f'{self.executor}, depth {self.depth}, gc.freeze {"on" if self.gc_freeze else "off"}, '
                 f'prealloc {"on" if self.prealloc else "off"}, groups {self.callback_groups}, '
-                f'answer on {self.answer}')
+                f'answer on {self.answer}'
+                + (f', SCHED_FIFO {self.rt_priority}' if self.rt_priority else ''))
 
 
 #: The settings the bench measures the floor with (the winners of the variant runs).
 BEST = Variant()
 
-#: Variants measured by ``grip-force bench --variants``: the baseline and one change at a time.
+#: Variants measured by ``grip-force bench --variants``: plain rclpy defaults, the
+#: EventsExecutor with one change at a time, the multi-threaded executor, the
+#: chosen settings, the same answering on a timer (the controller's structure),
+#: and the chosen settings under SCHED_FIFO.
 VARIANTS = (
     Variant('single', 10, False, False),
     Variant('events', 10, False, False),
-    Variant('single', 1, False, False),
-    Variant('single', 10, True, False),
-    Variant('single', 10, False, True),
+    Variant('events', 1, False, False),
+    Variant('events', 10, True, False),
+    Variant('events', 10, False, True),
     Variant('multi', 10, False, False, 'separate'),
     Variant('multi', 10, False, False, 'reentrant'),
     BEST,
+    replace(BEST, answer='timer'),
+    replace(BEST, rt_priority=50),
 )
 
 
@@ -130,9 +139,11 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
     common = variant.args() + ['--period', str(period)]
     children = []
     try:
-        children.append(Child('echo', python_module(CHILD, 'echo', *common), env))
+        rt = variant.rt_priority
+        children.append(Child('echo', python_module(CHILD, 'echo', *common), env, rt_priority=rt))
         children.append(Child('ping', python_module(CHILD, 'ping', '--seconds', str(seconds),
-                                                    '--warmup', str(warmup), *common), env))
+                                                    '--warmup', str(warmup), *common), env,
+                              rt_priority=rt))
         result = _window(children[1], children[:1], seconds)
     finally:
         stop_all(children)
@@ -141,7 +152,8 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
 
 
 def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
-                period: float = 1e-3, executor: str | None = None, controller: str = 'timer') -> dict:
+                period: float = 1e-3, executor: str | None = None, controller: str = 'timer',
+                rt_priority: int = 0) -> dict:
     """sim -> controller -> sim round trip at 1 kHz, the real executables.
 
     Starts ``sim_instrument``, ``controller`` (``--params-file config``) and a
@@ -161,6 +173,9 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     controller : str
         'timer': the shipped ``controller`` (steps on its 1 kHz timer); 'event':
         the bench's :mod:`.event_controller` (steps on each actuator state).
+    rt_priority : int
+        0: normal scheduling; 1..99: sim, controller and probe under SCHED_FIFO
+        at this priority (the master stays normal).
 
     Returns
     -------
@@ -176,14 +191,15 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     params = ['--ros-args', '--params-file', config, '--log-level', 'warn']
     children = []
     try:
-        children.append(Child('sim', [executable('sim_instrument'), *params], env))
+        rt = rt_priority
+        children.append(Child('sim', [executable('sim_instrument'), *params], env, rt_priority=rt))
         controller_cmd = ([executable('controller')] if controller == 'timer' else
                           python_module('grip_force_ros.bench.event_controller'))
-        children.append(Child('controller', [*controller_cmd, *params], env))
+        children.append(Child('controller', [*controller_cmd, *params], env, rt_priority=rt))
         children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
         probe = Child('probe', python_module(CHILD, 'probe', '--seconds', str(seconds),
                                              '--warmup', str(warmup), '--period', str(period),
-                                             '--depth', '10'), env)
+                                             '--depth', '10'), env, rt_priority=rt)
         children.append(probe)
         result = _window(probe, children[:3], seconds)
         for c in children[:3]:
@@ -194,6 +210,7 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     result['config'] = config
     result['executor'] = executor or 'node default'
     result['controller'] = controller
+    result['rt_priority'] = rt_priority
     return result
 
 

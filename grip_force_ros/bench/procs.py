@@ -86,6 +86,30 @@ def executable(name: str) -> str:
     return str(candidate) if candidate.exists() else name
 
 
+def realtime(priority: int):
+    """A ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
+
+    Set before ``exec``, so every thread the process starts (the executor, the DDS
+    receive threads) inherits it, as ``chrt -f <priority> <cmd>`` would. Needs
+    CAP_SYS_NICE (root or an rtprio limit); raises in the child otherwise. The
+    kernel's RT throttling (``sched_rt_runtime_us``) still leaves other work 5 %.
+    """
+    def apply() -> None:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    return apply
+
+
+def can_use_realtime(priority: int = 1) -> bool:
+    """Whether this process may start SCHED_FIFO children."""
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, before[0], before[1])
+        return True
+    except (OSError, AttributeError):
+        return False
+
+
 class Child:
     """One child process whose stdout lines are read in the background.
 
@@ -99,13 +123,15 @@ class Child:
         Environment (see :func:`ros_env`).
     """
 
-    def __init__(self, name: str, cmd: list[str], env: dict, cwd: str | None = None):
+    def __init__(self, name: str, cmd: list[str], env: dict, cwd: str | None = None,
+                 rt_priority: int = 0):
         self.name = name
         self.cmd = cmd
         self.lines: queue.Queue = queue.Queue()
         self.tail: list[str] = []
         self.proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1)
+                                     stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                     preexec_fn=realtime(rt_priority) if rt_priority else None)
         self.ps = psutil.Process(self.proc.pid)
         self._cpu0: float | None = None
         self._t0 = 0.0

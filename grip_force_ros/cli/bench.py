@@ -31,6 +31,12 @@ def add_arguments(parser) -> None:
                         help='also measure the floor with each executor/QoS/gc/allocation variant')
     parser.add_argument('--variant-seconds', type=float, default=None,
                         help='window of each variant run (s, default --seconds)')
+    parser.add_argument('--event-controller', action='store_true',
+                        help='also run the product with a controller that steps on each actuator state '
+                             '(bench variant, grip_force_ros.bench.event_controller)')
+    parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
+                        help='run the 1 kHz processes of the floor and the product under SCHED_FIFO N '
+                             '(1..99, like chrt -f N; needs CAP_SYS_NICE; default 0 = normal)')
     parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
                         help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
 
@@ -56,7 +62,8 @@ def render(result: dict) -> str:
     loop = result.get('loop')
     if loop:
         fl, pr = loop['floor'], loop['product']
-        lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}):")
+        rt = f", SCHED_FIFO {loop['rt_priority']}" if loop.get('rt_priority') else ''
+        lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}{rt}):")
         lines.append(f"  floor   ping-pong       p50 {_f(fl['p50_ms'])} ms  p99 {_f(fl['p99_ms'])} ms  "
                      f"max {_f(fl['max_ms'])} ms  missed {_f(loop['floor_missed_fraction'] * 100)} %")
         lines.append(f"  product sim->ctrl->sim  p50 {_f(pr['p50_ms'])} ms  p99 {_f(pr['p99_ms'])} ms  "
@@ -64,6 +71,12 @@ def render(result: dict) -> str:
         lines.append(f"  p99 ratio {_f(loop['p99_ratio'])} (goal <= 1.5: {_goal(loop['p99_ratio'], 1.5)}); "
                      f"missed periods {_f(loop['missed_fraction'] * 100)} % "
                      f"(goal <= 0.1 %: {_goal(loop['missed_fraction'], 0.001)})")
+        ev = loop.get('event_driven')
+        if ev:
+            ep = ev['product']
+            lines.append(f"  product, event-driven controller (bench variant): p50 {_f(ep['p50_ms'])} ms  "
+                         f"p99 {_f(ep['p99_ms'])} ms  max {_f(ep['max_ms'])} ms  missed "
+                         f"{_f(ev['missed_fraction'] * 100)} %  p99 ratio {_f(ev['p99_ratio'])}")
         cpu = loop['cpu_percent']
         lines.append('  cpu % of one core: floor ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
                      + '; product ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['product'].items()))
@@ -107,6 +120,15 @@ def run(args) -> int:
     if args.seconds <= 0 or args.log_minutes <= 0:
         print('grip-force bench: --seconds and --log-minutes must be > 0', file=sys.stderr)
         return 2
+    if not 0 <= args.rt_priority <= 99:
+        print('grip-force bench: --rt-priority must be in 0..99', file=sys.stderr)
+        return 2
+    if args.rt_priority:
+        from grip_force_ros.bench.procs import can_use_realtime
+        if not can_use_realtime(args.rt_priority):
+            print('grip-force bench: SCHED_FIFO not permitted here (needs CAP_SYS_NICE or an rtprio '
+                  'limit); run without --rt-priority', file=sys.stderr)
+            return 2
     try:
         config = str(find_config(args.config))
     except FileNotFoundError as exc:
@@ -117,7 +139,9 @@ def run(args) -> int:
         result = run_bench(args.seconds, parts, domains=parse_domains(args.domain_ids), config=config,
                            log_minutes=args.log_minutes, model_size=args.model_size,
                            variants=args.variants, variant_seconds=args.variant_seconds,
-                           product_executor=args.product_executor, say=say)
+                           product_executor=args.product_executor,
+                           event_controller=args.event_controller, rt_priority=args.rt_priority,
+                           say=say)
     except BenchError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)
         return 1
