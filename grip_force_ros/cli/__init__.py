@@ -26,6 +26,7 @@ COMMANDS = {
     'diagnose': 'diagnose',
     'blindcheck': 'blindcheck',
     'faultcheck': 'faultcheck',
+    'soak': 'soak',
     'bench': 'bench',
 }
 
