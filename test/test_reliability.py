@@ -1,0 +1,135 @@
+"""Watchdog timing and read-only hardware limits on real nodes (issue 5).
+
+An in-process controller node (parameter overrides from the paper's needle driver YAML)
+and a fault probe that closes the loop with a simulated instrument over loopback DDS
+(:class:`grip_force_ros.faults.runner.Session`).
+
+Watchdog: each input in turn falls silent; the first safe output (target force 0 N, the
+current ramping to 0 A) must come within two control periods after ``watchdog_timeout``
+(30 ms, as the dVRK) has expired on the controller's clock, and when the input returns
+control resumes without a current jump. The wall-clock time from the last published input
+to the first safe command is measured too (it includes DDS delivery and the scheduling of
+a loaded 2-core machine); its median is asserted, every trial is printed (``pytest -s``).
+"""
+import statistics
+
+import pytest
+
+from grip_force_ros.faults.catalogue import FaultCase, set_field, silence
+from grip_force_ros.faults.runner import Session, resolve_config, run_message_case
+
+pytestmark = pytest.mark.ros
+
+TRIALS = 4   # per silenced input
+
+
+@pytest.fixture(scope='module')
+def session():
+    s = Session(resolve_config('config/paper_needle_driver.yaml'))
+    assert s.wait_gripping(), 'the controller did not start gripping'
+    yield s
+    s.close()
+
+
+def _silence(source, ticks=80):
+    return FaultCase(f'silence_{source}', 'silence', f'no {source} messages', 'stale_safe',
+                     source, silence(), ticks=ticks, reason=f'stale {source}')
+
+
+def test_watchdog_safe_within_two_periods_and_bumpless_resume(session):
+    params = session.params
+    period = 1.0 / params.control_rate
+    timeout = params.watchdog_timeout
+    assert timeout == pytest.approx(0.030) and period == pytest.approx(1e-3)
+    step = params.max_current_slew * period
+    latencies, received, jumps = [], [], []
+    for source in ('master', 'instrument', 'actuator'):
+        for trial in range(TRIALS):
+            d = run_message_case(session, _silence(source))
+            print(f"{source} #{trial}: safe {d['safe_after_last_input_ms']} ms after the last "
+                  f"publish, {d['safe_after_last_receive_ms']} ms after its receipt, "
+                  f"period {d['controller_steps_after_timeout']} after the timeout, "
+                  f"resume jump {d['max_resume_jump'] * 1e3:.3f} mA")
+            assert d['passed'], d
+            assert 1 <= d['controller_steps_after_timeout'] <= 2, d
+            # the receive-time latency is bounded by the controller's own steps
+            assert d['safe_after_last_receive_ms'] > timeout * 1e3
+            latencies.append(d['safe_after_last_input_ms'] / 1e3)
+            received.append(d['safe_after_last_receive_ms'] / 1e3)
+            jumps.append(d['max_resume_jump'])
+    print(f'last publish -> first safe command: median {statistics.median(latencies) * 1e3:.2f} '
+          f'ms, max {max(latencies) * 1e3:.2f} ms over {len(latencies)} trials')
+    assert statistics.median(received) <= timeout + 2 * period + 1e-4
+    assert statistics.median(latencies) <= timeout + 2 * period + 2e-3   # + DDS delivery
+    # bumpless: the first command after the safe state continues from the last one
+    assert max(jumps) <= 0.5 * step
+
+
+def test_resume_from_a_partial_ramp_has_no_current_jump(session):
+    """Inputs back after 31 ms of silence, or one NaN sample: the ramp to 0 A is under way
+    (0.1 A per period) when control resumes; the command continues where the ramp left it."""
+    params = session.params
+    step = params.max_current_slew / params.control_rate
+    single_nan = FaultCase('single_nan_jaw', 'non-finite', 'one NaN jaw angle', 'reject_safe',
+                           'instrument', set_field('position', 1, float('nan')), ticks=1,
+                           reason='nan')
+    resumed_from = []
+    for case in (_silence('instrument', ticks=31), single_nan) * 3:
+        d = run_message_case(session, case)
+        assert d['passed'], d
+        assert d['max_resume_jump'] <= 0.5 * step, d
+        rows = [(stamp, c) for _, stamp, c in session.probe.commands]
+        targets = {stamp: f for _, stamp, f in session.probe.targets}
+        for (s0, c0), (s1, c1) in zip(rows, rows[1:]):
+            if targets.get(s0) == 0.0 and targets.get(s1, 0.0) > 0.0:
+                resumed_from.append(abs(c0))
+    print('resumed from |I| =', resumed_from)
+    assert any(i > 0.01 for i in resumed_from), resumed_from   # A: resumed mid-ramp
+
+
+def test_safe_output_ramps_at_the_slew_limit(session):
+    """While safe, the current falls to 0 A at exactly the slew limit, never faster."""
+    probe, params = session.probe, session.params
+    step = params.max_current_slew / params.control_rate
+    d = run_message_case(session, _silence('instrument', ticks=60))
+    assert d['passed'], d
+    # the commands of the safe stretch: |I| decreasing by at most one slew step to 0 A
+    rows = [(stamp, command) for _, stamp, command in probe.commands]
+    targets = {stamp: f for _, stamp, f in probe.targets}
+    safe = [c for stamp, c in rows if targets.get(stamp) == 0.0]
+    assert safe, 'no safe output recorded'
+    assert all(abs(b) <= abs(a) + 1e-12 and abs(a - b) <= step * (1 + 1e-9)
+               for a, b in zip(safe, safe[1:]))
+    assert abs(safe[-1]) < 1e-9     # 60 ms of silence: reached 0 A (<= 0.5 A at 0.1 A/ms)
+    assert probe.limits.violations == []
+
+
+@pytest.mark.parametrize('name, value', [
+    ('max_current', 5.0), ('max_current_slew', 1e4), ('max_grip_force', 100.0),
+    ('jaw_angle_max', 3.0), ('wrist_angle_limit', 3.0), ('control_rate', 500.0)])
+def test_hardware_limits_are_read_only_and_say_why(session, name, value):
+    before = session.get_parameter(name)
+    (ok, reason), = session.set_parameters({name: value})
+    assert not ok
+    assert 'read-only' in reason or 'read only' in reason, reason
+    assert name in reason or 'read-only' in reason
+    assert session.get_parameter(name) == before
+
+
+@pytest.mark.parametrize('values, words', [
+    ({'force_kp': -1.0}, ('force_kp', '-1.0', 'range')),
+    ({'watchdog_timeout': 5.0}, ('watchdog_timeout', 'range')),
+    ({'grip_force_max': float('nan')}, ('grip_force_max',)),
+    ({'object_kind': 'banana'}, ('banana', 'object_kind')),
+])
+def test_unsafe_runtime_sets_are_refused_with_the_reason(session, values, words):
+    before = {k: session.get_parameter(k) for k in values}
+    results = session.set_parameters(values)
+    assert [ok for ok, _ in results] == [False] * len(values)
+    reason = results[0][1]
+    for word in words:
+        assert word in reason, (word, reason)
+    after = {k: session.get_parameter(k) for k in values}
+    assert after == before
+    # the loop still grips after the refusal
+    assert session.wait_gripping(2.0)
