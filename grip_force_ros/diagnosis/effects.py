@@ -18,7 +18,7 @@ grid; the coefficients are linear least squares. Each effect's shape:
 | viscous_friction | contact * jaw_velocity | - | - |
 | cable_hysteresis | nominal * dir(log jaw tension) | - | relative width |
 | backlash | - | tanh(current / width) | width |
-| tension_dependent_friction | nominal * current | - | - |
+| tension_dependent_friction | nominal * current, nominal * current^2 | - | - |
 | viscoelastic_creep | lowpass_tau(nominal) | - | tau |
 | sensor_delay | (base = nominal(t - d)) | - | d |
 | torque_constant_drift | nominal * lowpass_tau(current^2)/I_max^2 (heat) | - | tau |
@@ -107,7 +107,8 @@ def _backlash(f, current_width):
 
 
 def _tension(f, _):
-    return Design(f['nominal'], [f['nominal'] * f['current']])
+    # efficiency falling with tension: first and second order in the current
+    return Design(f['nominal'], [f['nominal'] * f['current'], f['nominal'] * f['current'] ** 2])
 
 
 def _creep(f, tau):
@@ -145,8 +146,9 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Effect('backlash', (0.002, 0.005, 0.01, 0.02), 'current_width', 'A', _backlash,
            (), ('dead_band',), (('dead_band', 'rad', lambda c, g: -2.0 * c),)),
     Effect('tension_dependent_friction', (None,), None, '', _tension,
-           ('efficiency_loss_per_amp',), (),
-           (('efficiency_loss_per_amp', '1/A', lambda c, g: -_rel(c, g)),)),
+           ('efficiency_loss_per_amp', 'efficiency_loss_per_amp2'), (),
+           (('efficiency_loss_per_amp', '1/A', lambda c, g: -_rel(c, g)),
+            ('efficiency_loss_per_amp2', '1/A^2', lambda c, g: -_rel(c, g)))),
     Effect('viscoelastic_creep', (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0), 'time_constant', 's', _creep,
            ('relaxing_fraction',), (), (('relaxing_fraction', '-', lambda c, g: -_rel(c, g)),)),
     # below ~10 ms a delay cannot be told from the plant's own mechanical response (cable and
