@@ -26,7 +26,7 @@ def _peak_mb() -> float:
 def build_long_log(path: Path, minutes: float, *, bag: bool = False) -> Path:
     """Write a ``minutes`` long 1 kHz log built from simulated minutes; returns the path."""
     from grip_force_ros.diagnosis.blind import BlindCase, generate_log
-    from grip_force_ros.logs import write_bag, write_csv
+    from grip_force_ros.logs import write_bag
     from grip_force_ros.logs.csvlog import _format_column
 
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -454,7 +454,8 @@ def diagnose(train_logs: Sequence, test_logs: Sequence | None = None, params=Non
     params : ParamSet, optional
         Instrument parameters of the nominal model (defaults when omitted).
     **kwargs
-        ``model``, ``analysis_rate`` (Hz), ``default_object``, ``blocks``, ``folds``, ``min_improvement``, ``param_penalty``, ``jaw_side_cable_length``
+        ``model``, ``analysis_rate`` (Hz), ``default_object``, ``blocks``, ``folds``,
+        ``min_improvement``, ``param_penalty``, ``jaw_side_cable_length``
         (m), ``seed``, ``progress``.
 
     Returns
