@@ -161,6 +161,13 @@ def shift_stamp(offset: float) -> Mutator:
     return mutate
 
 
+def fixed_stamp(stamp: float) -> Mutator:
+    """Every sample carries the same stamp ``stamp`` (s), e.g. 0 for an unstamped driver."""
+    def mutate(sample: dict, k: int) -> list:
+        return [dict(sample, stamp=stamp)]
+    return mutate
+
+
 def duplicate_each(copies: int = 2) -> Mutator:
     """Send every sample ``copies`` times with the same stamp."""
     def mutate(sample: dict, k: int) -> list:
@@ -280,6 +287,10 @@ def _message_cases() -> list[FaultCase]:
           'reject_safe', 'actuator', shift_stamp(10.0), reason=r'ahead'),
         C('stamp_future_master', 'timestamps', 'master stamps 1 h in the future',
           'reject_safe', 'master', shift_stamp(3600.0), reason=r'ahead'),
+        C('unstamped_instrument', 'timestamps',
+          'instrument messages with a zero stamp (a driver that does not stamp): the first is '
+          'rejected as going backwards, the rest are duplicates that never refresh the watchdog',
+          'stale_safe', 'instrument', fixed_stamp(0.0), ticks=120, reason=r'stale instrument'),
     ]
     # --- duplicates and bursts
     cases += [
