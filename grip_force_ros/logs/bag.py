@@ -229,16 +229,42 @@ def _bag_dir(path: Path) -> Path:
     raise LogError(f'{path}: not a rosbag2 (expected a directory with metadata.yaml)')
 
 
-class _TopicBuffer:
-    """Raw messages of one topic, grouped by byte length for vectorised decoding."""
+#: Raw messages held per topic before they are decoded into arrays (bounds the memory of a read).
+FLUSH_MESSAGES = 50_000
 
-    def __init__(self):
+
+class _TopicBuffer:
+    """Raw messages of one topic, grouped by byte length and decoded into arrays every
+    FLUSH_MESSAGES messages (vectorised per group), so raw bytes never pile up."""
+
+    def __init__(self, decode):
+        self.decode = decode            # (groups) -> dict of arrays
         self.groups: dict[int, tuple[list[int], list[bytes]]] = {}
+        self.pending = 0
+        self.parts: list[dict] = []
+        self.count = 0
 
     def add(self, bag_ns: int, raw: bytes):
         times, datas = self.groups.setdefault(len(raw), ([], []))
         times.append(bag_ns)
         datas.append(raw)
+        self.pending += 1
+        self.count += 1
+        if self.pending >= FLUSH_MESSAGES:
+            self.flush()
+
+    def flush(self):
+        if self.pending:
+            self.parts.append(self.decode(self.groups))
+            self.groups = {}
+            self.pending = 0
+
+    def finish(self) -> dict:
+        self.flush()
+        keys = set(self.parts[0])
+        if any(set(p) != keys for p in self.parts):
+            raise LogError('joint names change between messages of one topic')
+        return _sorted_unique({k: np.concatenate([p[k] for p in self.parts]) for k in keys})
 
 
 def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
@@ -263,7 +289,10 @@ def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
     ts = _typestore()
     wanted = {topics.ACTUATOR_JS: _JS, topics.INSTRUMENT_JS: _JS, topics.MEASURED_FORCE: _WRENCH,
               topics.DIAGNOSTICS: _DIAG}
-    buffers = {name: _TopicBuffer() for name in wanted}
+    decoders = {topics.ACTUATOR_JS: lambda g: _decode_js(ts, g, path),
+                topics.INSTRUMENT_JS: lambda g: _decode_js(ts, g, path),
+                topics.MEASURED_FORCE: lambda g: _decode_wrench(ts, g, path)}
+    buffers = {name: _TopicBuffer(decoders[name]) for name in decoders}
     objects: list[tuple[int, str]] = []
     try:
         with Reader(_bag_dir(path)) as reader:
@@ -292,11 +321,14 @@ def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
         raise LogError(f'{path}: cannot read bag: {exc}') from exc
 
     for topic in (topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.MEASURED_FORCE):
-        if not buffers[topic].groups:
+        if not buffers[topic].count:
             raise LogError(f'{path}: no messages on {topic}')
-    act = _decode_js(ts, buffers.pop(topics.ACTUATOR_JS), path)
-    ins = _decode_js(ts, buffers.pop(topics.INSTRUMENT_JS), path)
-    wr = _decode_wrench(ts, buffers.pop(topics.MEASURED_FORCE), path)
+    try:
+        act = buffers.pop(topics.ACTUATOR_JS).finish()
+        ins = buffers.pop(topics.INSTRUMENT_JS).finish()
+        wr = buffers.pop(topics.MEASURED_FORCE).finish()
+    except LogError as exc:
+        raise LogError(f'{path}: {exc}') from None
 
     t_ns = act['stamp']
     lo = max(ins['stamp'][0], wr['stamp'][0])
@@ -343,9 +375,9 @@ def _sorted_unique(out: dict) -> dict:
     return {k: v[first] for k, v in out.items()}
 
 
-def _decode_js(ts, buf: _TopicBuffer, path: Path) -> dict:
+def _decode_js(ts, groups: dict, path: Path) -> dict:
     parts: dict[str, list[np.ndarray]] = {}
-    for size, (bag_times, datas) in buf.groups.items():
+    for size, (bag_times, datas) in groups.items():
         first = ts.deserialize_cdr(datas[0], _JS)
         names = list(first.name)
         make, fields = _js_maker(ts, names, first.header.frame_id)
@@ -373,15 +405,15 @@ def _decode_js(ts, buf: _TopicBuffer, path: Path) -> dict:
         parts.setdefault('stamp', []).append(_stamps(stamp, np.asarray(bag_times, dtype=np.int64)))
         for k, v in cols.items():
             parts.setdefault(k, []).append(v)
-    lengths = {len(v) for v in parts.values()}
+    lengths = {sum(len(x) for x in v) for v in parts.values()}
     if len(lengths) != 1:
         raise LogError(f'{path}: joint names change between JointState messages')
-    return _sorted_unique({k: np.concatenate(v) for k, v in parts.items()})
+    return {k: np.concatenate(v) for k, v in parts.items()}
 
 
-def _decode_wrench(ts, buf: _TopicBuffer, path: Path) -> dict:
+def _decode_wrench(ts, groups: dict, path: Path) -> dict:
     parts: dict[str, list[np.ndarray]] = {}
-    for size, (bag_times, datas) in buf.groups.items():
+    for size, (bag_times, datas) in groups.items():
         first = ts.deserialize_cdr(datas[0], _WRENCH)
         make, fields = _wrench_maker(ts, first.header.frame_id)
         tpl, off = _layout(ts, _WRENCH, make, fields)
@@ -392,4 +424,4 @@ def _decode_wrench(ts, buf: _TopicBuffer, path: Path) -> dict:
         parts.setdefault('stamp', []).append(_stamps(stamp, np.asarray(bag_times, dtype=np.int64)))
         for k in ('fz', 'tz'):
             parts.setdefault(k, []).append(vals[k])
-    return _sorted_unique({k: np.concatenate(v) for k, v in parts.items()})
+    return {k: np.concatenate(v) for k, v in parts.items()}
