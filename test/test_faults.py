@@ -34,7 +34,8 @@ def test_catalogue_has_25_kinds_with_defined_outcomes():
         if c.kind in ('message', 'restart'):
             assert c.source in SOURCES + ('all', 'restart'), c.name
             assert c.ticks > 0
-        if c.outcome in ('reject_safe', 'stale_safe', 'clamp', 'refuse_set', 'refuse_start'):
+        if c.outcome in ('reject_safe', 'reject_once', 'stale_safe', 'clamp', 'refuse_set',
+                         'refuse_start'):
             assert c.reason, f'{c.name}: an outcome with a reason needs the expected reason'
     # silence on every input topic, NaN and inf in every field the controller reads
     silenced = {c.source for c in cases if c.category == 'silence'}

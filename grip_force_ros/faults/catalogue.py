@@ -12,6 +12,10 @@ Outcomes (:data:`OUTCOMES`):
     is not overwritten, the source counts as faulted, so the output goes to the safe state
     (target force 0 N, current ramping to 0 A at the slew limit) until good samples return;
     then control resumes without a current jump.
+``reject_once``
+    One faulty sample among good ones: rejected with the reason on /diagnostics, the last
+    good input kept; the output is safe at most until the next good sample (possibly not
+    at all, when that sample arrives before the next control period).
 ``clamp``
     The sample is used after clamping to its range, flagged on /diagnostics; control goes on.
 ``ignore``
@@ -39,6 +43,8 @@ INF = math.inf
 OUTCOMES = {
     'reject_safe': 'rejected with the reason on /diagnostics, last good input kept, output safe '
                    'while faulted, control resumes without a current jump',
+    'reject_once': 'a single bad sample: rejected with the reason on /diagnostics, safe at most '
+                   'until the next good sample',
     'clamp': 'used after clamping to its range, flagged on /diagnostics, control goes on',
     'ignore': 'no effect: no rejection, the controller keeps its mode',
     'stale_safe': 'watchdog: safe state within two control periods of the timeout, reason on '
@@ -233,6 +239,10 @@ def _message_cases() -> list[FaultCase]:
     cases.append(C('inf_actuator_measured_current', 'non-finite', 'measured current = +inf',
                    'reject_safe', 'actuator', set_field('effort', 0, INF),
                    reason=r'inf|not finite|non-finite'))
+    # a single bad sample among good ones: one or two safe periods, the reason still reported
+    cases.append(C('single_nan_jaw_angle', 'non-finite', 'one jaw angle = nan among good samples',
+                   'reject_once', 'instrument', set_field('position', 1, NAN), ticks=1,
+                   reason=r'nan|not finite|non-finite'))
     # --- wrong array lengths
     cases += [
         C('short_instrument_position', 'array length', '1 position for 2 joints', 'reject_safe',
@@ -279,18 +289,19 @@ def _message_cases() -> list[FaultCase]:
     ]
     # --- timestamps
     cases += [
+        # a jump back is rejected once; the stamps that follow it increase and are used
         C('stamp_backwards_instrument', 'timestamps', 'instrument stamps jump 1 s back',
-          'reject_safe', 'instrument', shift_stamp(-1.0), reason=r'backwards'),
+          'reject_once', 'instrument', shift_stamp(-1.0), reason=r'backwards'),
         C('stamp_backwards_master', 'timestamps', 'master stamps jump 0.5 s back',
-          'reject_safe', 'master', shift_stamp(-0.5), reason=r'backwards'),
+          'reject_once', 'master', shift_stamp(-0.5), reason=r'backwards'),
         C('stamp_future_actuator', 'timestamps', 'actuator stamps 10 s in the future',
           'reject_safe', 'actuator', shift_stamp(10.0), reason=r'ahead'),
         C('stamp_future_master', 'timestamps', 'master stamps 1 h in the future',
           'reject_safe', 'master', shift_stamp(3600.0), reason=r'ahead'),
         C('unstamped_instrument', 'timestamps',
-          'instrument messages with a zero stamp (a driver that does not stamp): the first is '
-          'rejected as going backwards, the rest are duplicates that never refresh the watchdog',
-          'stale_safe', 'instrument', fixed_stamp(0.0), ticks=120, reason=r'stale instrument'),
+          'instrument messages with a zero (unset) header stamp, as from a driver that does not '
+          'stamp: used by their receive time, the watchdog still applies', 'ignore',
+          'instrument', fixed_stamp(0.0), ticks=120),
     ]
     # --- duplicates and bursts
     cases += [

@@ -258,7 +258,7 @@ class FaultProbe(Node):
             # the current state only: cumulative counters of past rejections stay out
             text = ' | '.join([status.name, status.message] +
                               [f'{k}={v}' for k, v in values.items()
-                               if not k.startswith('rejected')])
+                               if not k.startswith('rejected')])   # 'rejected: <reason>' = count
             self.diagnostics.append((now, text, values, status.level))
 
     def clear_records(self) -> None:

@@ -271,7 +271,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         problems.append('control did not resume within %.1f s' % RECOVERY_TIMEOUT)
     if jumps and max(jumps) > RESUME_JUMP_SHARE * step + 1e-9:
         problems.append(f'current jump {max(jumps):.4f} A at resume (> {RESUME_JUMP_SHARE} slew step)')
-    if case.outcome in ('reject_safe', 'stale_safe', 'clamp') and reason_text is None:
+    if case.outcome in ('reject_safe', 'reject_once', 'stale_safe', 'clamp') and reason_text is None:
         problems.append(f'no /diagnostics text matching {case.reason!r}')
     if case.outcome in ('reject_safe', 'stale_safe') and not safe_rows:
         problems.append('output never went to the safe state')
@@ -307,7 +307,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     detail['rejected_samples'] = rejected
     if case.outcome == 'ignore' and rejected:
         problems.append(f'{rejected} samples rejected: {session.last_rejection()}')
-    if case.outcome == 'reject_safe' and not rejected:
+    if case.outcome in ('reject_safe', 'reject_once') and not rejected:
         problems.append('no sample was rejected')
     if detail['limit_violations']:
         problems.append('limit violation: ' + (probe.limits.violations + probe.force_violations)[-1])
