@@ -92,6 +92,7 @@ class ControllerNode(Node):
         self._diag_key = None          # (mode, limits_hit, reasons, rejected count) last published
         self._diag_time = -math.inf    # s, when /diagnostics was last published
         self._limits_seen: set = set()  # limits hit since the last /diagnostics
+        self._new_rejections: list = []  # rejection reasons since the last /diagnostics
         # Loop timing (perf_counter s): for /diagnostics and the loop benchmark.
         self._period = 1.0 / params.control_rate
         self.timing = {'ticks': 0, 'late': 0, 'period_sum': 0.0, 'period_max': 0.0,
@@ -111,10 +112,17 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ inputs
     def _reject(self, source: str, now: float, exc: InputRejected) -> None:
         reason = self.inputs.reject(source, now, f'malformed message: {exc}')
+        self._note_rejection(reason)
         self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
+
+    def _note_rejection(self, reason: str) -> None:
+        """Keep a rejection for the next /diagnostics, even if it is over by then."""
+        if reason not in self._new_rejections and len(self._new_rejections) < 5:
+            self._new_rejections.append(reason)
 
     def _report(self, reason) -> None:
         if reason is not None:
+            self._note_rejection(reason)
             self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
 
     def _on_master(self, msg: JointState) -> None:
@@ -216,7 +224,7 @@ class ControllerNode(Node):
             self._limits_seen.update(out.limits_hit)
         key = (out.mode, out.limits_hit, out.reasons, len(self.inputs.rejected))
         since = now - self._diag_time
-        if since >= 1.0 / DIAGNOSTICS_RATE or (key != self._diag_key
+        if since >= 1.0 / DIAGNOSTICS_RATE or ((key != self._diag_key or self._new_rejections)
                                                and since >= DIAGNOSTICS_MIN_INTERVAL):
             self._publish_diagnostics(stamp_msg, out)
             self._diag_key, self._diag_time = key, now
@@ -241,6 +249,7 @@ class ControllerNode(Node):
         faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
                                                                'force')]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
+        values['new_rejections'] = '; '.join(self._new_rejections) or 'none'
         timing = self.timing
         if timing['ticks']:
             values['period_mean_ms'] = f"{timing['period_sum'] / timing['ticks'] * 1e3:.4f}"
@@ -262,6 +271,7 @@ class ControllerNode(Node):
         array.status = [self.diagnostic_status(out)]
         self._diag_pub.publish(array)
         self._limits_seen = set()
+        self._new_rejections = []
 
 
 def main(args=None) -> int:
