@@ -215,3 +215,28 @@ def test_recorder_writes_an_mcap_bag_that_rosbags_reads(tmp_path):
     series, _ = read_bag_series(bag)
     assert series[topics.MEASURED_FORCE]['measured_force'][-1] == pytest.approx(1.99)
     assert np.all(np.diff(series[topics.MASTER_JS]['t']) >= 0)
+
+
+# ---------------------------------------------------------------- comparison report
+def _report():
+    runs = lambda r: {c: {'steady_ratio': v, 'target_force': 4.0, 'problems': []}  # noqa: E731
+                      for c, v in zip(('controlled', 'uncalibrated', 'sensor', 'naive'), r)}
+    inst = [{'name': 'a', 'runs': runs((1.00, 1.6, 1.0, 1.6))},
+            {'name': 'b', 'runs': runs((1.02, 0.8, 1.0, 1.2))}]
+    rep = {'instruments': inst, 'plant_error': 0.2, 'wall_time': 100.0, 'out_dir': 'x'}
+    for c in ('controlled', 'uncalibrated', 'sensor', 'naive'):
+        rep[f'spread_{c}'] = analysis.spread([i['runs'][c]['steady_ratio'] for i in inst])
+    return rep
+
+
+def test_compare_report_table_and_plot(tmp_path):
+    from grip_force_ros.demo.compare import _json_safe, format_report
+    from grip_force_ros.demo.plot import compare_plot
+    rep = _report()
+    text = format_report(rep)
+    assert 'spread (max - min)' in text
+    last_row = [line for line in text.splitlines() if line.startswith('spread')][0].split()
+    assert [float(v) for v in last_row[-4:]] == pytest.approx([0.02, 0.8, 0.0, 0.4])
+    png = compare_plot(rep, tmp_path / 'c.png')
+    assert png.read_bytes()[:4] == b'\x89PNG'
+    assert _json_safe({'a': [float('nan'), 1.0]}) == {'a': [None, 1.0]}

@@ -178,7 +178,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     -------
     dict
         ``instruments`` (per-instrument details) and ``spread_controlled``,
-        ``spread_uncalibrated``, ``spread_sensor``, ``spread_naive``.
+        ``spread_uncalibrated``, ``spread_sensor``, ``spread_naive``; the same over the
+        runs no starved node spoiled (``spread_<condition>_unspoiled``, None when fewer
+        than two) and ``runs_still_spoiled``.
     """
     from grip_force_ros.demo.calibration import calibrated_yaml, fit_instrument
     from grip_force_ros.demo.processes import pick_domain_ids
@@ -274,12 +276,20 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     for condition in CONDITIONS:
         report[f'spread_{condition}'] = spread(
             [i['runs'][condition]['steady_ratio'] for i in instruments])
+        clean = [i['runs'][condition]['steady_ratio'] for i in instruments
+                 if not i['runs'][condition]['problems']]
+        report[f'spread_{condition}_unspoiled'] = spread(clean) if len(clean) >= 2 else None
+    report['runs_still_spoiled'] = [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
+                                    for i in instruments for c in CONDITIONS
+                                    if i['runs'][c]['problems']]
     report['naive_current_closed'] = gain
     report['plant_error'] = plant_error
     report['task_duration'] = task_duration
     report['wall_time'] = time.monotonic() - started
     report['out_dir'] = str(out_dir)
     _json_safe(report)
+    from grip_force_ros.demo.plot import compare_plot
+    report['plot'] = str(compare_plot(report, out_dir / 'compare.png'))
     (out_dir / 'compare.json').write_text(json.dumps(report, indent=1))
     return report
 
@@ -309,6 +319,8 @@ def format_report(report: dict[str, Any]) -> str:
     lines.append(f"{'spread (max - min)':28s}" + ''.join(
         f"{report[f'spread_{c}']:14.3f}" if report[f'spread_{c}'] is not None else f"{'n/a':>14s}"
         for c in CONDITIONS))
+    for item in report.get('runs_still_spoiled') or []:
+        lines.append(f'spoiled by a starved node after {ATTEMPTS} attempts: {item}')
     lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "
                  f"{report['wall_time']:.0f} s; {report['out_dir']})")
     return '\n'.join(lines)

@@ -88,3 +88,38 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def compare_plot(report: Mapping, path: str | Path) -> Path:
+    """Bar chart of ``--compare-instruments``: steady hold force / target per instrument and
+    condition, with each condition's spread in its label. Returns the PNG written."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    conditions = ('controlled', 'uncalibrated', 'sensor', 'naive')
+    labels = {'controlled': 'calibrated model, no sensor', 'uncalibrated': 'shipped YAML, no sensor',
+              'sensor': 'load-cell feedback', 'naive': 'naive (current ~ master, one gain)'}
+    names = [i['name'] for i in report['instruments']]
+    x = np.arange(len(names))
+    width = 0.2
+    fig, ax = plt.subplots(figsize=(10, 5))
+    for k, c in enumerate(conditions):
+        ratios = [i['runs'][c]['steady_ratio'] for i in report['instruments']]
+        ratios = [np.nan if r is None else r for r in ratios]
+        spread = report.get(f'spread_{c}')
+        spread_text = 'n/a' if spread is None else f'{spread:.3f}'
+        ax.bar(x + (k - 1.5) * width, ratios, width, label=f'{labels[c]}: spread {spread_text}')
+    ax.axhline(1.0, color='black', lw=1)
+    ax.set_xticks(x, names)
+    ax.set_ylabel('steady hold grip force / target [-]')
+    ax.set_title('same master trajectory, three instruments, plants 20 % off their YAML '
+                 f"(target {report['instruments'][0]['runs']['controlled'].get('target_force') or 0:.1f} N)",
+                 fontsize=10)
+    ax.legend(fontsize=8, loc='upper left')
+    ax.grid(True, axis='y', alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
