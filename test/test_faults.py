@@ -115,3 +115,26 @@ def test_faultcheck_whole_catalogue_on_real_nodes():
     # bounded: a grip force target above the hardware limit is capped
     capped = by_name['set_grip_force_max_above_hardware']
     assert 0 < capped['peak_target_force'] <= capped['max_grip_force']
+
+
+def test_limit_monitor_counts_every_kind_of_violation():
+    from grip_force_ros.faults.probe import LimitMonitor
+    m = LimitMonitor(max_current=0.5, max_step=0.1)
+    for command in (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.45, 0.35):   # within both limits
+        m.check(command)
+    assert m.violations == [] and m.count == 8
+    m.check(0.5)          # +0.15 A: beyond the slew step
+    m.check(0.6)          # beyond max_current
+    m.check(math.nan)     # non-finite
+    m.check(-0.6)         # beyond max_current, and a jump from the last finite command
+    assert len(m.violations) == 4
+    assert 'slew' in m.violations[0] and 'max_current' in m.violations[1]
+    assert 'non-finite' in m.violations[2]
+
+
+def test_time_message_conversion():
+    from grip_force_ros.faults.probe import to_time_msg
+    t = to_time_msg(12.25)
+    assert (t.sec, t.nanosec) == (12, 250_000_000)
+    assert to_time_msg(-5.0).sec == 0                     # clamped to the message's range
+    assert to_time_msg(1e12).sec == 2 ** 31 - 1

@@ -181,6 +181,10 @@ class Session:
         results = response.results if hasattr(response, 'results') else [response.result]
         return [(r.successful, r.reason) for r in results]
 
+    def violation_count(self) -> int:
+        """Limit violations the probe saw in this session, during cases and between them."""
+        return len(self.probe.limits.violations) + len(self.probe.force_violations)
+
     def receive_times(self) -> dict:
         """Source -> the controller's receive time (s) of its last accepted sample."""
         inputs = getattr(self.controller, 'inputs', None)
@@ -519,14 +523,15 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
                 detail['passed'] = False
                 detail['crash'] = (session.crash or 'executor thread ended')[-800:]
                 detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
-            violations += detail.get('limit_violations', 0) or 0
             details.append(detail)
             if progress:
                 progress(detail)
             if not session.alive or not detail.get('passed'):
+                violations += session.violation_count()   # also those between cases
                 session.close()   # a fresh controller for the next case
                 session = None
         if session is not None:
+            violations += session.violation_count()
             session.close()
     if file_thread is not None:
         file_thread.join()
