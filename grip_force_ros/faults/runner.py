@@ -181,6 +181,13 @@ class Session:
         results = response.results if hasattr(response, 'results') else [response.result]
         return [(r.successful, r.reason) for r in results]
 
+    def held_inputs(self) -> dict:
+        """The input values the controller node holds now (its ControlInputs)."""
+        inputs = getattr(self.controller, 'inputs', None)
+        names = ('master_angle', 'wrist_angle', 'jaw_angle', 'jaw_velocity', 'measured_current',
+                 'motor_angle', 'motor_velocity', 'measured_force')
+        return {n: float(getattr(inputs, n)) for n in names if hasattr(inputs, n)}
+
     def violation_count(self) -> int:
         """Limit violations the probe saw in this session, during cases and between them."""
         return len(self.probe.limits.violations) + len(self.probe.force_violations)
@@ -251,6 +258,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     # the controller's receive time of the last good sample, read inside the window
     wait_until(lambda: probe.fault_k >= min(10, case.ticks - 1) or done.is_set(), 1.0)
     last_received = session.receive_times()
+    held = session.held_inputs()     # what the controller holds while the fault lasts
     done.wait(case.ticks * probe.period * 20 + 2.0)
     t1 = probe.now()
     recovered = wait_until(lambda: session.gripping(t1), RECOVERY_TIMEOUT)
@@ -311,6 +319,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     detail['rejected_samples'] = rejected
     if case.outcome == 'ignore' and rejected:
         problems.append(f'{rejected} samples rejected: {session.last_rejection()}')
+    bad_held = _implausible(held, params)
+    if bad_held:
+        problems.append(f'the controller holds an unusable input during the fault: {bad_held}')
     if case.outcome in ('reject_safe', 'reject_once') and not rejected:
         problems.append('no sample was rejected')
     if detail['limit_violations']:
@@ -319,6 +330,20 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     if problems:
         detail['why'] = '; '.join(problems)
     return detail
+
+
+def _implausible(held: dict, params) -> list:
+    """Held input values that are non-finite or outside their plausibility ranges."""
+    bad = [f'{k}={v!r}' for k, v in held.items() if not math.isfinite(v)]
+    jaw, wrist = held.get('jaw_angle', 0.0), held.get('wrist_angle', 0.0)
+    if not params.jaw_angle_min <= jaw <= params.jaw_angle_max:
+        bad.append(f'jaw_angle={jaw!r}')
+    if abs(wrist) > params.wrist_angle_limit:
+        bad.append(f'wrist_angle={wrist!r}')
+    master = held.get('master_angle', params.master_angle_min)
+    if not params.master_angle_min <= master <= params.master_angle_max:
+        bad.append(f'master_angle={master!r}')
+    return bad
 
 
 def _diag_mode(values: dict):
