@@ -138,3 +138,19 @@ def test_time_message_conversion():
     assert (t.sec, t.nanosec) == (12, 250_000_000)
     assert to_time_msg(-5.0).sec == 0                     # clamped to the message's range
     assert to_time_msg(1e12).sec == 2 ** 31 - 1
+
+
+@pytest.mark.ros
+def test_faultcheck_cli_json():
+    """``grip-force faultcheck --only ... --json`` prints the report; exit 0 when all pass."""
+    import json
+    import subprocess
+    import sys
+    cmd = [sys.executable, '-m', 'grip_force_ros.cli', 'faultcheck', '--json', '--only',
+           'silence_actuator', 'set_max_current_read_only', 'file_out_of_range']
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = json.loads(done.stdout)
+    assert {k: report[k] for k in ('cases', 'passed', 'crashes', 'limit_violations', 'failures')} \
+        == {'cases': 3, 'passed': 3, 'crashes': 0, 'limit_violations': 0, 'failures': []}
+    assert sorted(d['name'] for d in report['details']) == sorted(cmd[-3:])
