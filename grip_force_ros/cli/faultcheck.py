@@ -47,6 +47,14 @@ def run(args) -> int:
     else:
         summary = {k: report[k] for k in ('cases', 'passed', 'crashes', 'limit_violations',
                                           'failures', 'seconds')}
+        stale = [d for d in report['details'] if d.get('controller_steps_after_timeout')]
+        if stale:
+            wall = [d['safe_after_last_input_ms'] for d in stale if d.get('safe_after_last_input_ms')]
+            print(f"watchdog ({len(stale)} cases): safe at control period "
+                  f"<= {max(d['controller_steps_after_timeout'] for d in stale)} after the timeout, "
+                  f"{min(wall):.1f}-{max(wall):.1f} ms after the last published input")
+        jumps = [d.get('max_resume_jump') or 0.0 for d in report['details']]
+        print(f'largest current step at a resume after the safe state: {max(jumps) * 1e3:.3f} mA')
         print(json.dumps(summary))
     ok = (report['passed'] == report['cases'] and report['crashes'] == 0
           and report['limit_violations'] == 0)
