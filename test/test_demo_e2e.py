@@ -73,3 +73,32 @@ def test_hold_force_reaches_the_target(demo_run):
     assert abs(m['hold_error_mean']) < 0.1 * m['target_force']   # sensorless, same plant
     assert m['hold_error_rms'] < 0.15 * m['target_force']
     assert m['pull_out_force'] > 0.0
+
+
+def test_ctrl_c_stops_every_node(tmp_path):
+    """SIGINT to the demo mid-task: it exits 130 and leaves no node process behind."""
+    import signal
+    import time
+
+    import psutil
+    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    demo = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
+                             '20', '--quiet', '--out', str(tmp_path / 'run')],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        children = []
+        while time.monotonic() < deadline and len(children) < 3:
+            children = psutil.Process(demo.pid).children(recursive=True)
+            time.sleep(0.2)
+        assert len(children) >= 3, 'the three nodes never started'
+        time.sleep(2.0)
+        demo.send_signal(signal.SIGINT)
+        _, err = demo.communicate(timeout=30)
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+    assert demo.returncode == 130, err[-2000:]
+    assert 'interrupted' in err
+    gone, alive = psutil.wait_procs(children, timeout=5)
+    assert not alive, [p.pid for p in alive]
