@@ -234,6 +234,10 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
 
     def tertiles(dimension, values, fmt, value_unit):
         v = values[te]
+        if v.size == 0 or np.ptp(v) <= 1e-12 * max(1.0, float(np.max(np.abs(v)))):
+            add(dimension, f'constant ({fmt(float(v[0]) if v.size else 0.0)} {value_unit})',
+                np.ones(v.size, dtype=bool))
+            return
         edges = np.quantile(v, [0, 1 / 3, 2 / 3, 1])
         for i, name in enumerate(('low', 'mid', 'high')):
             lo, hi = edges[i], edges[i + 1]
@@ -258,7 +262,8 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
     obj = data.object[te]
     for code in np.unique(obj):
         add('object', OBJECT_CODES[int(code)], obj == code)
-    out.sort(key=lambda r: -r['share_of_gap'])
+    # a region holding every sample (a constant wrist, one object) says nothing: last
+    out.sort(key=lambda r: (r['share_of_samples'] > 0.999, -r['share_of_gap']))
     return out
 
 
