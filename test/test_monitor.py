@@ -21,7 +21,8 @@ def test_render_shows_values_units_and_silence():
     text = '\n'.join(render(snap, 'domain 7'))
     assert '4.000 N' in text and '3.950 N' in text
     assert '1000 Hz' in text and 'silent 5.0 s' in text
-    assert 'mode             grip' in text and '[WARN ] grip_force: controller: current limit' in text
+    assert 'mode             grip' in text
+    assert '[WARN ] grip_force: controller: current limit' in text
     line = plain_line(snap)
     assert 'target=4.000' in line and 'measured=3.950' in line and 'diag=WARN' in line
     assert controller_mode([]) == '?'

@@ -1,6 +1,7 @@
 """`grip-force calibrate`: fit an instrument's parameters from a load-cell grasp log.
 
-    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv --out X_calibrated.yaml
+    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv \\
+        --out X_calibrated.yaml
 
 Keeps the steady plateaus of the log (a few force levels), fits the
 cable-pulley friction coefficient (or the ``--fit`` parameters) of the
@@ -44,8 +45,8 @@ def run(args) -> int:
             values = [str(o) for o in log['object'] if str(o)]
             obj = max(set(values), key=values.count) if values else None
         obj = obj or 'needle'
-        result = fit_instrument(params, log, fit=[s.strip() for s in args.fit.split(',') if s.strip()],
-                                obj=obj)
+        names = [s.strip() for s in args.fit.split(',') if s.strip()]
+        result = fit_instrument(params, log, fit=names, obj=obj)
     except (FileNotFoundError, LogError, ParameterError, ValueError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
@@ -61,6 +62,7 @@ def run(args) -> int:
     for name, value in result.values.items():
         print(f'  {name}: {value:.5f} +/- {result.std_errors[name]:.5f} '
               f'(shipped {result.before[name]:.5f})')
-    print(f'  residual rms {result.residual_rms:.4f} N (shipped: {result.residual_rms_before:.4f} N)')
+    print(f'  residual rms {result.residual_rms:.4f} N '
+          f'(shipped: {result.residual_rms_before:.4f} N)')
     print(f'wrote {out}')
     return 0

@@ -70,7 +70,8 @@ def print_report(result: dict, stream=sys.stdout) -> None:
     m = result['metrics'] or {}
     w = stream.write
     w(f"instrument        {result['instrument']} ({result['config']})\n")
-    w(f"task              needle grasp, {result['duration']:.2f} s, ROS domain {result['domain_id']}\n")
+    w(f"task              needle grasp, {result['duration']:.2f} s, "
+      f"ROS domain {result['domain_id']}\n")
     w(f"steady hold       target {_fmt(m.get('target_force'))}, measured (load cell) "
       f"{_fmt(m.get('measured_force'))}, estimated (model) {_fmt(m.get('estimated_force'))}\n")
     w(f"hold-phase error  mean {_fmt(m.get('hold_error_mean'), '+.3f')}, rms "

@@ -124,7 +124,8 @@ def force_metrics(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[fl
         'hold_error_rms': float(np.sqrt(np.mean(err ** 2))),
         'hold_error_max': float(np.max(np.abs(err))),
         'hold_error_rel': float(np.mean(err) / target_mean) if target_mean > 0 else float('nan'),
-        'steady_ratio': float(np.mean(force[ok]) / target_mean) if target_mean > 0 else float('nan'),
+        'steady_ratio': (float(np.mean(force[ok]) / target_mean) if target_mean > 0
+                         else float('nan')),
     }
     est = data.get('estimated_force')
     meas = data.get('measured_force')

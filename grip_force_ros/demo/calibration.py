@@ -71,7 +71,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     CalibrationError
         Missing columns or no steady slice.
     """
-    missing = [c for c in ('t', 'current', 'wrist_angle', 'jaw_angle', 'grip_force') if c not in log]
+    needed = ('t', 'current', 'wrist_angle', 'jaw_angle', 'grip_force')
+    missing = [c for c in needed if c not in log]
     if missing:
         raise CalibrationError(f'calibration log lacks column(s) {missing} '
                                '(a torque-measuring rig is not supported)')

@@ -106,7 +106,7 @@ def _run_worker(job: dict[str, Any]) -> dict[str, Any]:
     t0 = time.monotonic()
     spoiled = []
     for attempt in range(1, ATTEMPTS + 1):
-        out_dir = Path(job['out_dir']) if attempt == 1 else Path(f"{job['out_dir']}_retry{attempt - 1}")
+        out_dir = Path(job['out_dir'] if attempt == 1 else f"{job['out_dir']}_retry{attempt - 1}")
         result = run_task(spec, out_dir, job['domain_id'], analyse=job['analyse'],
                           plot=job['plot'])
         if not result.problems:

@@ -92,7 +92,9 @@ def diagnostic_summary(msg: Any) -> list[dict[str, Any]]:
     out = []
     for status in msg.status:
         level = status.level
-        level = int.from_bytes(level, 'little') if isinstance(level, (bytes, bytearray)) else int(level)
+        if isinstance(level, (bytes, bytearray)):   # rclpy gives the byte field as bytes
+            level = int.from_bytes(level, 'little')
+        level = int(level)
         out.append({'name': str(status.name), 'level': level, 'message': str(status.message),
                     'values': {str(kv.key): str(kv.value) for kv in status.values}})
     return out

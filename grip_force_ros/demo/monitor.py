@@ -61,10 +61,12 @@ def render(snapshot: Snapshot, header: str = '') -> list[str]:
     s = snapshot
     lines = [f'grip-force monitor  {header}  t = {s.elapsed:6.1f} s',
              f'  master angle     {_v(s, "master_angle")} rad        {_rate(s, topics.MASTER_JS)}',
-             f'  target force     {_v(s, "target_force")} N          {_rate(s, topics.TARGET_FORCE)}',
+             f'  target force     {_v(s, "target_force")} N          '
+             f'{_rate(s, topics.TARGET_FORCE)}',
              f'  estimated force  {_v(s, "estimated_force")} N          '
              f'{_rate(s, topics.ESTIMATED_FORCE)}   pull-out {_v(s, "pull_out_force")} N',
-             f'  measured force   {_v(s, "measured_force")} N          {_rate(s, topics.MEASURED_FORCE)}',
+             f'  measured force   {_v(s, "measured_force")} N          '
+             f'{_rate(s, topics.MEASURED_FORCE)}',
              f'  current command  {_v(s, "current_command")} A          '
              f'{_rate(s, topics.SERVO_CURRENT)}   measured {_v(s, "current")} A',
              f'  jaw / wrist      {_v(s, "jaw_angle")} / {_v(s, "wrist_angle").strip()} rad  '
@@ -85,7 +87,8 @@ def plain_line(snapshot: Snapshot) -> str:
     worst = max((d['level'] for d in s.diagnostics), default=None)
     return (f't={s.elapsed:.2f} master={_v(s, "master_angle", ".3f")} '
             f'target={_v(s, "target_force", ".3f")} estimated={_v(s, "estimated_force", ".3f")} '
-            f'measured={_v(s, "measured_force", ".3f")} current_cmd={_v(s, "current_command", ".3f")} '
+            f'measured={_v(s, "measured_force", ".3f")} '
+            f'current_cmd={_v(s, "current_command", ".3f")} '
             f'current={_v(s, "current", ".3f")} mode={controller_mode(s.diagnostics)} '
             f'diag={_LEVELS.get(worst, "-") if worst is not None else "-"}')
 

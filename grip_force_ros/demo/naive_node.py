@@ -90,7 +90,8 @@ class NaiveNode(Node):
         target = WrenchStamped()
         target.header.stamp = stamp
         target.header.frame_id = topics.JAW_FRAME
-        target.wrench.force.z = self.values['grip_force_max'] * share ** self.values['force_map_exponent']
+        exponent = self.values['force_map_exponent']
+        target.wrench.force.z = self.values['grip_force_max'] * share ** exponent   # N
         self.pub_target.publish(target)
 
 

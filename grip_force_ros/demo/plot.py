@@ -98,7 +98,8 @@ def compare_plot(report: Mapping, path: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     conditions = ('controlled', 'uncalibrated', 'sensor', 'naive')
-    labels = {'controlled': 'calibrated model, no sensor', 'uncalibrated': 'shipped YAML, no sensor',
+    labels = {'controlled': 'calibrated model, no sensor',
+              'uncalibrated': 'shipped YAML, no sensor',
               'sensor': 'load-cell feedback', 'naive': 'naive (current ~ master, one gain)'}
     names = [i['name'] for i in report['instruments']]
     x = np.arange(len(names))
@@ -113,9 +114,10 @@ def compare_plot(report: Mapping, path: str | Path) -> Path:
     ax.axhline(1.0, color='black', lw=1)
     ax.set_xticks(x, names)
     ax.set_ylabel('steady hold grip force / target [-]')
-    ax.set_title('same master trajectory, three instruments, plants 20 % off their YAML '
-                 f"(target {report['instruments'][0]['runs']['controlled'].get('target_force') or 0:.1f} N)",
-                 fontsize=10)
+    target = report['instruments'][0]['runs']['controlled'].get('target_force') or 0.0
+    error = report.get('plant_error', 0.2)
+    ax.set_title(f'same master trajectory, {len(names)} instruments, plants {error:.0%} off their '
+                 f'YAML (target {target:.1f} N)', fontsize=10)
     ax.legend(fontsize=8, loc='upper left')
     ax.grid(True, axis='y', alpha=0.3)
     fig.tight_layout()

@@ -245,7 +245,8 @@ def format_status(s: Mapping[str, Any], label: str = '') -> str:
     return (f"{label + ' ' if label else ''}[{s.get('phase', '?'):8s} {s.get('t', 0.0):5.2f}/"
             f"{s.get('duration', 0.0):.2f} s] master {f('master_angle', '6.3f')} rad | target "
             f"{f('target_force', '6.3f')} N  measured {f('measured_force', '6.3f')} N  "
-            f"estimated {f('estimated_force', '6.3f')} N | current {f('current_command', '6.3f')} A")
+            f"estimated {f('estimated_force', '6.3f')} N | current "
+            f"{f('current_command', '6.3f')} A")
 
 
 class Progress:
