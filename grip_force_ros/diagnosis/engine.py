@@ -197,12 +197,12 @@ ANGLE_FLOOR_MS = 1e-8
 FORCE_FLOOR = 1e-3
 
 
-def _combine(data, first, other, first_name, other_name, fits):
+def _combine(data, first, other, first_name, other_name, fits, other_value):
     """Design of two effects together: both sets of columns; with a sensor delay the
     other effect's columns are delayed too (the sensor sees the whole force late)."""
     (f1, a1), (f2, a2) = first, other
     if other_name == 'sensor_delay':
-        Xf = data.shift(f1, float(fits[other_name]['value']))
+        Xf = data.shift(f1, float(other_value))
     elif first_name == 'sensor_delay':
         Xf = np.column_stack([f1, data.shift(f2[:, 1:], float(fits[first_name]['value']))])
     else:
@@ -407,9 +407,10 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         for name in EFFECT_NAMES:
             if name == winner:
                 continue
-            other = data.designs(EFFECTS[name], fits[name]['value'])
-            Xf, Xa = _combine(data, first_design, other, winner, name, fits)
-            fit2 = _evaluate(data, lambda _: (Xf, Xa), (None,))
+            def pair(value, name=name):
+                other = data.designs(EFFECTS[name], value)
+                return _combine(data, first_design, other, winner, name, fits, value)
+            fit2 = _evaluate(data, pair, EFFECTS[name].grid)
             score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
             if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
                 best2 = (score2, name, fit2)
