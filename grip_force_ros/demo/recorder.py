@@ -99,6 +99,7 @@ class RecorderNode(Node):
         self._writer: Writer | None = None
         if bag_path is not None:
             self._writer = Writer(Path(bag_path), version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.set_custom_data('recorded_by', 'grip_force_ros demo recorder')
             self._writer.open()
         self._discovery_timer = self.create_timer(0.05, self._discover)
         self._discover()
