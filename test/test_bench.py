@@ -94,7 +94,7 @@ def test_bench_all_parts_tiny(tmp_path):
     from grip_force_ros.cli.bench import render
     from grip_force_ros.demo import find_config
     r = run_bench(1.0, config=str(find_config('paper_needle_driver')), log_minutes=1.0,
-                  model_size=2000)
+                  model_size=2000, event_controller=True)
     json.dumps(r)                                             # serialisable as --json prints it
     loop, model, diag = r['loop'], r['model'], r['diagnosis']
     for value in (loop['p99_ratio'], loop['missed_fraction'], model['forward_ratio'],
@@ -108,6 +108,9 @@ def test_bench_all_parts_tiny(tmp_path):
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
     assert set(loop['cpu_percent']['product']) == {'probe', 'sim', 'controller', 'master'}
     assert all(v > 0 for v in loop['cpu_percent']['product'].values())
+    event = loop['event_driven']                              # the bench's event-driven controller
+    assert event['product']['samples'] > 100 and math.isfinite(event['p99_ratio'])
     assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
+    assert 'event-driven' in text
