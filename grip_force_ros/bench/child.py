@@ -236,6 +236,7 @@ class Probe(Node):
     def __init__(self, opts):
         super().__init__('bench_probe')
         self.period = opts.period
+        self.match = opts.match
         capacity = int((opts.seconds + 5.0) / opts.period) + 1000
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
         qos = make_qos(opts.depth)
@@ -263,8 +264,29 @@ class Probe(Node):
             self.n_commands += 1
 
     def summary(self) -> dict:
+        if self.match == 'stamp':
+            return stamped_commands(self.states[:self.n_states], self.commands[:self.n_commands],
+                                    self.period)
         return match_commands(self.states[:self.n_states], self.commands[:self.n_commands],
                               self.period)
+
+
+def stamped_commands(states: np.ndarray, commands: np.ndarray, period: float) -> dict:
+    """Round trips when each command carries the stamp of the state it answers (exact).
+
+    Same arrays and result as :func:`match_commands`; ``periods`` counts the sim
+    periods without an answer (gaps in the answered stamps).
+    """
+    commands = commands[np.argsort(commands[:, 0], kind='stable')]
+    round_trips = commands[:, 1] - commands[:, 0]
+    worst = np.argsort(round_trips)[-5:][::-1]
+    t0 = commands[0, 0] if len(commands) else 0
+    return {'latency': latency_summary(round_trips),
+            'worst': [(float((commands[i, 0] - t0) * 1e-9), float(round_trips[i] * 1e-6)) for i in worst],
+            'periods': missed_periods(commands[:, 0], period),
+            'sim_periods': missed_periods(np.sort(states[:, 0]), period),
+            'states': int(len(states)), 'commands': int(len(commands)),
+            'stale_answers': int(len(commands) - np.unique(commands[:, 0]).size)}
 
 
 def match_commands(states: np.ndarray, commands: np.ndarray, period: float) -> dict:
@@ -338,6 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--prealloc', action='store_true', help='reuse one message per publisher')
     p.add_argument('--answer', choices=('callback', 'timer'), default='callback',
                    help='echo: answer in the subscription callback or on a 1 kHz timer')
+    p.add_argument('--match', choices=('delivery', 'stamp'), default='delivery',
+                   help='probe: command stamped at the controller tick (match the newest state '
+                        'delivered before it) or with the answered state stamp (exact)')
     p.add_argument('--callback-groups', choices=('default', 'separate', 'reentrant'),
                    default='default')
     return p

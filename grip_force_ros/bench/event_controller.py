@@ -19,17 +19,38 @@ from grip_force_ros.nodes.common import run_node
 from grip_force_ros.nodes.controller import ControllerNode
 
 
+class _StampingPublisher:
+    """Publishes the command with the stamp of the state it answers (for the bench's probe)."""
+
+    def __init__(self, publisher):
+        self.publisher = publisher
+        self.stamp = None            # builtin_interfaces/Time of the state being answered
+
+    def publish(self, msg) -> None:
+        if self.stamp is not None:
+            msg.header.stamp = self.stamp
+        self.publisher.publish(msg)
+
+
 class EventDrivenController(ControllerNode):
-    """:class:`ControllerNode` stepping on each actuator state; timer only as a fallback."""
+    """:class:`ControllerNode` stepping on each actuator state; timer only as a fallback.
+
+    The current command carries the stamp of the actuator state it answers (the
+    shipped node stamps it with its clock at the tick), so the bench measures this
+    variant's round trip exactly: arrival minus the command's stamp.
+    """
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._last_step = time.perf_counter()
+        self._servo_pub = _StampingPublisher(self._servo_pub)
 
     def _on_actuator(self, msg) -> None:
         super()._on_actuator(msg)
         self._last_step = time.perf_counter()
+        self._servo_pub.stamp = msg.header.stamp
         super()._tick()
+        self._servo_pub.stamp = None
 
     def _tick(self) -> None:
         # fallback: the sim went quiet for 1.5 periods; step so the watchdog can act

@@ -171,8 +171,10 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
     controller : str
-        'timer': the shipped ``controller`` (steps on its 1 kHz timer); 'event':
-        the bench's :mod:`.event_controller` (steps on each actuator state).
+        'timer': the shipped ``controller`` (steps on its 1 kHz timer; commands
+        matched to states by delivery time); 'event': the bench's
+        :mod:`.event_controller` (steps on each actuator state; its commands carry
+        the answered state's stamp, so the round trip is exact).
     rt_priority : int
         0: normal scheduling; 1..99: sim, controller and probe under SCHED_FIFO
         at this priority (the master stays normal).
@@ -199,7 +201,9 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
         probe = Child('probe', python_module(CHILD, 'probe', '--seconds', str(seconds),
                                              '--warmup', str(warmup), '--period', str(period),
-                                             '--depth', '10'), env, rt_priority=rt)
+                                             '--depth', '10', '--match',
+                                             'delivery' if controller == 'timer' else 'stamp'),
+                      env, rt_priority=rt)
         children.append(probe)
         result = _window(probe, children[:3], seconds)
         for c in children[:3]:
