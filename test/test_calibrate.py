@@ -1,4 +1,6 @@
 """grip-force calibrate: the fit recovers a known friction offset of a simulated plant (no ROS)."""
+import json
+
 import numpy as np
 import pytest
 
@@ -106,3 +108,15 @@ def test_header_names_source_and_uncertainty():
     text = calibrated_yaml(find_config('long_jaw_grasper'), result, 'runs/calib.mcap')
     assert text.startswith('# Calibrated from long_jaw_grasper.yaml')
     assert '# Source log: runs/calib.mcap' in text and '+/-' in text
+
+
+def test_cli_reads_a_rosbag2_mcap_log(tmp_path, capsys):
+    from grip_force_ros.logs import write_bag
+    _, log = sim_log('four_pulley_needle_driver', 0.8, 1.2)
+    bag = write_bag(tmp_path / 'calib_bag', log)
+    out = tmp_path / 'cal.yaml'
+    assert cli_main(['calibrate', '--config', 'four_pulley_needle_driver', '--log', str(bag),
+                     '--out', str(out), '--json']) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report['fitted']['pulley_friction_coefficient'] == pytest.approx(0.096, abs=0.004)
+    assert load_params_file(out).pulley_friction_coefficient == pytest.approx(0.096, abs=0.004)
