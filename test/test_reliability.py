@@ -70,13 +70,15 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
     (0.1 A per period) when control resumes; the command continues where the ramp left it."""
     params = session.params
     step = params.max_current_slew / params.control_rate
-    single_nan = FaultCase('single_nan_jaw', 'non-finite', 'one NaN jaw angle', 'reject_safe',
+    single_nan = FaultCase('single_nan_jaw', 'non-finite', 'one NaN jaw angle', 'reject_once',
                            'instrument', set_field('position', 1, float('nan')), ticks=1,
                            reason='nan')
     resumed_from = []
     for case in (_silence('instrument', ticks=31), single_nan) * 3:
         d = run_message_case(session, case)
-        assert d['passed'], d
+        # one bad sample or 31 ms of silence need not make a safe period (the next good
+        # sample may come first); when one happened, the resume must be bumpless
+        assert d['recovered'] and d['limit_violations'] == 0, d
         assert d['max_resume_jump'] <= 0.5 * step, d
         rows = [(stamp, c) for _, stamp, c in session.probe.commands]
         targets = {stamp: f for _, stamp, f in session.probe.targets}
