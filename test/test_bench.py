@@ -61,6 +61,22 @@ def test_match_commands_takes_newest_delivered_state():
     assert r['stale_answers'] == 1
 
 
+def test_stamped_commands_round_trip_is_arrival_minus_stamp():
+    from grip_force_ros.bench.child import stamped_commands
+    ms = 1_000_000
+    states = np.array([[k * ms, k * ms + ms // 10] for k in range(10)], np.int64)
+    answered = [k for k in range(10) if k != 3]              # state 3 never answered
+    commands = np.array([[k * ms, k * ms + 300_000 + (2 * ms if k == 7 else 0)] for k in answered],
+                        np.int64)
+    r = stamped_commands(states, commands, 1e-3)
+    assert r['latency']['samples'] == 9
+    assert r['latency']['p50_ms'] == pytest.approx(0.3)
+    assert r['latency']['max_ms'] == pytest.approx(2.3)
+    assert r['worst'][0][1] == pytest.approx(2.3) and r['worst'][0][0] == pytest.approx(7e-3)
+    assert r['periods']['missed'] == 1                        # the unanswered state
+    assert r['sim_periods']['missed'] == 0 and r['stale_answers'] == 0
+
+
 def test_model_speed_structure():
     from grip_force_ros.bench.model_speed import run_model
     from grip_force_ros.demo import find_config
