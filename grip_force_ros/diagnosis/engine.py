@@ -408,6 +408,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     force_floor_ms = (FORCE_FLOOR * _rms(data.y[data.test])) ** 2
     ranking = []
     fits = {}
+    best_score = math.inf
     for name in EFFECT_NAMES:
         effect = EFFECTS[name]
         say(f'fitting {name}')
@@ -415,8 +416,16 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         value = fit['value']
         Xf, Xa = data.designs(effect, value)
         cf, ca, sf, sa, train_mse = _full_fit(data, Xf, Xa, rng)
-        fits[name] = fit
         score = _score(fit, base, force_floor_ms) + param_penalty * effect.n_params
+        # held-out residual arrays are kept only for the best effect so far (memory)
+        if score < best_score:
+            best_score = score
+            for other in fits.values():
+                other.pop('resid_f', None)
+                other.pop('resid_a', None)
+        else:
+            fit = {k: v for k, v in fit.items() if not k.startswith('resid')}
+        fits[name] = fit
         params_out = {}
         g = float(cf[0])
         for (pname, punit, transform), coef, std in zip(
