@@ -12,6 +12,20 @@ from grip_force_ros.control.pid import PID
 #: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
 
+#: Time (s) in which the force target climbs from the estimate to the force map's target
+#: when grip resumes after the safe state (the map's target is then a step).
+RESUME_RAMP_TIME = 0.1
+#: Band (fraction of the largest force target) around the feedback force inside which the
+#: feedforward keeps its branch (loading / unloading) instead of switching.
+BRANCH_BAND = 0.02
+#: Time constant (s) of the low-pass on the measured current that moves the stick band's
+#: state: white current noise would otherwise ratchet the state to the noise's envelope.
+STICK_FILTER_TIME = 0.005
+#: Sensorless grip: errors below this fraction of the largest force target are not acted
+#: on while the stick band holds the force (an integrator would only walk the current
+#: across the band, where the force does not change).
+HOLD_BAND = 0.005
+
 _isfinite = math.isfinite
 _NO_REASONS: tuple = ()
 
@@ -40,7 +54,9 @@ class GripController:
     model : object, optional
         Provides ``grip_force_scalar(current, wrist, jaw, obj)`` and
         ``current_for_force_scalar(force, wrist, jaw, obj)``; default
-        ``GripForceModel(params)`` (with losses).
+        ``GripForceModel(params)`` (with losses). A :class:`GripForceModel` also gets the
+        direction-aware estimate (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`);
+        any other model is used as the loading branch only.
 
     Notes
     -----
@@ -53,6 +69,10 @@ class GripController:
             from grip_force_ros.model import GripForceModel
             model = GripForceModel(params)
         self.model = model
+        self.hysteresis = None          # HystereticGripForce, the stick band of the pulleys
+        if hasattr(model, '_efficiency_scalar') and hasattr(model, 'tension_per_amp'):
+            from grip_force_ros.model.hysteresis import HystereticGripForce
+            self.hysteresis = HystereticGripForce(model)
         self._configure(params)
         self.command = 0.0              # A, last output
         self.mode = 'safe'              # starts safe until every input has arrived
@@ -62,6 +82,10 @@ class GripController:
         self.steps = 0                  # periods run
         self.limit_steps = 0            # periods in which a limit acted
         self.last_reasons: tuple = ()   # reasons of the last period
+        self.unloading = False          # feedforward on the unloading branch of the stick band
+        self.resume_force = math.inf    # N, ramped force target after safe (inf: no ramp)
+        self.last_wrist = 0.0           # rad, last accepted wrist angle
+        self.filtered_current = 0.0     # A, low-passed measured current (stick-band state)
 
     def _configure(self, params) -> None:
         """Build the map, PIDs and limiter from ``params`` (state of the loop kept by caller)."""
@@ -75,6 +99,7 @@ class GripController:
         self._required = tuple((src, src + '_fault', src + '_time')
                                for src in ('master', 'instrument', 'actuator', 'force')
                                if src != 'force' or self.use_sensor)
+        self.stick_filter = 1.0 - math.exp(-self.period / STICK_FILTER_TIME)   # per period
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
                                    if params.object_kind == 'needle' else 0.0)
         self.force_map = ForceMap.from_params(params)
@@ -177,25 +202,61 @@ class GripController:
         if inputs.master_clamped:
             reasons = ('master angle clamped to its range',)
 
+        hysteresis = self.hysteresis
+        try:
+            if hysteresis is not None:       # the stick band moves with the current in both modes
+                measured = inputs.measured_current
+                self.filtered_current += self.stick_filter * (measured - self.filtered_current)
+                estimate = hysteresis.update(self.filtered_current, wrist, jaw, obj)
+                if hysteresis.on_loading_edge:   # loading: the paper's model, unfiltered
+                    estimate = self.model.grip_force_scalar(measured, wrist, jaw, obj)
+            elif not self.use_sensor:
+                estimate = self.model.grip_force_scalar(inputs.measured_current, wrist, jaw, obj)
+        except (ValueError, ArithmeticError) as exc:
+            if not self.use_sensor:
+                return self._safe((f'force estimate failed: {exc}',), inputs)
+            hysteresis.reset()
+        self.last_wrist = wrist
         if self.use_sensor:
             force = inputs.measured_force
         else:
-            try:
-                force = self.model.grip_force_scalar(inputs.measured_current, wrist, jaw, obj)
-            except (ValueError, ArithmeticError) as exc:
-                return self._safe((f'force estimate failed: {exc}',), inputs)
+            force = estimate
             if not _isfinite(force):
                 return self._safe(('force estimate not finite',), inputs)
 
         gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity)
         previous_mode = self.mode
         feedforward = 0.0
+        branch_switch = False
         if gripping:
             mode = 'grip'
             target_force = target if target < self.force_max else self.force_max
+            if previous_mode == 'safe':          # resume: ramp up from the present force
+                self.resume_force = force if force > 0.0 else 0.0
+            if self.resume_force < target_force:
+                self.resume_force += self.force_max * self.period / RESUME_RAMP_TIME
+                if self.resume_force < target_force:
+                    target_force = self.resume_force
+                else:
+                    self.resume_force = math.inf
+            else:
+                self.resume_force = math.inf
+            # branch of the stick band the target lies on, seen from the feedback force
+            band = BRANCH_BAND * self.force_max
+            unloading = self.unloading
+            if target_force < force - band:
+                unloading = True
+            elif target_force > force + band:
+                unloading = False
+            branch_switch = unloading != self.unloading
+            self.unloading = unloading
             if self.use_feedforward and target_force > 0.0:
                 try:
-                    feedforward = self.model.current_for_force_scalar(target_force, wrist, jaw, obj)
+                    if hysteresis is not None:
+                        feedforward = hysteresis.current_for_force(target_force, wrist, jaw, obj,
+                                                                   unloading=unloading)
+                    else:
+                        feedforward = self.model.current_for_force_scalar(target_force, wrist, jaw, obj)
                 except (ValueError, ArithmeticError) as exc:
                     feedforward = 0.0
                     reasons = reasons + (f'no feedforward: {exc}',)
@@ -203,13 +264,18 @@ class GripController:
                     feedforward = 0.0
                     reasons = reasons + ('no feedforward: not finite',)
             pid, setpoint, measurement = self.force_pid, target_force, force
+            if (hysteresis is not None and not self.use_sensor and not hysteresis.on_loading_edge
+                    and abs(target_force - force) < HOLD_BAND * self.force_max):
+                measurement = target_force
             target_jaw = jaw
         else:
             mode = 'free'
             target_force = 0.0
+            self.unloading = False
+            self.resume_force = math.inf
             pid, setpoint, measurement = self.jaw_pid, target, jaw
             target_jaw = target
-        if mode != previous_mode:      # bumpless: continue from the last command
+        if mode != previous_mode or branch_switch:   # bumpless: continue from the last command
             pid.preset(self.command - feedforward, setpoint, measurement)
         unlimited = feedforward + pid.update(setpoint, measurement)
         command, limits_hit = self.limiter.apply(unlimited, self.command)
@@ -228,6 +294,12 @@ class GripController:
         """Safe state: ramp the current to 0 A at the slew limit, keep the last estimate."""
         command, limits_hit = self.limiter.apply(0.0, self.command)
         self.command = command
+        if self.hysteresis is not None:   # the measurement may be what failed: the current
+            try:                          # loop follows the ramped command
+                self.filtered_current += self.stick_filter * (command - self.filtered_current)
+                self.hysteresis.drive_torque(self.filtered_current, self.last_wrist)
+            except (ValueError, ArithmeticError):
+                self.hysteresis.reset()
         self.mode = 'safe'
         self.safe_steps += 1
         self.last_reasons = reasons

@@ -7,7 +7,9 @@ operator* of the drum tension::
 
     Tn[k] = clip(Tn[k-1], lambda T0[k], T0[k] / lambda)      (T0 >= 0; mirrored for T0 < 0)
 
-This module evaluates that, with the model's own efficiency, resistance fraction and
+The play operator and the grip force on it live in :mod:`grip_force_ros.model.hysteresis`
+(the controller's sensorless estimate uses the same code); this module evaluates them,
+with the model's own efficiency, resistance fraction and
 contact gain, for whole current histories: a nominal that knows the direction of slip,
 for calibration and the sim-to-real diagnosis (effect-free sim logs follow it; the
 model's forward map alone only follows their loading branches).
@@ -19,41 +21,13 @@ from typing import Any
 import numpy as np
 
 from grip_force_ros.model import GripForceModel
-from grip_force_ros.model import contact as _contact
+from grip_force_ros.model.hysteresis import hysteretic_grip_force, play_operator
 
 __all__ = ['capstan_play', 'quasi_static_grip_force']
 
 
-def capstan_play(drum_tension, efficiency, initial: float = 0.0) -> np.ndarray:
-    """Jaw-side tension (N) of a stick-slip pulley chain driven by ``drum_tension`` (N).
-
-    Parameters
-    ----------
-    drum_tension : array_like, shape (n,)
-        Drum-side tension history T0 (N), signed (negative: the opening cable).
-    efficiency : float or array_like, shape (n,)
-        Chain efficiency lambda (-), in (0, 1].
-    initial : float
-        Jaw-side tension before the first sample (N).
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        Tn, always within ``[lambda T0, T0/lambda]`` (ordered by sign).
-    """
-    t0 = np.asarray(drum_tension, float)
-    lam = np.broadcast_to(np.asarray(efficiency, float), t0.shape)
-    low = np.where(t0 >= 0.0, lam * t0, t0 / lam).tolist()
-    high = np.where(t0 >= 0.0, t0 / lam, lam * t0).tolist()
-    out = np.empty(t0.shape)
-    tn = float(initial)
-    for k in range(t0.size):
-        if tn < low[k]:
-            tn = low[k]
-        elif tn > high[k]:
-            tn = high[k]
-        out[k] = tn
-    return out
+#: The stick band as a play operator on the tension; one implementation, in the model.
+capstan_play = play_operator
 
 
 def quasi_static_grip_force(params: Any, current, wrist_angle, jaw_angle, obj: str = 'needle',
@@ -80,14 +54,6 @@ def quasi_static_grip_force(params: Any, current, wrist_angle, jaw_angle, obj: s
         Grip force (N). On a monotonically rising current it equals
         ``GripForceModel(params).forward(...).grip_force``.
     """
-    model = GripForceModel(params)
-    current = np.asarray(current, float)
-    wrist = np.broadcast_to(np.asarray(wrist_angle, float), current.shape)
-    jaw = np.broadcast_to(np.asarray(jaw_angle, float), current.shape)
-    drum = model.tension_per_amp * current * np.asarray(torque_constant_scale, float)
-    lam = np.broadcast_to(model.efficiency(current * np.asarray(torque_constant_scale, float), wrist),
-                          current.shape)
-    jaw_tension = capstan_play(drum, lam)
-    arm = np.maximum(params.drive_pulley_radius * (1.0 - params.drive_resistance_fraction / lam), 0.0)
-    gain = _contact.contact_gain(obj, jaw, params.jaw_moment_arm_tip, params.jaw_moment_arm_inner)
-    return np.maximum(arm * jaw_tension, 0.0) * gain
+    force, _ = hysteretic_grip_force(GripForceModel(params), current, wrist_angle, jaw_angle, obj,
+                                     torque_constant_scale=torque_constant_scale)
+    return force
