@@ -20,7 +20,7 @@ RESUME_RAMP_TIME = 0.1
 BRANCH_BAND = 0.02
 #: Time constant (s) of the low-pass on the measured current that moves the stick band's
 #: state: white current noise would otherwise ratchet the state to the noise's envelope.
-STICK_FILTER_TIME = 0.005
+STICK_FILTER_TIME = 0.002
 #: Sensorless grip: errors below this fraction of the largest force target are not acted
 #: on while the stick band holds the force (an integrator would only walk the current
 #: across the band, where the force does not change).
@@ -82,7 +82,7 @@ class GripController:
         self.steps = 0                  # periods run
         self.limit_steps = 0            # periods in which a limit acted
         self.last_reasons: tuple = ()   # reasons of the last period
-        self.unloading = False          # feedforward on the unloading branch of the stick band
+        self.branch = 'loading'         # feedforward branch of the stick band (see step)
         self.resume_force = math.inf    # N, ramped force target after safe (inf: no ramp)
         self.last_wrist = 0.0           # rad, last accepted wrist angle
         self.filtered_current = 0.0     # A, low-passed measured current (stick-band state)
@@ -241,20 +241,26 @@ class GripController:
                     self.resume_force = math.inf
             else:
                 self.resume_force = math.inf
-            # branch of the stick band the target lies on, seen from the feedback force
+            # Branch of the stick band for the feedforward, seen from the feedback force:
+            # 'loading' reaches a higher force from below (the paper's inverse),
+            # 'unloading' a lower one from above (the cable slips back), and once an
+            # unloading has arrived, 'middle' holds it with the drum mid-band, where
+            # current noise cannot ratchet the force along an edge.
             band = BRANCH_BAND * self.force_max
-            unloading = self.unloading
-            if target_force < force - band:
-                unloading = True
-            elif target_force > force + band:
-                unloading = False
-            branch_switch = unloading != self.unloading
-            self.unloading = unloading
+            branch = self.branch
+            if target_force > force + band:
+                branch = 'loading'
+            elif target_force < force - band:
+                branch = 'unloading'
+            elif branch == 'unloading' and abs(target_force - force) < HOLD_BAND * self.force_max:
+                branch = 'middle'
+            branch_switch = branch != self.branch
+            self.branch = branch
             if self.use_feedforward and target_force > 0.0:
                 try:
                     if hysteresis is not None:
                         feedforward = hysteresis.current_for_force(target_force, wrist, jaw, obj,
-                                                                   unloading=unloading)
+                                                                   branch)
                     else:
                         feedforward = self.model.current_for_force_scalar(target_force, wrist, jaw, obj)
                 except (ValueError, ArithmeticError) as exc:
@@ -271,7 +277,7 @@ class GripController:
         else:
             mode = 'free'
             target_force = 0.0
-            self.unloading = False
+            self.branch = 'loading'
             self.resume_force = math.inf
             pid, setpoint, measurement = self.jaw_pid, target, jaw
             target_jaw = target

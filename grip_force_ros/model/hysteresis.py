@@ -36,9 +36,12 @@ from __future__ import annotations
 import numpy as np
 
 from grip_force_ros.model import contact as _contact
-from grip_force_ros.model.contact import check_object
+from grip_force_ros.model.contact import ModelError, check_object
 
-__all__ = ['play_operator', 'hysteretic_grip_force', 'HystereticGripForce']
+__all__ = ['play_operator', 'hysteretic_grip_force', 'HystereticGripForce', 'BRANCHES']
+
+#: Branches of :meth:`HystereticGripForce.current_for_force`.
+BRANCHES = ('loading', 'unloading', 'middle')
 
 
 def play_operator(drum_tension, efficiency, initial: float = 0.0) -> np.ndarray:
@@ -201,36 +204,40 @@ class HystereticGripForce:
         return torque * _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
 
     def current_for_force(self, grip_force: float, wrist_angle: float, jaw_angle: float,
-                          obj: str = 'needle', unloading: bool | None = None) -> float:
-        """Current (A) that brings the grip force to ``grip_force`` (N) from the present state.
+                          obj: str = 'needle', branch: str | None = None) -> float:
+        """Current (A) for the grip force ``grip_force`` (N) on one branch of the stick band.
 
-        Loading (the target is above the present force): the paper's inverse,
-        ``model.current_for_force_scalar``, the drum tension ``Tn*/lambda``. Unloading
-        (below): the drum must fall to ``lambda Tn*`` so that the cable slips back
-        to ``Tn*``: ``lambda^2`` times the loading current for constant friction.
+        ``'loading'``: the paper's inverse (``model.current_for_force_scalar``), drum
+        tension ``Tn*/lambda``: the force is reached from below. ``'unloading'``: drum
+        tension ``lambda Tn*``, the cable slips back to ``Tn*``: the force is reached from
+        above, with ``lambda^2`` times the loading current (constant friction).
+        ``'middle'``: drum tension ``Tn*``, the geometric middle of the band around
+        ``Tn*``: it holds a force already reached from either side with the largest
+        margin (a factor ``1/lambda``) to both edges. Default (None): ``'unloading'``
+        when the target is below the force of the present state, else ``'loading'``.
 
-        Parameters
-        ----------
-        unloading : bool, optional
-            Force the branch; default: unloading when the target is below the force of
-            the present state.
+        With tension-dependent friction lambda is evaluated at the resulting drum
+        tension (two fixed-point passes; the resistance moment keeps the loading lambda).
 
         Raises
         ------
         ModelError
-            As :meth:`GripForceModel.current_for_force_scalar`.
+            As :meth:`GripForceModel.current_for_force_scalar`; an unknown branch.
         """
         loading_current = self.model.current_for_force_scalar(grip_force, wrist_angle, jaw_angle, obj)
-        if unloading is None:
-            unloading = grip_force < self.force(jaw_angle, obj)
-        if not unloading or loading_current <= 0.0:
+        if branch is None:
+            branch = 'unloading' if grip_force < self.force(jaw_angle, obj) else 'loading'
+        if branch == 'loading' or loading_current <= 0.0:
+            if branch not in BRANCHES:
+                raise ModelError(f'unknown branch {branch!r}; one of {BRANCHES}')
             return loading_current
         drum = self._per_amp * loading_current                       # T0 of the loading edge
-        lam = self._efficiency(drum, wrist_angle)
-        target_tension = lam * drum                                  # Tn* (N)
-        unload_drum = lam * target_tension
+        target_tension = self._efficiency(drum, wrist_angle) * drum  # Tn* (N)
+        if branch == 'middle':
+            return target_tension / self._per_amp
+        if branch != 'unloading':
+            raise ModelError(f'unknown branch {branch!r}; one of {BRANCHES}')
+        unload_drum = self._efficiency(drum, wrist_angle) * target_tension
         for _ in range(2):                                           # lambda(T0) when friction
-            lam = self._efficiency(unload_drum, wrist_angle)         # depends on tension
-            unload_drum = lam * target_tension
+            unload_drum = self._efficiency(unload_drum, wrist_angle) * target_tension
         return unload_drum / self._per_amp
-
