@@ -13,7 +13,6 @@ process), plus what is particular to each.
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -230,12 +229,7 @@ def compare(floor: dict, product: dict) -> dict:
         'floor': {k: fl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
         'product': {k: pl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
         'cpu_percent': {'floor': floor['cpu_percent'], 'product': product['cpu_percent']},
+        # the product's longest round trips: (s into the window, ms)
+        'product_worst': product.get('worst', []),
         'goals': {'p99_ratio': 1.5, 'missed_fraction': 0.001},
     }
-
-
-def time_it(fn, *args, **kwargs):
-    """``(result, wall seconds)`` of one call."""
-    t0 = time.perf_counter()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - t0

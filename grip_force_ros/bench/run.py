@@ -76,7 +76,7 @@ def run_loop(seconds: float, domains=None, config: str = DEFAULT_CONFIG, variant
     if event is not None:
         e = compare(floor, event)
         out['event_driven'] = {k: e[k] for k in ('p99_ratio', 'p50_ratio', 'max_ratio', 'missed_fraction',
-                                                   'product')}
+                                                   'product', 'product_worst')}
         out['event_driven']['cpu_percent'] = event['cpu_percent']
         out['event_driven']['stale_answers'] = event['stale_answers']
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],

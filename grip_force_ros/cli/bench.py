@@ -78,7 +78,8 @@ def render(result: dict) -> str:
                          f"p99 {_f(ep['p99_ms'])} ms  max {_f(ep['max_ms'])} ms  missed "
                          f"{_f(ev['missed_fraction'] * 100)} %  p99 ratio {_f(ev['p99_ratio'])}")
         cpu = loop['cpu_percent']
-        lines.append('  cpu % of one core: floor ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
+        lines.append('  cpu % of one core: floor '
+                     + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
                      + '; product ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['product'].items()))
     model = result.get('model')
     if model:
@@ -95,7 +96,8 @@ def render(result: dict) -> str:
                          + ('' if r['affine'] else ' (nonlinear: inverse solved per sample)'))
     diag = result.get('diagnosis')
     if diag:
-        lines.append(f"diagnosis ({diag['minutes']:g} min at 1 kHz, {diag['rows']} rows, {diag['file_mb']:.0f} MB CSV):")
+        lines.append(f"diagnosis ({diag['minutes']:g} min at 1 kHz, {diag['rows']} rows, "
+                     f"{diag['file_mb']:.0f} MB CSV):")
         lines.append(f"  load {diag['load_s']:.2f} s, diagnose {diag['diagnose_s']:.2f} s: ratio "
                      f"{_f(diag['load_ratio'])} (goal <= 5: {_goal(diag['load_ratio'], 5)}); peak RSS "
                      f"load {diag['load_peak_mb']:.0f} MB, diagnose {diag['diagnose_peak_mb']:.0f} MB "
