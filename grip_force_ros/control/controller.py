@@ -69,10 +69,11 @@ class GripController:
             from grip_force_ros.model import GripForceModel
             model = GripForceModel(params)
         self.model = model
-        self.hysteresis = None          # HystereticGripForce, the stick band of the pulleys
+        self.stick_band = None          # HystereticGripForce, the stick band of the pulleys
         if hasattr(model, '_efficiency_scalar') and hasattr(model, 'tension_per_amp'):
             from grip_force_ros.model.hysteresis import HystereticGripForce
-            self.hysteresis = HystereticGripForce(model)
+            self.stick_band = HystereticGripForce(model)
+        self.hysteresis = None          # the stick band when sensorless (set by _configure)
         self._configure(params)
         self.command = 0.0              # A, last output
         self.mode = 'safe'              # starts safe until every input has arrived
@@ -95,6 +96,14 @@ class GripController:
         self.object_kind = params.object_kind
         self.use_sensor = bool(params.force_sensor_enabled)
         self.use_feedforward = bool(params.feedforward_enabled)
+        # Sensorless: the estimate and the feedforward follow the stick band. With the load
+        # cell the feedback sees the branch itself; branch switches computed from a YAML
+        # that differs from the plant cost more than they give (docs/control.md).
+        hysteresis = None if self.use_sensor else self.stick_band
+        if hysteresis is not None and self.hysteresis is None:   # (re)start at the loading edge
+            hysteresis.reset()
+            self.filtered_current = 0.0
+        self.hysteresis = hysteresis
         #: (source, fault attribute, receive-time attribute) of the inputs the loop needs
         self._required = tuple((src, src + '_fault', src + '_time')
                                for src in ('master', 'instrument', 'actuator', 'force')
@@ -204,7 +213,7 @@ class GripController:
 
         hysteresis = self.hysteresis
         try:
-            if hysteresis is not None:       # the stick band moves with the current in both modes
+            if hysteresis is not None:       # sensorless, direction-aware
                 measured = inputs.measured_current
                 self.filtered_current += self.stick_filter * (measured - self.filtered_current)
                 estimate = hysteresis.update(self.filtered_current, wrist, jaw, obj)
@@ -213,9 +222,7 @@ class GripController:
             elif not self.use_sensor:
                 estimate = self.model.grip_force_scalar(inputs.measured_current, wrist, jaw, obj)
         except (ValueError, ArithmeticError) as exc:
-            if not self.use_sensor:
-                return self._safe((f'force estimate failed: {exc}',), inputs)
-            hysteresis.reset()
+            return self._safe((f'force estimate failed: {exc}',), inputs)
         self.last_wrist = wrist
         if self.use_sensor:
             force = inputs.measured_force
@@ -246,16 +253,17 @@ class GripController:
             # 'unloading' a lower one from above (the cable slips back), and once an
             # unloading has arrived, 'middle' holds it with the drum mid-band, where
             # current noise cannot ratchet the force along an edge.
-            band = BRANCH_BAND * self.force_max
-            branch = self.branch
-            if target_force > force + band:
-                branch = 'loading'
-            elif target_force < force - band:
-                branch = 'unloading'
-            elif branch == 'unloading' and abs(target_force - force) < HOLD_BAND * self.force_max:
-                branch = 'middle'
-            branch_switch = branch != self.branch
-            self.branch = branch
+            if hysteresis is not None:
+                band = BRANCH_BAND * self.force_max
+                branch = self.branch
+                if target_force > force + band:
+                    branch = 'loading'
+                elif target_force < force - band:
+                    branch = 'unloading'
+                elif branch == 'unloading' and abs(target_force - force) < HOLD_BAND * self.force_max:
+                    branch = 'middle'
+                branch_switch = branch != self.branch
+                self.branch = branch
             if self.use_feedforward and target_force > 0.0:
                 try:
                     if hysteresis is not None:
@@ -270,7 +278,7 @@ class GripController:
                     feedforward = 0.0
                     reasons = reasons + ('no feedforward: not finite',)
             pid, setpoint, measurement = self.force_pid, target_force, force
-            if (hysteresis is not None and not self.use_sensor and not hysteresis.on_loading_edge
+            if (hysteresis is not None and not hysteresis.on_loading_edge
                     and abs(target_force - force) < HOLD_BAND * self.force_max):
                 measurement = target_force
             target_jaw = jaw
