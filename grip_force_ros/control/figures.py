@@ -1,0 +1,113 @@
+"""Figure of the stick-band fix: a watchdog trip in a sensorless grip, before and after.
+
+    .venv/bin/python -m grip_force_ros.control.figures [OUT.png]
+
+Runs :class:`GripController` on :class:`~grip_force_ros.sim.plant.InstrumentSim`
+(config/paper_needle_driver.yaml, needle_grasp, a 50 ms blackout of every input at
+t = 1.5 s) twice: as it was (loading-branch estimate and feedforward, no force ramp on
+resume) and as it is. Prints the hold force over 2.3-2.8 s; writes the PNG
+(default docs/figures/control_blackout_stick_band.png).
+"""
+from __future__ import annotations
+
+import sys
+from contextlib import contextmanager
+
+import numpy as np
+
+from grip_force_ros.control import controller as _controller
+
+BLACKOUT = (1.5, 0.05)      # s: start, length
+SECONDS = 2.8               # s
+
+
+class _LoadingBranchOnly:
+    """The model's loading branch alone (what the controller used before the stick band)."""
+
+    def __init__(self, model):
+        self.grip_force_scalar = model.grip_force_scalar
+        self.current_for_force_scalar = model.current_for_force_scalar
+
+
+@contextmanager
+def _no_resume_ramp():
+    saved = _controller.RESUME_RAMP_TIME
+    _controller.RESUME_RAMP_TIME = 1e-12
+    try:
+        yield
+    finally:
+        _controller.RESUME_RAMP_TIME = saved
+
+
+def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
+    """Closed loop with the blackout. Columns: t, target, sim grip force, estimate (N),
+    command, actual current (A), drum tension, jaw-side tension (N), efficiency (-)."""
+    from grip_force_ros.model import GripForceModel
+    from grip_force_ros.sim.plant import InstrumentSim
+    from grip_force_ros.trajectories import needle_grasp
+    model = GripForceModel(params)
+    ctrl = _controller.GripController(params, model if stick_band else _LoadingBranchOnly(model))
+    sim = InstrumentSim(params, obj='needle', seed=seed)
+    inputs, traj, rows = ctrl.new_inputs(), needle_grasp(), []
+    for k in range(int(round(SECONDS / 1e-3))):
+        t = k * 1e-3
+        m = sim.measure()
+        if not BLACKOUT[0] <= t < BLACKOUT[0] + BLACKOUT[1]:
+            inputs.set_master(t, traj.angle(t))
+            inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
+            inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
+        out = ctrl.step(t, inputs)
+        sim.step(out.current_command, 1e-3)
+        tr = sim.truth()
+        rows.append((t, out.target_force, tr['grip_force'], out.estimated_force, out.current_command,
+                     tr['current'], tr['drum_tension'], tr['jaw_tension'], tr['efficiency']))
+    return np.array(rows)
+
+
+def main(argv=None) -> int:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from grip_force_ros.params import load_params_file
+    argv = sys.argv[1:] if argv is None else argv
+    out = argv[0] if argv else 'docs/figures/control_blackout_stick_band.png'
+    params = load_params_file('config/paper_needle_driver.yaml')
+    with _no_resume_ramp():
+        before = blackout_run(params, stick_band=False)
+    after = blackout_run(params, stick_band=True)
+    fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)
+    for col, (title, log) in enumerate((('before: loading-branch estimate', before),
+                                        ('after: stick-band estimate + force ramp on resume', after))):
+        hold = log[(log[:, 0] > 2.3) & (log[:, 0] < 2.8)]
+        print(f'{title}: hold {hold[:, 2].mean():.3f} N (sim), estimate {hold[:, 3].mean():.3f} N, '
+              f'target {hold[:, 1].mean():.3f} N')
+        w = log[(log[:, 0] > 1.4)]
+        ax = axes[0, col]
+        ax.plot(w[:, 0], w[:, 1], 'k--', label='target')
+        ax.plot(w[:, 0], w[:, 2], label='sim grip force (truth)')
+        ax.plot(w[:, 0], w[:, 3], label='controller estimate')
+        ax.set_ylabel('force (N)')
+        ax.set_title(f'{title}\nhold {hold[:, 2].mean():.2f} N for {hold[:, 1].mean():.2f} N')
+        ax.legend(fontsize=8)
+        ax = axes[1, col]
+        ax.plot(w[:, 0], w[:, 4], label='command')
+        ax.plot(w[:, 0], w[:, 5], label='actual current')
+        ax.set_ylabel('current (A)')
+        ax.legend(fontsize=8)
+        ax = axes[2, col]
+        ax.plot(w[:, 0], w[:, 7], label='jaw-side tension Tn')
+        ax.plot(w[:, 0], w[:, 8] * w[:, 6], ':', label='lambda T0 (loading edge)')
+        ax.plot(w[:, 0], w[:, 6] / w[:, 8], ':', label='T0 / lambda (unloading edge)')
+        ax.set_ylabel('tension (N)')
+        ax.set_xlabel('t (s)')
+        ax.legend(fontsize=8)
+    fig.suptitle('Sensorless grip, 50 ms blackout of every input at t = 1.5 s '
+                 '(paper_needle_driver, needle_grasp, sim seed 3)')
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+    print(f'wrote {out}')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
