@@ -19,7 +19,8 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
     out = ctrl.step(now, inputs)             # -> ControlOutput (a NamedTuple)
     out.current_command    # [A]  motor current command, |.| <= max_current, slew-limited
     out.target_force       # [N]  0 in free motion and in the safe state
-    out.estimated_force    # [N]  grip force used as feedback (sensor or model estimate)
+    out.estimated_force    # [N]  grip force used as feedback (sensor, or the direction-aware
+                           #      model estimate: model/hysteresis.py, the pulleys' stick band)
     out.pull_out_force     # [N]  needle pull-out force from the estimate (0 unless needle)
     out.mode               # 'free' | 'grip' | 'safe'
     out.limits_hit         # tuple of 'current_limit', 'slew_limit'
@@ -40,7 +41,9 @@ became stale (older than ``watchdog_timeout`` by its receive time), missing, or 
 more than ``stamp_future_tolerance``), with the reason in ``out.reasons``. A rejected sample
 is not stored (the last good value is kept) and its source stays faulted until a valid
 sample arrives. When all inputs are good again, control resumes bumplessly: the PID
-integrator is preset so the command continues from its last value (no current jump).
+integrator is preset so the command continues from its last value (no current jump), and
+the force target ramps from the estimate to the map's target over ``RESUME_RAMP_TIME``
+(0.1 s for the full ``grip_force_max``).
 A duplicate sample (same stamp as the last one) is ignored and does not refresh the
 watchdog. Master angles slightly outside [master_angle_min, master_angle_max] are clamped
 and flagged; beyond ``master_angle_tolerance`` they are invalid.
