@@ -106,3 +106,29 @@ def test_estimate_tracks_the_sim_through_partial_release_and_regrasp(paper):
     rms_hysteretic = np.sqrt(np.mean(error[after] ** 2))
     rms_loading = np.sqrt(np.mean((loading[after] - log[after, 2]) ** 2))
     assert rms_loading > 2.0 * rms_hysteretic
+
+
+def test_safe_state_releases_the_stick_band_and_the_sensor_switch_restarts_it(paper):
+    """The safe ramp to 0 A moves the band's state with the command (measurement may be
+    what failed); the load cell turns the stick band off, turning it off again restarts it."""
+    ctrl = GripController(paper)
+    inputs = ctrl.new_inputs()
+    current = 0.25
+    for k in range(200):                      # grip with a steady measured current
+        t = k * PERIOD
+        inputs.set_master(t, 0.0)
+        inputs.set_instrument(t, 0.0, 0.02, 0.0)
+        inputs.set_actuator(t, current, 0.0, 0.0)
+        out = ctrl.step(t, inputs)
+    assert out.mode == 'grip'
+    loaded = ctrl.hysteresis.jaw_tension
+    assert loaded == pytest.approx(float(ctrl.model.efficiency(current)) * ctrl.model.tension_per_amp
+                                   * current, rel=1e-3)
+    for k in range(200, 300):                 # nothing arrives: watchdog, ramp to 0 A
+        out = ctrl.step(k * PERIOD, inputs)
+    assert out.mode == 'safe' and out.current_command == 0.0
+    assert ctrl.hysteresis.jaw_tension < 0.01 * loaded
+    ctrl.update_params(paper.replace(force_sensor_enabled=True))
+    assert ctrl.hysteresis is None
+    ctrl.update_params(paper)
+    assert ctrl.hysteresis is ctrl.stick_band and ctrl.hysteresis.jaw_tension == 0.0
