@@ -108,6 +108,13 @@ class GripForceModel:
         self._rn = p.drive_pulley_radius
         self._tip, self._inner = p.jaw_moment_arm_tip, p.jaw_moment_arm_inner
         self._pull_per_grip = _contact.PULL_OUT_PER_MU * p.needle_friction_coefficient
+        # vectorised fast-path constants (docs/model.md, speed): with constant friction
+        # only the last guide pulley's wrap depends on the wrist, and only when
+        # wrist_wrap_gain != 0; everything else is one number per instrument.
+        self._wrist_matters = self.wrist_wrap_gain != 0.0 and self.mu > 0.0
+        self._efficiency_at_rest = self._efficiency_scalar(0.0, 0.0)    # lambda_n at zero wrist (-)
+        self._torque_per_amp_at_rest = self.tension_per_amp * self._rn * (
+            self._efficiency_at_rest - self.resistance_fraction)           # dM/dI at zero wrist (N*m/A)
 
     # ------------------------------------------------------------------ helpers
     def wrap_angles(self, wrist_angle=0.0):
@@ -187,18 +194,33 @@ class GripForceModel:
         ForwardResult
         """
         check_object(obj)
-        current, wrist, jaw, mv, jv = np.broadcast_arrays(
-            *(np.asarray(x, float) for x in (current, wrist_angle, jaw_angle, motor_velocity, jaw_velocity)))
-        torque, lam, f0 = self.drive_torque(current, wrist, mv, jv)
-        gain = _contact.contact_gain(obj, jaw, self._tip, self._inner)
-        grip = np.maximum(torque, 0.0) * gain
-        if obj == 'needle':
-            pull = grip * self._pull_per_grip
-        elif obj == 'free':
-            pull = np.zeros_like(grip)
+        current, wrist, jaw, mv, jv = (np.asarray(x, float) for x in (
+            current, wrist_angle, jaw_angle, motor_velocity, jaw_velocity))
+        shape = np.broadcast_shapes(current.shape, wrist.shape, jaw.shape, mv.shape, jv.shape)
+        current = np.broadcast_to(current, shape)
+        # The five outputs share one fresh block: one large allocation the allocator
+        # reuses from call to call, where five separate ones cost a page fault per
+        # 4 kB on every call (most of the time of a large forward; docs/model.md, speed).
+        block = np.empty((5,) + shape)
+        grip, pull, torque, efficiency, drum_tension = (block[i, ...] for i in range(5))  # arrays, even 0-d
+        np.multiply(self.tension_per_amp, current, out=drum_tension)            # F0 (N)
+        lam = self._chain_efficiency(drum_tension, wrist)     # lambda_n (-), float or array
+        efficiency[...] = lam
+        if self.affine and not self._wrist_matters:           # lam is the constant _efficiency_at_rest
+            np.multiply(self._torque_per_amp_at_rest, current, out=torque)
         else:
-            pull = np.full_like(grip, np.nan)
-        return ForwardResult(grip, pull, torque, np.broadcast_to(lam, grip.shape).copy(), f0)
+            np.subtract(efficiency, self.resistance_fraction, out=torque)
+            torque *= drum_tension
+            torque *= self._rn                                # M = r_n F0 (lambda_n - fraction) (N*m)
+        if mv.any() or jv.any():
+            torque += _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
+        np.clip(torque, 0.0, np.inf, out=grip)                # max(M, 0), NaN stays NaN
+        grip *= self._contact_gain(obj, jaw)                  # F_J (N)
+        if obj == 'needle':
+            np.multiply(grip, self._pull_per_grip, out=pull)  # F_L (N)
+        else:
+            pull.fill(0.0 if obj == 'free' else np.nan)
+        return ForwardResult(grip, pull, torque, efficiency, drum_tension)
 
     def inverse(self, grip_force, wrist_angle, jaw_angle, obj: str = 'needle', motor_velocity=0.0,
                 jaw_velocity=0.0):
@@ -213,27 +235,151 @@ class GripForceModel:
             jaw open past pi/2); a force the instrument cannot reach.
         """
         check_object(obj)
-        force, wrist, jaw, mv, jv = np.broadcast_arrays(
-            *(np.asarray(x, float) for x in (grip_force, wrist_angle, jaw_angle, motor_velocity, jaw_velocity)))
-        if not np.all(np.isfinite(force)) or np.any(force < 0.0):
-            raise ModelError(f'grip force must be finite and >= 0 N, got {force[~(force >= 0)][:3]!r}')
-        gain = _contact.contact_gain(obj, jaw, self._tip, self._inner)
-        if np.any((gain <= 0.0) & (force > 0.0)):
-            raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
-                             'at these jaw angles')
-        with np.errstate(divide='ignore', invalid='ignore'):
-            torque = np.where(force > 0.0, force / gain, 0.0)                 # M needed (N*m)
-        inertial = _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
+        force, wrist, jaw, mv, jv = (np.asarray(x, float) for x in (
+            grip_force, wrist_angle, jaw_angle, motor_velocity, jaw_velocity))
+        shape = np.broadcast_shapes(force.shape, wrist.shape, jaw.shape, mv.shape, jv.shape)
+        force = np.broadcast_to(force, shape)
+        if force.size and not (force.min() >= 0.0 and force.max() < math.inf):   # NaN fails both
+            raise ModelError(f'grip force must be finite and >= 0 N, got {force[~(force >= 0.0)][:3]!r}')
+        gain = self._contact_gain(obj, jaw)                   # F_J / max(M, 0) (1/m)
+        if isinstance(gain, float):
+            if gain <= 0.0 and force.size and force.max() > 0.0:
+                raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
+                                 'at these jaw angles')
+            torque = force / gain if gain > 0.0 else np.zeros(shape)          # M needed (N*m)
+        else:
+            if np.any((gain <= 0.0) & (force > 0.0)):
+                raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
+                                 'at these jaw angles')
+            with np.errstate(divide='ignore', invalid='ignore'):
+                torque = np.where(force > 0.0, force / gain, 0.0)
+        if mv.any() or jv.any():
+            torque -= _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
+        per_amp = self._torque_per_amp_at_zero_tension(wrist)   # dM/dI at I = 0 (N*m/A)
         if self.affine:
-            lam = _friction.chain_efficiency(self.mu, self.radii, self.params.cable_radius,
-                                             self.wrap_angles(wrist))
-            per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
-            if np.any(per_amp <= 0.0):
-                raise ModelError(self._no_grip_message(float(np.min(lam))))
-            return (torque - inertial) / per_amp
-        flat = [self._solve_current(t, w, i) for t, w, i in
-                zip(torque.ravel(), np.broadcast_to(wrist, torque.shape).ravel(), inertial.ravel())]
-        return np.asarray(flat, float).reshape(torque.shape)
+            torque /= per_amp                                      # in place: one fresh array per call
+            return torque                                          # current (A)
+        return self._solve_current_array(torque, wrist, per_amp)
+
+    # ------------------------------------------------------------------ vectorised helpers
+    def _contact_gain(self, obj: str, jaw):
+        """Grip force per unit drive torque (1/m): a float where it does not depend on the jaw."""
+        if obj in ('needle', 'free'):
+            return _contact.contact_gain_scalar(obj, 0.0, self._tip, self._inner)
+        return _contact.contact_gain(obj, jaw, self._tip, self._inner)
+
+    def _efficiency_at_zero_tension(self, wrist):
+        """Constant-friction lambda_n (-): a float unless the wrist matters (then an array).
+
+        Only the last guide pulley depends on the wrist; its wrap grows by
+        ``wrist_wrap_gain |wrist|``. The others are ``self._fixed_efficiency``.
+        """
+        if not self._wrist_matters:
+            return self._efficiency_at_rest
+        if wrist.ndim == 0:
+            return self._efficiency_scalar(0.0, float(wrist))
+        a, b = self._exps[-1]
+        weight = a / (a - b)
+        wrap = np.abs(wrist)
+        wrap *= self.wrist_wrap_gain
+        wrap += self.wraps[-1]                                     # theta_n (rad)
+        eta = np.exp(b * wrap)
+        eta *= weight
+        rising = np.exp(np.multiply(wrap, a, out=wrap), out=wrap)
+        rising *= 1.0 - weight
+        eta += rising                             # eta_n = w e^(b theta) + (1 - w) e^(a theta)
+        return np.divide(self._fixed_efficiency, eta, out=eta)     # lambda_n = fixed / eta_n
+
+    def _chain_efficiency(self, drum_tension, wrist):
+        """lambda_n (-) at drum tension F0 (N) and wrist (rad): float, or array broadcasting with both.
+
+        Same as :func:`friction.chain_efficiency` (the reference the tests hold it to),
+        with the constant-friction parts computed once.
+        """
+        at_zero = self._efficiency_at_zero_tension(wrist)
+        if self.affine:
+            return at_zero
+        if drum_tension.ndim == 0 and wrist.ndim == 0:
+            return self._efficiency_scalar(float(drum_tension), float(wrist))
+        loaded = drum_tension > 0.0
+        start = np.where(loaded, drum_tension, 1.0)                # probe tension where F0 <= 0 (N)
+        last_wrap = self.wraps[-1] + self.wrist_wrap_gain * np.abs(wrist)
+        mu, gain = self.mu, self.friction_gain
+        tension = start
+        for i, rho in enumerate(self._rho):
+            wrap = last_wrap if i == len(self._rho) - 1 else self.wraps[i]
+            mu_here = tension * (mu * gain)
+            mu_here += mu                                           # mu (1 + g F) (-)
+            root = np.square(mu_here)
+            root *= 4.0 * rho
+            root += (1.0 + rho) ** 2
+            np.sqrt(root, out=root)
+            root += 1.0 + rho                                       # (1 + rho) + sqrt(...)
+            a = (2.0 * rho) * mu_here / root                        # a, cancellation-free (1/rad)
+            b = np.divide(root, mu_here, out=root)
+            b *= -0.5                                               # b = -((1 + rho) + sqrt)/(2 mu)
+            weight = a / (a - b)
+            eta = np.exp(np.multiply(b, wrap, out=b), out=b)
+            eta *= weight
+            np.subtract(1.0, weight, out=weight)
+            a *= wrap
+            eta += np.multiply(weight, np.exp(a, out=a), out=a)    # eta_i = w e^(b th) + (1 - w) e^(a th)
+            tension = tension / eta                                 # F_i = F_(i-1) / eta_i (N)
+        return np.where(loaded, tension / start, at_zero)
+
+    def _torque_per_amp_at_zero_tension(self, wrist):
+        """dM/dI at zero current (N*m/A), float or array; ModelError if it is not positive."""
+        if not self._wrist_matters:
+            if self._torque_per_amp_at_rest <= 0.0:
+                raise ModelError(self._no_grip_message(self._efficiency_at_rest))
+            return self._torque_per_amp_at_rest
+        lam = self._efficiency_at_zero_tension(wrist)
+        per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
+        if np.min(per_amp) <= 0.0:
+            raise ModelError(self._no_grip_message(float(np.min(lam))))
+        return per_amp
+
+    def _torque_array(self, current, wrist):
+        """Drive torque M (N*m) at zero velocities, arrays (the nonlinear inverse's function)."""
+        drum_tension = self.tension_per_amp * current
+        lam = self._chain_efficiency(drum_tension, wrist)
+        return self._rn * drum_tension * (lam - self.resistance_fraction)
+
+    def _solve_current_array(self, torque, wrist, per_amp):
+        """Currents with M(I) = torque (N*m), tension-dependent friction, all samples at once.
+
+        Newton with a forward-difference slope, as :meth:`_newton_current`, on the
+        samples not yet converged; it starts from ``torque / per_amp``, a lower bound
+        (friction only grows with tension). Samples where Newton gives up (past the
+        peak of M, or no convergence in 30 steps) go to the per-sample
+        :meth:`_solve_current` (bracket + brentq), which also raises for unreachable
+        torques. A torque <= 0 is linear: ``torque / per_amp``.
+        """
+        torque = np.asarray(torque, float)
+        wrist = np.broadcast_to(wrist, torque.shape)
+        current = np.array(np.broadcast_to(torque / per_amp, torque.shape), float).ravel()
+        todo = np.flatnonzero(torque.ravel() > 0.0)           # torque <= 0: current is exact
+        need, w = torque.ravel()[todo], wrist.ravel()[todo]
+        guess = current[todo]
+        for _ in range(30):
+            if todo.size == 0:
+                break
+            value = self._torque_array(guess, w) - need
+            step_size = 1e-7 * guess
+            slope = (self._torque_array(guess + step_size, w) - need - value) / step_size
+            with np.errstate(divide='ignore', invalid='ignore'):
+                step = -value / slope
+            new = guess + step
+            failed = ~(slope > 0.0) | ~(new > 0.0)
+            done = ~failed & (np.abs(step) <= 1e-13 * new)
+            current[todo[done]] = new[done]
+            for k in np.flatnonzero(failed):                      # rare: the bracketed scalar solve
+                current[todo[k]] = self._solve_current(float(need[k]), float(w[k]), 0.0)
+            keep = ~(done | failed)
+            todo, need, w, guess = todo[keep], need[keep], w[keep], new[keep]
+        for k in range(todo.size):                                # not converged in 30 steps
+            current[todo[k]] = self._solve_current(float(need[k]), float(w[k]), 0.0)
+        return current.reshape(torque.shape)
 
     def jaw_angle(self, motor_angle, wrist_angle, current):
         """Jaw opening angle (rad) from drum angle (rad), wrist pitch (rad), current (A).
