@@ -137,3 +137,13 @@ def test_inverse_errors_on_arrays():
     weak = GripForceModel(PAPER.replace(drive_resistance_fraction=0.9, wrist_wrap_gain=0.3))
     with pytest.raises(ModelError, match='no grip force at any current'):
         weak.inverse(np.array([1.0, 2.0]), np.array([0.0, 0.5]), 0.0)
+
+
+def test_scalar_inputs_keep_their_result_types():
+    """Scalar inputs give numpy scalars (grip, torque, drum tension, needle pull-out) as before."""
+    for m in (GripForceModel(PAPER), MODELS['four_pulley']()):
+        r = m.forward(0.3, 0.1, 0.2, 'needle')
+        for value in (r.grip_force, r.pull_out_force, r.jaw_torque, r.drum_tension):
+            assert isinstance(value, np.float64)
+        assert isinstance(r.efficiency, np.ndarray) and r.efficiency.shape == ()
+        assert float(m.inverse(r.grip_force, 0.1, 0.2, 'needle')) == pytest.approx(0.3, rel=1e-12)

@@ -227,6 +227,9 @@ class GripForceModel:
             np.multiply(grip, self._pull_per_grip, out=pull)  # F_L (N)
         else:
             pull.fill(0.0 if obj == 'free' else np.nan)
+        if shape == ():   # scalar inputs: the same types as ever (numpy scalars, 0-d arrays)
+            return ForwardResult(grip[()], pull[()] if obj == 'needle' else pull, torque[()], efficiency,
+                                 drum_tension[()])
         return ForwardResult(grip, pull, torque, efficiency, drum_tension)
 
     def inverse(self, grip_force, wrist_angle, jaw_angle, obj: str = 'needle', motor_velocity=0.0,
