@@ -26,13 +26,15 @@ MODELS = {
 def reference_forward(m, current, wrist, jaw, obj, mv=0.0, jv=0.0):
     """Straightforward forward: every equation on broadcast arrays, no shortcut."""
     p = m.params
-    current, wrist, jaw, mv, jv = np.broadcast_arrays(*(np.asarray(x, float) for x in (current, wrist, jaw, mv, jv)))
+    current, wrist, jaw, mv, jv = np.broadcast_arrays(
+        *(np.asarray(x, float) for x in (current, wrist, jaw, mv, jv)))
     f0 = m.tension_per_amp * current
     wraps = [*m.wraps[:-1], m.wraps[-1] + m.wrist_wrap_gain * np.abs(wrist)]
     lam = friction.chain_efficiency(m.mu, m.radii, p.cable_radius, wraps, f0, m.friction_gain)
     inertial = transmission.inertial_moment(-jv, mv, p.drive_pulley_radius, p.jaw_mass, p.drum_mass)
     torque = transmission.drive_torque(f0, lam, p.drive_pulley_radius, m.resistance_fraction, inertial)
-    grip = np.maximum(torque, 0.0) * contact.contact_gain(obj, jaw, p.jaw_moment_arm_tip, p.jaw_moment_arm_inner)
+    gain = contact.contact_gain(obj, jaw, p.jaw_moment_arm_tip, p.jaw_moment_arm_inner)
+    grip = np.maximum(torque, 0.0) * gain
     return grip, np.broadcast_to(lam, grip.shape), torque, f0
 
 
@@ -65,7 +67,8 @@ def test_forward_equals_the_straightforward_computation(name, shapes):
             np.testing.assert_allclose(r.jaw_torque, torque, rtol=1e-12, atol=1e-15)
             np.testing.assert_allclose(r.grip_force, grip, rtol=1e-12, atol=1e-13)
             if obj == 'needle':
-                np.testing.assert_allclose(r.pull_out_force, contact.PULL_OUT_PER_MU * 0.15 * grip, rtol=1e-12)
+                pull = contact.PULL_OUT_PER_MU * m.params.needle_friction_coefficient * grip
+                np.testing.assert_allclose(r.pull_out_force, pull, rtol=1e-12)
             elif obj == 'free':
                 assert np.all(r.pull_out_force == 0.0) and np.all(r.grip_force == 0.0)
             else:
