@@ -115,13 +115,7 @@ class GripForceModel:
         self._efficiency_at_rest = self._efficiency_scalar(0.0, 0.0)    # lambda_n at zero wrist (-)
         self._torque_per_amp_at_rest = self.tension_per_amp * self._rn * (
             self._efficiency_at_rest - self.resistance_fraction)           # dM/dI at zero wrist (N*m/A)
-        # tension-dependent friction: M(I) ~ s0 I (1 - droop I) at zero wrist, fitted at
-        # max_current; only the starting point of the vectorised Newton uses it (1/A)
-        self._torque_droop = 0.0
-        if not self.affine and self._torque_per_amp_at_rest > 0.0 and p.max_current > 0.0:
-            linear = self._torque_per_amp_at_rest * p.max_current
-            self._torque_droop = max(0.0, (1.0 - self._torque_scalar(p.max_current, 0.0) / linear)
-                                     / p.max_current)
+        self._start_table = None if self.affine else self._current_table()   # see _starting_currents
 
     # ------------------------------------------------------------------ helpers
     def wrap_angles(self, wrist_angle=0.0):
@@ -368,12 +362,37 @@ class GripForceModel:
         lam = self._chain_efficiency(drum_tension, wrist)
         return self._rn * drum_tension * (lam - self.resistance_fraction)
 
+    def _current_table(self, nodes: int = 129):
+        """(linear currents, currents) (A, A): M(I) / (dM/dI at 0) against I at zero wrist.
+
+        Over [0, 2 max_current], cut where M stops rising; ``nodes`` scalar evaluations
+        (~0.5 ms, at construction). None when M does not rise at all.
+        """
+        if self._torque_per_amp_at_rest <= 0.0:
+            return None
+        currents = np.linspace(0.0, 2.0 * max(self.params.max_current, 1e-3), nodes)       # A
+        torques = np.array([self._torque_scalar(float(i), 0.0) for i in currents])         # N*m
+        falling = np.flatnonzero(np.diff(torques) <= 0.0)
+        end = falling[0] + 1 if falling.size else nodes
+        return torques[:end] / self._torque_per_amp_at_rest, currents[:end]
+
+    def _starting_currents(self, linear_current):
+        """Newton's starting currents (A) from ``torque / per_amp`` (A), the current without
+        tension-dependent friction.
+
+        The table of :meth:`_current_table` maps one to the other by linear
+        interpolation: exact at the nodes, ~1e-4 relative between them. With the wrist
+        mattering it is only a good guess; past the table it is clamped (Newton then
+        climbs, M being concave).
+        """
+        return np.interp(linear_current, *self._start_table)
+
     def _solve_current_array(self, torque, wrist, per_amp):
         """Currents with M(I) = torque (N*m), tension-dependent friction, all samples at once.
 
         Newton with a forward-difference slope, as :meth:`_newton_current`, on the
-        samples not yet converged. It starts from ``g (1 + droop g)``, ``g = torque /
-        per_amp`` (the root of the quadratic fit of M, within ~1%) and accepts a sample
+        samples not yet converged. It starts from :meth:`_starting_currents` (within
+        ~1e-4 where the wrist does not matter) and accepts a sample
         once its step is below 1e-7 of the current: the slope is exact to ~1e-8, so
         the error after that step is ~1e-15. Samples where Newton gives up (past the
         peak of M, or no convergence in 30 steps) go to the per-sample
@@ -385,8 +404,7 @@ class GripForceModel:
         current = np.array(np.broadcast_to(torque / per_amp, torque.shape), float).ravel()
         todo = np.flatnonzero(torque.ravel() > 0.0)           # torque <= 0: current is exact
         need, w = torque.ravel()[todo], wrist.ravel()[todo]
-        guess = current[todo]
-        guess *= 1.0 + self._torque_droop * guess
+        guess = self._starting_currents(current[todo])
         for _ in range(30):
             if todo.size == 0:
                 break
