@@ -18,6 +18,8 @@ MODELS = {
     'ideal': lambda: GripForceModel(PAPER.replace(wrist_wrap_gain=0.4), losses=False),
     'long_jaw': lambda: GripForceModel(load_params_file('config/long_jaw_grasper.yaml')),
     'four_pulley': lambda: GripForceModel(load_params_file('config/four_pulley_needle_driver.yaml')),
+    'frictionless_with_gain': lambda: GripForceModel(PAPER.replace(pulley_friction_coefficient=0.0,
+                                                                   tension_friction_gain=0.001)),
     'nonlinear_wrist_gain': lambda: GripForceModel(PAPER.replace(tension_friction_gain=0.0008,
                                                                  wrist_wrap_gain=0.3)),
 }

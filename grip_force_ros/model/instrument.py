@@ -301,7 +301,7 @@ class GripForceModel:
         with the constant-friction parts computed once.
         """
         at_zero = self._efficiency_at_zero_tension(wrist)
-        if self.affine:
+        if self.affine or self.mu == 0.0:                          # no tension dependence
             return at_zero
         if drum_tension.ndim == 0 and wrist.ndim == 0:
             return self._efficiency_scalar(float(drum_tension), float(wrist))
