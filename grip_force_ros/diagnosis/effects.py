@@ -74,6 +74,11 @@ class Effect:
 ANGLE_PER_TORQUE = 1.0
 
 
+#: Full widths (rad of motor angle) of the play whose output is the friction direction when it
+#: follows the drive motion (pivot_coulomb_friction, cable_hysteresis on a sliding jaw).
+MOTOR_PLAY_WIDTHS = (0.005, 0.02, 0.05)
+
+
 def _cached(f, key, make):
     cache = f.setdefault('_cache', {})
     if key not in cache:
@@ -81,7 +86,23 @@ def _cached(f, key, make):
     return cache[key]
 
 
-def _coulomb(f, tau):
+def _motor_direction(f, width):
+    # direction of the last drive motion with memory: a play of full width ``width`` (rad) on the
+    # motor (drum) angle; it holds through stick and reversals, where the current swings across the
+    # friction band while the drive does not move (a sign of the velocity would flip at once)
+    return _cached(f, ('play_motor', width), lambda: play(f['motor'], width))
+
+
+def _coulomb(f, grid_value):
+    source, width = grid_value
+    if source == 'motor_angle':
+        # the jaw slides under load (a rig whose load follows the stroke): the friction opposes the
+        # motion, its direction follows the drive's angle through stick
+        force_dir = _motor_direction(f, width)
+        angle_dir = _cached(f, ('play_jaw_model', width),
+                            lambda: play(f['jaw_model'], width))
+        return Design(f['nominal'], [f['contact'] * f['gain'] * force_dir], [angle_dir])
+    tau = width
     # the pivot sticks while the drive torque changes by less than 2 tau: a play on the torque
     force_dir = _cached(f, ('play_torque', tau), lambda: play(f['torque'], 2.0 * tau))
     angle_dir = _cached(f, ('play_jaw_model', 2.0 * tau / ANGLE_PER_TORQUE),
@@ -93,7 +114,12 @@ def _viscous(f, _):
     return Design(f['nominal'], [f['contact'] * f['jaw_velocity']])
 
 
-def _hysteresis(f, width):
+def _hysteresis(f, grid_value):
+    source, width = grid_value
+    if source == 'motor_angle':
+        # friction proportional to the cable tension, its direction following the drive motion
+        # with memory: a transmission efficiency that differs between driving and back-driving
+        return Design(f['nominal'], [f['nominal'] * _motor_direction(f, width)])
     # Dahl loop: a moment proportional to the tension, flipping after a relative tension change
     log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
     direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
@@ -134,14 +160,20 @@ def _rel(coef, gain):
 
 
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect('pivot_coulomb_friction', (0.002, 0.005, 0.01, 0.02), 'friction_torque_grid', 'N*m',
+    Effect('pivot_coulomb_friction',
+           tuple(('drive_torque', v) for v in (0.002, 0.005, 0.01, 0.02))
+           + tuple(('motor_angle', v) for v in MOTOR_PLAY_WIDTHS),
+           'friction_torque_grid', 'N*m (drive_torque) or rad (motor_angle play width)',
            _coulomb,
            ('force_step',), ('angle_step',),
            (('force_step', 'unit of y', lambda c, g: c), ('angle_step', 'rad', lambda c, g: c))),
     Effect('viscous_friction', (None,), None, '', _viscous,
            ('force_per_jaw_velocity',), (),
            (('force_per_jaw_velocity', 'unit of y*s/rad', lambda c, g: c),)),
-    Effect('cable_hysteresis', (0.02, 0.05, 0.1, 0.2), 'relative_tension_width', '-', _hysteresis,
+    Effect('cable_hysteresis',
+           tuple(('log_tension', v) for v in (0.02, 0.05, 0.1, 0.2))
+           + tuple(('motor_angle', v) for v in MOTOR_PLAY_WIDTHS),
+           'direction_state_width', '- (log_tension) or rad (motor_angle play width)', _hysteresis,
            ('loop_fraction',), (), (('loop_fraction', '-', lambda c, g: -_rel(c, g)),)),
     Effect('backlash', (0.002, 0.005, 0.01, 0.02), 'current_width', 'A', _backlash,
            (), ('dead_band',), (('dead_band', 'rad', lambda c, g: -2.0 * c),)),

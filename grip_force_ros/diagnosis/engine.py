@@ -434,7 +434,14 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
             scale = abs(val / coef) if coef else 1.0
             params_out[pname] = {'value': val, 'std': float(std) * scale,
                                  'unit': punit.replace('unit of y', unit)}
-        if effect.grid_name:
+        if effect.grid_name and isinstance(value, tuple):
+            # (which signal the direction state follows, its width)
+            source, width = value
+            params_out[effect.grid_name] = {'value': width, 'std': None, 'direction_state_of': source,
+                                            'unit': 'rad' if source == 'motor_angle' else
+                                            ('N*m' if source == 'drive_torque' else '-'),
+                                            'note': 'picked from a grid on the training parts'}
+        elif effect.grid_name:
             params_out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
                                             'note': 'picked from a grid on the training parts'}
         ranking.append({'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),

@@ -267,7 +267,11 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
         tn, uncertain = efficiency * drum_tension, np.zeros(t.size, dtype=bool)
     nominal = torque if measured == 'jaw_torque' else np.maximum(torque, 0.0) * gain
     if measured == 'jaw_torque':
-        contact = (current > 0).astype(float)
+        # a jaw torque rig holds the jaw against its load through the whole stroke: loaded
+        # wherever the log names an object (the current's sign says which way the drive
+        # slides, not whether the jaw is loaded: with friction larger than the load it flips
+        # at every stroke under a constant load)
+        contact = (codes > 0).astype(float)
     else:
         contact = ((nominal > 0) & (codes > 0)).astype(float)
     # time under load (s): resets whenever the prediction says no load

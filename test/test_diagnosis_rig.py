@@ -1,0 +1,58 @@
+"""The generic diagnosis on the real da Vinci rig runs (skipped when the data are absent).
+
+The rig's physics (docs/real_data.md): Coulomb friction of ~75 mN*m at the jaw, larger than
+any load, with stick through reversals; the jaw torque sensor zero checks to 0.1 mN*m. So the
+generic engine must name a friction effect whose direction follows the drive motion, not a
+sensor offset, and shrink the held-out gap well below the nominal model's.
+"""
+from pathlib import Path
+
+import pytest
+
+from grip_force_ros.diagnosis import diagnose
+from grip_force_ros.params import load_params_file
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / 'shared' / 'data' / 'mis-tool-characterization' / 'Tool_4_Maryland_L_2'
+
+#: The realdata split: fit on the 10 % and 30 % load runs, judge on the 20 % and 40 % runs,
+#: all five stroke frequencies on both sides. Runs are named XY: X frequency, Y load step.
+TRAIN = ('00', '02', '10', '12', '20', '22', '30', '32', '40', '42')
+TEST = ('01', '03', '11', '13', '21', '23', '31', '33', '41', '43')
+
+
+@pytest.fixture(scope='module')
+def rig_result():
+    if not DATA.is_dir():
+        pytest.skip(f'rig data not found at {DATA}')
+    from grip_force_ros.rig import read_run, to_contract_log
+    logs = {name: to_contract_log(read_run(DATA / f'{name}.TXT')) for name in TRAIN + TEST}
+    params = load_params_file(ROOT / 'config' / 'maryland_forceps.yaml')
+    return diagnose([logs[n] for n in TRAIN], [logs[n] for n in TEST], params)
+
+
+def test_rig_verdict_is_pivot_friction_following_the_motor(rig_result):
+    verdict = rig_result['verdict']
+    assert verdict['measured'] == 'jaw_torque'
+    assert verdict['effect'] not in ('force_sensor_offset', 'none')
+    assert verdict['effect'] == 'pivot_coulomb_friction'
+    coulomb = next(r for r in rig_result['ranking'] if r['effect'] == 'pivot_coulomb_friction')
+    grid = coulomb['params']['friction_torque_grid']
+    assert grid['direction_state_of'] == 'motor_angle'
+    # friction opposes the motion: a closing stroke needs more current for the same jaw torque
+    step = coulomb['params']['force_step']['value']
+    assert step < -0.02                                    # N*m at the jaw (the rig: ~-0.06..-0.075)
+    # with the friction column the current's calibrated gain is the model's again (~0.9), not the
+    # 0.17 the friction swing leaves when it is ignored
+    assert 0.6 < coulomb['gain'] < 1.2
+
+
+def test_rig_gap_shrinks_on_runs_never_seen(rig_result):
+    verdict = rig_result['verdict']
+    # measured at the commit of this test: 33.7 -> 18.4 mN*m with the friction alone,
+    # 12.8 mN*m with the second effect; the margin leaves room for small engine changes
+    assert verdict['gap_after_first'] < 0.7 * verdict['gap_before']
+    assert verdict['gap_after'] < 0.5 * verdict['gap_before']
+    # a jaw torque rig is loaded through the whole stroke: no sample is a load transient
+    # because the current changed sign
+    assert rig_result['split']['transient_share'] < 0.02
