@@ -7,7 +7,7 @@ from hypothesis import given, settings, strategies as st
 
 from grip_force_ros.diagnosis import (EFFECT_NAMES, DiagnosisError, build_frame, capstan_tension,
                                       diagnose, load_decimated, run_diagnosis, write_report)
-from grip_force_ros.diagnosis.frame import decimate, play
+from grip_force_ros.diagnosis.frame import decimate, hold_where_stuck, play, play_sliding
 from grip_force_ros.logs import read_log, write_csv
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
@@ -48,6 +48,20 @@ def test_play_is_a_direction_with_memory(x, width):
     assert np.all(np.abs(d) <= 1 + 1e-9)
     up = play(np.r_[0.0, np.linspace(0, 3 * width, 30)], width)
     assert up[-1] == pytest.approx(1.0)
+
+
+def test_play_sliding_sticks_for_the_width_after_each_reversal():
+    width = 0.1
+    x = np.r_[np.linspace(0, 1, 101), np.linspace(1, 0, 101)[1:]]            # 0.01 per sample
+    direction, sliding = play_sliding(x, width)
+    assert direction[100] == pytest.approx(1.0) and direction[-1] == pytest.approx(-1.0)
+    # after the reversal at sample 100 the input must travel the full width (10 samples)
+    # before the state moves again: stuck there, sliding on both sides of it
+    assert not sliding[101:110].any()
+    assert sliding[60:100].all() and sliding[112:].all()
+    held = hold_where_stuck(x, sliding)
+    assert np.all(held[101:110] == held[100])                              # the value of the last slide
+    np.testing.assert_array_equal(held[sliding], x[sliding])
 
 
 def test_load_decimated_streams_the_same_as_whole(tmp_path):
@@ -144,6 +158,41 @@ def test_jaw_torque_logs_are_compared_in_newton_metres():
     assert result['verdict']['effect'] == 'force_sensor_offset'
     assert result['verdict']['gap_before'] > 0.001
     assert result['verdict']['gap_after'] < 0.3 * result['verdict']['gap_before']
+
+
+def _sliding_rig(seed, seconds=40.0, dt=5e-3, friction=0.06, load_levels=(0.01, 0.03, 0.05)):
+    """A jaw driven along a sine against a constant load per log, through Coulomb friction
+    larger than the load: the current flips sign at every stroke and sticks at reversals."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds / dt)) * dt
+    motor = 0.5 - 0.5 * np.cos(2 * np.pi * t / 5.0)
+    slide, sliding = play_sliding(motor, 0.01)
+    load = float(rng.choice(load_levels))                                  # N*m at the jaw
+    per_amp = float(_nominal({**_inputs(0, 1.0), 'current': np.full(200, 1.0)}, 'jaw_torque')[0])
+    # the drive torque while sliding: the load plus the friction against the motion; while stuck the
+    # current moves across the friction band (here: a ramp between the branches)
+    drive = load + friction * slide
+    current = drive / per_amp + rng.normal(0, 0.002, t.size)
+    return {'t': t, 'current': current, 'motor_angle': motor, 'wrist_angle': np.zeros(t.size),
+            'jaw_angle': 0.9 * motor, 'object': np.full(t.size, 'rigid'),
+            'jaw_torque': load + rng.normal(0, 5e-4, t.size)}
+
+
+def test_jaw_torque_rig_is_loaded_through_the_stroke_and_names_pivot_friction():
+    """A torque rig whose current changes sign every stroke under a constant load: no sample is a
+    load transient, and the friction is named with a direction that follows the motor angle."""
+    train = [_sliding_rig(s) for s in (21, 22, 23, 24)]
+    test = [_sliding_rig(s) for s in (25, 26)]
+    assert (train[0]['current'] < 0).any() and (train[0]['current'] > 0).any()
+    frame = build_frame(load_decimated(train[0]), MODEL)
+    assert frame['contact'].all()                                          # loaded although current < 0
+    result = diagnose(train, test, params=PARAMS)
+    v = result['verdict']
+    assert v['effect'] == 'pivot_coulomb_friction'
+    coulomb = next(r for r in result['ranking'] if r['effect'] == 'pivot_coulomb_friction')
+    assert coulomb['params']['friction_torque_grid']['direction_state_of'] == 'motor_angle'
+    assert coulomb['params']['force_step']['value'] == pytest.approx(-0.06, rel=0.2)
+    assert v['gap_after_first'] < 0.4 * v['gap_before']                   # measured 35 -> 11 mN*m
 
 
 def test_json_contract_and_split_by_files():

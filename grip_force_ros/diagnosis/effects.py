@@ -34,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from grip_force_ros.diagnosis.frame import lowpass, play
+from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
 
 #: The DESIGN.md vocabulary (``none`` is the verdict when no effect is needed).
 EFFECT_NAMES = ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
@@ -97,11 +97,14 @@ def _coulomb(f, grid_value):
     source, width = grid_value
     if source == 'motor_angle':
         # the jaw slides under load (a rig whose load follows the stroke): the friction opposes the
-        # motion, its direction follows the drive's angle through stick
-        force_dir = _motor_direction(f, width)
+        # motion, its direction follows the drive's angle through stick; while the drive sticks
+        # (inside the play's band: standing, or reversing) the friction takes up any change of the
+        # current, so the transmitted load is the one of the last sliding sample
+        force_dir, sliding = _cached(f, ('play_sliding_motor', width), lambda: play_sliding(f['motor'], width))
+        base = _cached(f, ('held_nominal', width), lambda: hold_where_stuck(f['nominal'], sliding))
         angle_dir = _cached(f, ('play_jaw_model', width),
                             lambda: play(f['jaw_model'], width))
-        return Design(f['nominal'], [f['contact'] * f['gain'] * force_dir], [angle_dir])
+        return Design(base, [f['contact'] * f['gain'] * force_dir], [angle_dir])
     tau = width
     # the pivot sticks while the drive torque changes by less than 2 tau: a play on the torque
     force_dir = _cached(f, ('play_torque', tau), lambda: play(f['torque'], 2.0 * tau))

@@ -120,6 +120,31 @@ def play(x: np.ndarray, width: float) -> np.ndarray:
     return (x - out) / half
 
 
+def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The :func:`play` output and where its state moves (the input slides beyond the band).
+
+    Returns
+    -------
+    direction : ndarray
+        As :func:`play`, in [-1, 1].
+    sliding : ndarray of bool
+        True where the play's state moved at this sample: ``x`` has travelled the full
+        band since its last reversal and keeps going; False while it sits inside the band
+        (stuck, or reversing).
+    """
+    direction = play(x, width)
+    state = x - direction * (0.5 * width)
+    sliding = np.abs(np.diff(state, prepend=state[0])) > 1e-12 * max(1.0, width)
+    return direction, sliding
+
+
+def hold_where_stuck(values: np.ndarray, sliding: np.ndarray) -> np.ndarray:
+    """``values`` where ``sliding``; elsewhere the last value seen while sliding (the first
+    value before any sliding)."""
+    idx = np.maximum.accumulate(np.where(sliding, np.arange(values.size), 0))
+    return values[idx]
+
+
 def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
                     jaw_side_change: np.ndarray | None = None, *,
                     tolerance: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
