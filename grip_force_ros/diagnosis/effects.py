@@ -14,9 +14,9 @@ grid; the coefficients are linear least squares. Each effect's shape:
 
 | effect | force column(s) | angle column(s) | grid |
 |---|---|---|---|
-| pivot_coulomb_friction | contact * G * dir(drive torque) | dir(jaw_model) | friction torque |
+| pivot_coulomb_friction | contact * G * dir(drive torque), or contact * G * dir(motor angle) with the nominal held while stuck | dir(jaw_model) | friction torque, or motor play width |
 | viscous_friction | contact * jaw_velocity | - | - |
-| cable_hysteresis | nominal * dir(log jaw tension) | - | relative width |
+| cable_hysteresis | nominal * dir(log jaw tension), or nominal * dir(motor angle) | - | relative width, or motor play width |
 | backlash | - | tanh(current / width) | width |
 | tension_dependent_friction | nominal * current, nominal * current^2 | - | - |
 | viscoelastic_creep | lowpass_tau(nominal) | - | tau |
@@ -25,7 +25,10 @@ grid; the coefficients are linear least squares. Each effect's shape:
 | force_sensor_offset | 1 | - | - |
 
 ``dir(x)`` is a play operator output in [-1, 1]: the direction of the last motion
-of ``x`` with memory (stiction, dead band).
+of ``x`` with memory (stiction, dead band). Grids of the two friction effects hold
+(source, width) pairs: the drive torque / log tension (a jaw held in contact, the sim's
+pivot) or the motor angle (a jaw sliding under its load, as on a torque rig, where the
+friction direction persists through stick and reversals while the current swings).
 """
 from __future__ import annotations
 

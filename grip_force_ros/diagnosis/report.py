@@ -86,11 +86,11 @@ def plot_timeseries(d: Diagnosis, path: Path, seconds: float = 30.0) -> Path:
     a.plot(idx, s['y'][sel][keep], color='0.3', lw=1, label=f"measured {d.result['measured']}")
     a.plot(idx, s['calibrated'][sel][keep], color='tab:red', lw=1, label='calibrated model')
     a.plot(idx, s['after'][sel][keep], color='tab:green', lw=1,
-           label=f"model + {d.result['verdict']['effect']}")
+           label='model + ' + ' + '.join(d.result['verdict'].get('effects', [d.result['verdict']['effect']])))
     a.set_ylabel(f"{d.result['measured']} ({unit})")
     a.legend(fontsize=8)
     b.plot(idx, s['resid_before'][sel][keep], color='tab:red', lw=1, label='residual, calibrated model')
-    b.plot(idx, s['resid_after'][sel][keep], color='tab:green', lw=1, label='residual, + effect')
+    b.plot(idx, s['resid_after'][sel][keep], color='tab:green', lw=1, label='residual, + named effect(s)')
     b.axhline(0, color='k', lw=0.5)
     b.set_ylabel(f'residual ({unit})')
     b.set_xlabel('held-out sample (analysis rate; held-out blocks joined)')
@@ -143,8 +143,11 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
     lines = [f'# {title}', '']
     if sources:
         lines += ['Logs: ' + ', '.join(f'`{s}`' for s in sources), '']
-    lines += [f"**Verdict: `{v['effect']}`** - held-out RMS gap of {r['measured']} "
-              f"{_fmt(v['gap_before'])} {unit} -> {_fmt(v['gap_after'])} {unit} "
+    named = ' + '.join(f'`{e}`' for e in v.get('effects', [v['effect']]))
+    first = (f" ({_fmt(v['gap_after_first'])} {unit} with `{v['effect']}` alone)"
+             if len(v.get('effects', [])) > 1 and 'gap_after_first' in v else '')
+    lines += [f"**Verdict: {named}** - held-out RMS gap of {r['measured']} "
+              f"{_fmt(v['gap_before'])} {unit} -> {_fmt(v['gap_after'])} {unit}{first} "
               f"(shrink {100 * v['shrink']:.0f} %); jaw angle {_fmt(v['angle_gap_before'])} -> "
               f"{_fmt(v['angle_gap_after'])} rad. Runner-up: `{v['runner_up']}`.", '',
               f"Split: {r['split'].get('description', r['split']['method'])}; "
@@ -168,7 +171,8 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
               '|---|---|---|---|---|']
     for e in r['ranking']:
         ps = '; '.join(f"{k} = {_fmt(p['value'])}" + (f" ± {_fmt(p['std'], 2)}" if p.get('std') is not None else '')
-                       + f" {p['unit']}" for k, p in e['params'].items())
+                       + f" {p['unit']}" + (f" (play on {p['direction_state_of']})" if 'direction_state_of' in p else '')
+                       for k, p in e['params'].items())
         lines.append(f"| {e['effect']} | {_fmt(e['holdout_rmse'])} | {_fmt(e['holdout_angle_rmse'])} | "
                      f"{e['score']:.3f} | {ps} |")
     lines += ['', f"Rule: {v['rule']}.", '', '## 4. How far', '',
