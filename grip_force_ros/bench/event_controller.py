@@ -1,19 +1,19 @@
-"""Bench variant of the controller node: one control step per actuator state (event-driven).
+"""Bench variant of the controller node: commands stamped with the state they answer.
 
-The shipped ``controller`` steps on its own 1 kHz timer, unsynchronised with
-the sim's 1 kHz timer, so each command answers a state that waited 0..1 period
-for the next tick. This variant, used only by ``grip-force bench
---product-controller events`` to measure the proposal, steps in the actuator
-state's callback instead (the state arrives once per sim period), and keeps a
-1 kHz timer as a fallback that steps only when no state arrived for 1.5
-periods (so the watchdog still trips on a silent sim).
+The shipped ``controller`` steps on each actuator state (its 1 kHz timer is the
+watchdog fallback) and stamps each command with its own clock at the step, so
+the bench's probe has to match commands to states by delivery time (biased
+towards longer round trips, see BENCHMARKS.md). This variant, used only by
+``grip-force bench --event-controller``, is the same node whose current command
+carries the stamp of the actuator state it answers, so the round trip is exact:
+the command's arrival minus its stamp. (Commands of the fallback timer keep the
+controller's clock.)
 
 Run: ``python -m grip_force_ros.bench.event_controller --ros-args --params-file X.yaml``.
 """
 from __future__ import annotations
 
 import sys
-import time
 
 from grip_force_ros.nodes.common import run_node
 from grip_force_ros.nodes.controller import ControllerNode
@@ -33,30 +33,18 @@ class _StampingPublisher:
 
 
 class EventDrivenController(ControllerNode):
-    """:class:`ControllerNode` stepping on each actuator state; timer only as a fallback.
-
-    The current command carries the stamp of the actuator state it answers (the
-    shipped node stamps it with its clock at the tick), so the bench measures this
-    variant's round trip exactly: arrival minus the command's stamp.
-    """
+    """:class:`ControllerNode` whose current command carries the answered state's stamp."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._last_step = time.perf_counter()
         self._servo_pub = _StampingPublisher(self._servo_pub)
 
     def _on_actuator(self, msg) -> None:
-        super()._on_actuator(msg)
-        self._last_step = time.perf_counter()
         self._servo_pub.stamp = msg.header.stamp
-        super()._tick()
-        self._servo_pub.stamp = None
-
-    def _tick(self) -> None:
-        # fallback: the sim went quiet for 1.5 periods; step so the watchdog can act
-        if time.perf_counter() - self._last_step > 1.5 * self._period:
-            self._last_step = time.perf_counter()
-            super()._tick()
+        try:
+            super()._on_actuator(msg)      # steps on the state (the shipped node's loop)
+        finally:
+            self._servo_pub.stamp = None
 
 
 def main(args=None) -> int:

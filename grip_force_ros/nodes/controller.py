@@ -6,11 +6,24 @@ Subscribes (KEEP_LAST 1; only the newest sample matters):
     instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
                                       effort = measured current (A)
     grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
-Publishes, every control period (``control_rate``, 1 kHz):
+Publishes, every control step (one per control period, ``control_rate``, 1 kHz):
     instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
     grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
     grip/target_force                 force.z = target grip force (N)
 and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
+
+Loop timing, as hardware interfaces do it: the control step runs when a fresh
+actuator state arrives (in its subscription callback), so each command answers
+the newest state without waiting for a free-running timer (two unsynchronised
+1 kHz timers, the sim's and the controller's, would add a 0-1 ms wait whose
+phase is fixed for a whole run). The ``control_rate`` timer stays as the
+watchdog and fallback: it steps when no state was stepped on since its previous
+tick (a late or lost state, or silence: the safe state still comes within two
+periods of ``watchdog_timeout``), never within half a period of the previous
+step. Every actuator state is stepped on: the PID assumes one step per period,
+so the actuator state is expected at ``control_rate`` (the sim publishes at
+``publish_rate`` = 1 kHz). Cancelling the timer stops the loop altogether (no
+step on states either).
 
 A malformed message (unknown or missing joint names, wrong array lengths, NaN)
 is rejected with its reason; the last good input is kept. All the control
@@ -39,6 +52,8 @@ GROUPS = ('instrument', 'limits', 'controller')
 #: Periodic /diagnostics rate (Hz); changes are published sooner, at most this often:
 DIAGNOSTICS_RATE = 10.0
 DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
+#: The timer does not step sooner than this many periods after the previous step:
+MIN_STEP_SPACING_PERIODS = 0.5
 
 _MASTER_JOINTS = (topics.MASTER_JOINT,)
 _INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
@@ -50,7 +65,7 @@ _INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance
 
 
 class ControllerNode(Node):
-    """Runs :class:`GripController` at ``control_rate`` on the latest inputs."""
+    """Runs :class:`GripController` once per actuator state, the timer as watchdog fallback."""
 
     def __init__(self, **kwargs):
         super().__init__('controller', **kwargs)
@@ -98,6 +113,11 @@ class ControllerNode(Node):
         self.timing = {'ticks': 0, 'late': 0, 'period_sum': 0.0, 'period_max': 0.0,
                        'busy_sum': 0.0, 'busy_max': 0.0}
         self._last_tick = None
+        # Step scheduling (perf_counter s): see the module docstring.
+        self._min_spacing = MIN_STEP_SPACING_PERIODS * self._period
+        self._last_step = -math.inf        # when the last control step started
+        self._stepped_on_state = False     # since the timer's previous tick
+        self.steps = {'on_state': 0, 'on_timer': 0}   # control steps by trigger
         self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
         self.get_logger().info(
             f'{params.instrument_name}: control at {params.control_rate:.0f} Hz, '
@@ -146,6 +166,14 @@ class ControllerNode(Node):
                                                 stamp_seconds(msg.header.stamp)))
 
     def _on_actuator(self, msg: JointState) -> None:
+        """Actuator state: store it and run the control step on it (event-driven loop)."""
+        self._read_actuator(msg)
+        if not self._timer.is_canceled():  # cancelled: the loop is stopped
+            self.steps['on_state'] += 1
+            self._step(time.perf_counter())
+            self._stepped_on_state = True
+
+    def _read_actuator(self, msg: JointState) -> None:
         now = self._now()
         fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
         try:
@@ -180,7 +208,22 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _tick(self) -> None:
+        """The ``control_rate`` timer: watchdog and fallback of the event-driven loop.
+
+        Steps when no actuator state was stepped on since the previous tick (a
+        late or lost state; when they stop, the watchdog acts on the stale inputs
+        every period), never within :data:`MIN_STEP_SPACING_PERIODS` of the
+        previous step.
+        """
         started = time.perf_counter()
+        if not self._stepped_on_state and started - self._last_step >= self._min_spacing:
+            self.steps['on_timer'] += 1
+            self._step(started)
+        self._stepped_on_state = False
+
+    def _step(self, started: float) -> None:
+        """One control step, timed (``started``: perf_counter s, now)."""
+        self._last_step = started
         self._control()
         timing = self.timing
         busy = time.perf_counter() - started
@@ -257,6 +300,8 @@ class ControllerNode(Node):
             values['late_periods'] = str(timing['late'])   # longer than 1.5 periods
             values['tick_mean_us'] = f"{timing['busy_sum'] / timing['ticks'] * 1e6:.1f}"
             values['tick_max_us'] = f"{timing['busy_max'] * 1e6:.1f}"
+        values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an actuator state
+        values['steps_on_timer'] = str(self.steps['on_timer'])   # fallback: no fresh state
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'

@@ -1,0 +1,154 @@
+"""Step scheduling of the controller node: a step per actuator state, the timer as fallback.
+
+The node is built on a real rclpy context but not spun: the test calls the
+actuator-state callback and the timer callback itself, on a fake perf_counter,
+so every arrival time is exact and the figures do not depend on the machine.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+import random
+import types
+
+import pytest
+
+from grip_force_ros import topics
+from grip_force_ros.nodes import controller as controller_module
+from grip_force_ros.nodes.common import joint_state
+from grip_force_ros.nodes.controller import MIN_STEP_SPACING_PERIODS, ControllerNode
+from grip_force_ros.nodes.harness import RosRunner
+
+pytestmark = pytest.mark.ros
+
+
+class _Clock:
+    """Stands in for the ``time`` module of the node: perf_counter is set by the test."""
+
+    def __init__(self):
+        self.now = 100.0     # s
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def node(monkeypatch):
+    clock = _Clock()
+    monkeypatch.setattr(controller_module, 'time',
+                        types.SimpleNamespace(perf_counter=clock.perf_counter))
+    ros = RosRunner()
+    ctl = ros.add(ControllerNode)
+    step_times: list[float] = []
+    control = ctl._control
+
+    def recorded_control():
+        step_times.append(clock.now)
+        control()
+
+    ctl._control = recorded_control
+    try:
+        yield ctl, clock, step_times
+    finally:
+        ros.stop()
+
+
+def _state(ctl) -> None:
+    """One actuator state (drum current, position, velocity) delivered to the node."""
+    stamp = ctl.get_clock().now().to_msg()
+    ctl._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
+
+
+def _run(ctl, clock, events) -> list[float]:
+    """Deliver ('state' | 'tick', time s) events in time order; the timer's steps (s)."""
+    timer_steps = []
+    for kind, t in sorted(events, key=lambda e: e[1]):
+        clock.now = t
+        if kind == 'state':
+            _state(ctl)
+        else:
+            before = ctl.steps['on_timer']
+            ctl._tick()
+            if ctl.steps['on_timer'] > before:
+                timer_steps.append(t)
+    return timer_steps
+
+
+def test_each_state_is_answered_at_once_and_the_timer_stays_quiet(node):
+    ctl, clock, steps = node
+    period = ctl._period
+    start = clock.now
+    states = [('state', start + k * period) for k in range(200)]
+    ticks = [('tick', start + (k + 0.3) * period) for k in range(200)]   # timer phase 0.3
+    _run(ctl, clock, states + ticks)
+    assert steps == [t for _, t in states], 'one step per state, at its arrival'
+    assert ctl.steps == {'on_state': 200, 'on_timer': 0}
+    assert ctl.last_output is not None
+    assert ctl.timing['late'] == 0
+
+
+def test_timer_steps_every_period_once_the_states_stop(node):
+    ctl, clock, steps = node
+    period = ctl._period
+    start = clock.now
+    _run(ctl, clock, [('state', start + k * period) for k in range(10)]
+         + [('tick', start + (k + 0.6) * period) for k in range(60)])
+    last_state = start + 9 * period
+    timer_steps = [t for t in steps if t > last_state]
+    # the first fallback step comes within two periods of the last state, then every period
+    assert timer_steps[0] - last_state <= 2 * period + 1e-12
+    assert len(timer_steps) == 60 - 10
+    assert max(b - a for a, b in zip(timer_steps, timer_steps[1:])) == pytest.approx(period)
+    assert ctl.steps['on_timer'] == len(timer_steps)
+
+
+def test_every_state_is_stepped_on_and_the_timer_keeps_half_a_period_away(node):
+    ctl, clock, steps = node
+    period = ctl._period
+    t0 = clock.now
+    # a late state right before the next one: both are answered at once, the timer is quiet
+    _run(ctl, clock, [('state', t0), ('state', t0 + 0.2 * period), ('tick', t0 + 0.7 * period)])
+    assert steps == [t0, t0 + 0.2 * period]
+    # states stop: a late tick steps, the on-time tick 0.1 period after it does not
+    _run(ctl, clock, [('tick', t0 + 1.9 * period), ('tick', t0 + 2.0 * period),
+                      ('tick', t0 + 3.0 * period)])
+    assert steps[2:] == [t0 + 1.9 * period, t0 + 3.0 * period]
+    assert ctl.steps == {'on_state': 2, 'on_timer': 2}
+
+
+def test_a_cancelled_timer_stops_the_loop(node):
+    ctl, clock, steps = node
+    ctl._timer.cancel()
+    _state(ctl)
+    assert steps == [] and ctl.last_output is None
+    assert ctl.inputs.measured_current == pytest.approx(0.05), 'the state is still read'
+
+
+@pytest.mark.parametrize('seed', [1, 2, 3])
+def test_steps_keep_their_spacing_under_jitter(node, seed):
+    """States with delivery jitter up to 0.8 period and 2 % lost, any timer phase: each state
+    is stepped on; the timer steps exactly at the ticks with no state since the previous tick,
+    so no two periods pass without a command."""
+    ctl, clock, steps = node
+    rng = random.Random(seed)
+    period = ctl._period
+    start = clock.now
+    n = 2000
+    phase = rng.random()
+    states = [('state', start + (k + rng.uniform(0.0, 0.8)) * period)
+              for k in range(n) if rng.random() > 0.02]
+    ticks = [('tick', start + (k + phase) * period) for k in range(n)]
+    timer_steps = _run(ctl, clock, states + ticks)
+    assert ctl.steps == {'on_state': len(states), 'on_timer': len(timer_steps)}
+    assert len(steps) == len(states) + len(timer_steps)
+    previous = {b: a for a, b in zip(steps, steps[1:])}
+    min_spacing = MIN_STEP_SPACING_PERIODS * period - 1e-12
+    assert all(t - previous.get(t, -math.inf) >= min_spacing for t in timer_steps)
+    state_times = sorted(t for _, t in states)
+    empty_ticks = [t for _, t in ticks
+                   if not any(t - period < s <= t for s in state_times[
+                       max(0, bisect.bisect_left(state_times, t - period) - 1):
+                       bisect.bisect_right(state_times, t) + 1])]
+    assert timer_steps == empty_ticks
+    gaps = [b - a for a, b in zip(steps, steps[1:])]
+    assert max(gaps) <= 2 * period + 1e-12
