@@ -66,6 +66,10 @@ MASTER_SPECS = [
     ParamSpec('exit_when_done', 'bool', False, '',
               'Exit the node (code 0) shortly after a non-repeating trajectory ends.',
               group='master'),
+    ParamSpec('start_when_subscribed', 'bool', True, '',
+              'Hold the trajectory at its start until a subscriber (the controller) is matched, '
+              'so DDS discovery on a loaded machine cannot swallow the start of the task.',
+              group='master'),
 ]
 
 

@@ -77,3 +77,26 @@ def test_docs_list_every_node_parameter():
     assert not missing, f'docs/ros_interface.md lacks {missing}: python -m grip_force_ros.nodes.docs'
     for topic in topics.RECORDED:
         assert f'`{topic}`' in text
+
+
+def test_trajectory_clock_waits_for_a_subscriber():
+    # DDS discovery can take seconds on a loaded machine: the task must not run unseen
+    with RosRunner() as ros:
+        master = ros.add(MasterNode, time_scale=0.4)
+        ros.start()
+        time.sleep(0.5)
+        assert master.elapsed() == 0.0 and not master._started
+        received = []
+        _collect(ros, received)
+        assert ros.wait_for(lambda: len(received) > 5, 10.0)
+        assert master._started and master.elapsed() > 0.0
+        # it started when the subscriber matched, not at node start: the probe saw the open angle
+        assert received[0][2] == pytest.approx(0.8)
+
+
+def test_start_when_subscribed_false_runs_from_node_start():
+    with RosRunner() as ros:
+        master = ros.add(MasterNode, time_scale=0.4, start_when_subscribed=False)
+        ros.start()
+        time.sleep(0.3)
+        assert master.elapsed() >= 0.2

@@ -163,13 +163,30 @@ def test_needle_grasp_sensorless_tracks_its_estimate(tmp_path):
     assert np.isfinite(force).all() and force.size > 100
 
 
+def _summary(rec):
+    from collections import Counter
+    return (Counter(rec.column('mode')), Counter(str(r) for r in rec.column('reasons')).most_common(4),
+            Counter(str(x) for x in rec.column('limits')).most_common(4),
+            float(np.max(rec.column('target'), initial=0)), float(np.max(rec.column('command'), initial=0)))
+
+
 def test_current_and_slew_limits_hold(tmp_path):
     # a current limit well below what 4 N needs (~0.29 A): the limit must hold, and say so
     max_current, slew = 0.15, 20.0
-    rec = run_loop(tmp_path, 4.0,
+    limits_at = Recorder.FIELDS.index('limits')
+
+    def until_the_limit_has_acted(ros, rec, sim_proc):
+        # wait for the event itself (not a fixed time: start-up is slow on a loaded machine),
+        # then long enough for /diagnostics (10 Hz) to report it
+        assert ros.wait_for(lambda: rec.rows and 'current_limit' in rec.rows[-1][limits_at],
+                            20.0), ('the current limit never acted', _summary(rec))
+        time.sleep(0.5)
+
+    rec = run_loop(tmp_path, 0.0,
                    controller={'force_sensor_enabled': True, 'max_current': max_current,
                                'max_current_slew': slew},
-                   master={'trajectory': 'needle_grasp', 'time_scale': 0.6})
+                   master={'trajectory': 'needle_grasp', 'time_scale': 0.6},
+                   during=until_the_limit_has_acted)
     command = rec.column('command')
     assert np.all(np.abs(command) <= max_current + 1e-12)
     assert np.max(np.abs(np.diff(command))) <= slew * 1e-3 * (1 + 1e-9)

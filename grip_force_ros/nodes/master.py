@@ -2,7 +2,8 @@
 
 Publishes ``master/gripper/measured_js`` (JointState, joint ``gripper``:
 position = opening (rad), velocity (rad/s)) at ``master_rate`` from a scripted
-trajectory or a replay (:mod:`grip_force_ros.trajectories`). After a
+trajectory or a replay (:mod:`grip_force_ros.trajectories`). The trajectory
+clock starts when a subscriber is matched (``start_when_subscribed``). After a
 non-repeating trajectory ends it keeps publishing the last angle (a silent
 master would trip the controller's watchdog), or exits when
 ``exit_when_done`` is true.
@@ -40,6 +41,7 @@ class MasterNode(Node):
         self.trajectory: Trajectory = self._build(self._values())
         self._pub = self.create_publisher(JointState, topics.MASTER_JS, STATE_PUB_QOS)
         self._start = time.monotonic()
+        self._started = False            # trajectory clock running (see start_when_subscribed)
         self._last_phase = None
         self._timer = self.create_timer(1.0 / self._param.value('master_rate'), self._tick)
         self.get_logger().info(
@@ -67,6 +69,7 @@ class MasterNode(Node):
                       'time_scale'}:
             self.trajectory = self._build(self._values())
             self._start = time.monotonic()
+            self._started = False
             self._last_phase = None
         if 'master_rate' in changed:
             self._timer.cancel()
@@ -74,7 +77,12 @@ class MasterNode(Node):
             self._timer = self.create_timer(1.0 / self._param.value('master_rate'), self._tick)
 
     def elapsed(self) -> float:
-        """Time since the trajectory started (s), wrapped when repeating."""
+        """Time since the trajectory started (s), wrapped when repeating; 0 until it starts."""
+        if not self._started:
+            if self._param.value('start_when_subscribed') and self._pub.get_subscription_count() == 0:
+                return 0.0
+            self._started = True
+            self._start = time.monotonic()
         t = time.monotonic() - self._start
         if self._param.value('repeat') and self.trajectory.duration > 0:
             t %= self.trajectory.duration
