@@ -239,3 +239,11 @@ def test_compare_report_table_and_plot(tmp_path):
     png = compare_plot(rep, tmp_path / 'c.png')
     assert png.read_bytes()[:4] == b'\x89PNG'
     assert _json_safe({'a': [float('nan'), 1.0]}) == {'a': [None, 1.0]}
+
+
+def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
+    from grip_force_ros.cli import main as cli_main
+    (tmp_path / 'old.txt').write_text('a previous run')
+    for extra in ([], ['--compare-instruments']):
+        assert cli_main(['demo', '--out', str(tmp_path), *extra]) == 2
+        assert 'is not empty' in capsys.readouterr().err

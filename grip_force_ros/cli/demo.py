@@ -100,6 +100,10 @@ def run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         print('error: --duration must be > 0 s', file=sys.stderr)
         return 2
+    if args.out and Path(args.out).exists() and any(Path(args.out).iterdir()):
+        # a run writes bags, which are never overwritten: refuse before starting any node
+        print(f'error: --out {args.out} is not empty; choose a new directory', file=sys.stderr)
+        return 2
     try:
         if args.compare_instruments:
             from grip_force_ros.demo.compare import TASK_DURATION, compare_instruments
