@@ -69,9 +69,10 @@ class ControlInputs:
         'rejected',
     )
 
-    def __init__(self, *, master_angle_min=0.0, master_angle_max=1.2, master_angle_tolerance=0.5,
-                 jaw_angle_min=-0.1, jaw_angle_max=math.pi / 2, wrist_angle_limit=math.pi / 2,
-                 current_limit=2.0, force_limit=120.0, stamp_future_tolerance=0.1):
+    def __init__(self, *, master_angle_min, master_angle_max, master_angle_tolerance,
+                 jaw_angle_min, jaw_angle_max, wrist_angle_limit,
+                 current_limit, force_limit, stamp_future_tolerance):
+        # no defaults here: the ranges come from the parameter schema (from_params)
         self.master_angle_min = float(master_angle_min)
         self.master_angle_max = float(master_angle_max)
         self.master_angle_tolerance = float(master_angle_tolerance)
