@@ -45,8 +45,7 @@ from grip_force_ros import topics
 from grip_force_ros.control import ControlInputs, GripController
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node, stamp_seconds)
-from grip_force_ros.nodes.ros_params import NodeParameters
-from grip_force_ros.params import ParameterError
+from grip_force_ros.nodes.ros_params import declare_node_parameters
 
 GROUPS = ('instrument', 'limits', 'controller')
 #: Periodic /diagnostics rate (Hz); changes are published sooner, at most this often:
@@ -70,11 +69,7 @@ class ControllerNode(Node):
     def __init__(self, **kwargs):
         super().__init__('controller', **kwargs)
         self.finished = Future()
-        try:
-            self._param = NodeParameters(self, GROUPS, on_update=self._on_params)
-        except ParameterError:
-            self.destroy_node()     # no half-made node left in the graph
-            raise
+        self._param = declare_node_parameters(self, GROUPS, on_update=self._on_params)
         params = self._param.params
         self.controller = GripController(params)
         self.inputs: ControlInputs = self.controller.new_inputs()

@@ -18,8 +18,7 @@ from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import STATE_PUB_QOS, joint_state, run_node
-from grip_force_ros.nodes.ros_params import NodeParameters
-from grip_force_ros.params import ParameterError
+from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory
 
 #: How long after the end of the trajectory an ``exit_when_done`` master keeps publishing (s).
@@ -32,12 +31,8 @@ class MasterNode(Node):
     def __init__(self, **kwargs):
         super().__init__('master', **kwargs)
         self.finished = Future()
-        try:
-            self._param = NodeParameters(self, groups=(), extra_specs=MASTER_SPECS,
-                                         on_update=self._on_params, check=self._check)
-        except ParameterError:
-            self.destroy_node()     # no half-made node left in the graph
-            raise
+        self._param = declare_node_parameters(self, groups=(), extra_specs=MASTER_SPECS,
+                                              on_update=self._on_params, check=self._check)
         self.trajectory: Trajectory = self._build(self._values())
         self._pub = self.create_publisher(JointState, topics.MASTER_JS, STATE_PUB_QOS)
         self._start = time.monotonic()

@@ -224,6 +224,23 @@ class NodeParameters:
             self._check(values)
 
 
+def declare_node_parameters(node, *args, **kwargs) -> 'NodeParameters':
+    """:class:`NodeParameters` for ``node``; on a bad value the half-made node is destroyed.
+
+    So a node that refuses its parameters leaves nothing behind in the ROS graph.
+
+    Raises
+    ------
+    ParameterError
+        As :class:`NodeParameters`.
+    """
+    try:
+        return NodeParameters(node, *args, **kwargs)
+    except ParameterError:
+        node.destroy_node()
+        raise
+
+
 def format_startup_error(node_name: str, exc: Exception) -> str:
     """One line for stderr when a node refuses its parameters."""
     return f'[{node_name}] refusing to start: {exc}'

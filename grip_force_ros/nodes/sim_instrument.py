@@ -31,8 +31,7 @@ from sensor_msgs.msg import JointState
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node)
-from grip_force_ros.nodes.ros_params import NodeParameters
-from grip_force_ros.params import ParameterError
+from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.sim import InstrumentSim
 
 GROUPS = ('instrument', 'sim', 'effects')
@@ -49,11 +48,7 @@ class SimInstrumentNode(Node):
     def __init__(self, **kwargs):
         super().__init__('sim_instrument', **kwargs)
         self.finished = Future()
-        try:
-            self._param = NodeParameters(self, GROUPS, on_update=self._on_params)
-        except ParameterError:
-            self.destroy_node()     # no half-made node left in the graph
-            raise
+        self._param = declare_node_parameters(self, GROUPS, on_update=self._on_params)
         params = self._param.params
         self.sim = InstrumentSim(params, obj=None, seed=params.sim_seed)
         self.current_command = 0.0       # A, last accepted command
