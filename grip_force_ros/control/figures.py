@@ -16,6 +16,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from grip_force_ros.control import controller as _controller
+from grip_force_ros.plotting import pyplot
 
 BLACKOUT = (1.5, 0.05)      # s: start, length
 SECONDS = 2.8               # s
@@ -65,9 +66,7 @@ def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     from grip_force_ros.params import load_params_file
     argv = sys.argv[1:] if argv is None else argv
     out = argv[0] if argv else 'docs/figures/control_blackout_stick_band.png'

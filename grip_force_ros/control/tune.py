@@ -37,6 +37,8 @@ from itertools import product
 
 import numpy as np
 
+from grip_force_ros.plotting import pyplot
+
 #: Margins claimed (and tested) for every loop and every plant variant.
 CLAIM_GM_DB = 6.0
 CLAIM_PM_DEG = 45.0
@@ -543,9 +545,7 @@ def settling_time(t: np.ndarray, y: np.ndarray, band: float = 0.05) -> float:
 
 def plot_steps(params, path, title: str = '', model=None) -> None:
     """Write the step-response figure (PNG) of :func:`step_responses`."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     steps = step_responses(params, model=model)
     fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     for name, (t, y) in steps.items():

@@ -6,6 +6,8 @@ from typing import Mapping
 
 import numpy as np
 
+from grip_force_ros.plotting import pyplot
+
 _PHASE_COLOURS = {'approach': '#f0f0f0', 'close': '#e3ecf7', 'hold': '#e6f4e6',
                   'pull': '#fbeede', 'release': '#f3e6f3'}
 
@@ -24,9 +26,7 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     Path
         The PNG written.
     """
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from grip_force_ros.demo.analysis import steady_window
 
@@ -93,9 +93,7 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
 def compare_plot(report: Mapping, path: str | Path) -> Path:
     """Bar chart of ``--compare-instruments``: steady hold force / target per instrument and
     condition, with each condition's spread in its label. Returns the PNG written."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     conditions = ('controlled', 'uncalibrated', 'sensor', 'naive')
     labels = {'controlled': 'calibrated model, no sensor',

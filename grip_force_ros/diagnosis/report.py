@@ -6,13 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from grip_force_ros.diagnosis.engine import Diagnosis
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
+from grip_force_ros.plotting import pyplot, save
 
 
 def _binned(x, y, bins=20):
@@ -30,7 +24,7 @@ def _binned(x, y, bins=20):
 
 def plot_regions(d: Diagnosis, path: Path) -> Path:
     """Bar chart: held-out share of the gap per operating region (top 14)."""
-    plt = _plt()
+    plt = pyplot()
     regions = d.result['regions'][:14][::-1]
     fig, ax = plt.subplots(figsize=(9, 0.35 * len(regions) + 1.5))
     y = np.arange(len(regions))
@@ -41,15 +35,12 @@ def plot_regions(d: Diagnosis, path: Path) -> Path:
     ax.set_xlim(0, 1)
     ax.legend(loc='lower right', fontsize=8)
     ax.set_title('Where the model disagrees with the log')
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def plot_residuals(d: Diagnosis, path: Path) -> Path:
     """Held-out residual (binned mean and RMS) against six operating variables."""
-    plt = _plt()
+    plt = pyplot()
     s = d.series
     unit = d.result['unit']
     panels = (('current', 'current (A)'), ('jaw', 'jaw angle (rad)'), ('wrist', 'wrist angle (rad)'),
@@ -67,15 +58,12 @@ def plot_residuals(d: Diagnosis, path: Path) -> Path:
         ax.set_ylabel(f'residual ({unit})')
     axes[0, 0].legend(fontsize=7)
     fig.suptitle('Held-out residual over operating regions (binned by quantiles)')
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def plot_timeseries(d: Diagnosis, path: Path, seconds: float = 30.0) -> Path:
     """Held-out stretch of the first log: measured, calibrated model, model + effect."""
-    plt = _plt()
+    plt = pyplot()
     s = d.series
     sel = s['log_index'] == s['log_index'][0]
     t = s['t'][sel]
@@ -96,15 +84,12 @@ def plot_timeseries(d: Diagnosis, path: Path, seconds: float = 30.0) -> Path:
     b.set_xlabel('held-out sample (analysis rate; held-out blocks joined)')
     b.legend(fontsize=8)
     fig.suptitle('Held-out data the fits never saw')
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def plot_ranking(d: Diagnosis, path: Path) -> Path:
     """Held-out score of every effect (lower is better; `none` marks the naming threshold)."""
-    plt = _plt()
+    plt = pyplot()
     ranking = d.result['ranking'][::-1]
     fig, ax = plt.subplots(figsize=(8, 0.35 * len(ranking) + 1.5))
     y = np.arange(len(ranking))
@@ -114,10 +99,7 @@ def plot_ranking(d: Diagnosis, path: Path) -> Path:
     ax.axvline(0, color='k', lw=0.5)
     ax.set_xlabel('held-out score: log loss ratio (force Huber + angle MSE) + parameter penalty')
     ax.set_title('Which effect (lower = explains more of the held-out gap)')
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=110)
 
 
 def _fmt(x, digits=4):

@@ -7,26 +7,18 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use('Agg')
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from grip_force_ros.model import GripForceModel
+from grip_force_ros.plotting import pyplot, save
+from grip_force_ros.reproduce.rows import PAPER
 
-from grip_force_ros.model import GripForceModel  # noqa: E402
-from grip_force_ros.reproduce.rows import PAPER  # noqa: E402
+plt = pyplot()
 
 __all__ = ['grip_over_wrist_and_opening', 'grip_vs_current', 'needle_with_and_without_losses',
            'outputs_vs_cable_radius', 'efficiency_vs_current', 'make_all']
 
 DPI = 110
-
-
-def _save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
 
 
 def grip_over_wrist_and_opening(params, out: Path, current: float = 0.35, others=()) -> Path:
@@ -45,7 +37,7 @@ def grip_over_wrist_and_opening(params, out: Path, current: float = 0.35, others
         ax.set_ylabel('opening angle [rad]')
         ax.set_title(f'{p.instrument_name}\nrigid object, I = {current:g} A\n'
                      f'wrist_wrap_gain = {p.wrist_wrap_gain:g}', fontsize=9)
-    return _save(fig, out / 'grip_over_wrist_and_opening.png')
+    return save(fig, out / 'grip_over_wrist_and_opening.png', DPI)
 
 
 def grip_vs_current(params, out: Path, opening: float = math.pi / 6, others=()) -> Path:
@@ -68,7 +60,7 @@ def grip_vs_current(params, out: Path, opening: float = math.pi / 6, others=()) 
     ax.set_title(f'Rigid object, opening angle pi/6 = {opening:.3f} rad, wrist 0')
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    return _save(fig, out / 'grip_vs_current.png')
+    return save(fig, out / 'grip_vs_current.png', DPI)
 
 
 def needle_with_and_without_losses(params, out: Path) -> Path:
@@ -95,7 +87,7 @@ def needle_with_and_without_losses(params, out: Path) -> Path:
         ax.legend(fontsize=7.5)
     axes[0].set_title(f'0.5 mm needle, {params.instrument_name}')
     axes[1].set_title("pull-out F_L = (sqrt2 + 1) mu' F_J")
-    return _save(fig, out / 'needle_with_and_without_losses.png')
+    return save(fig, out / 'needle_with_and_without_losses.png', DPI)
 
 
 def outputs_vs_cable_radius(params, out: Path) -> Path:
@@ -127,7 +119,7 @@ def outputs_vs_cable_radius(params, out: Path) -> Path:
     axes[1, 1].set_yscale('log')
     fig.suptitle(f'{params.instrument_name}: what the unstated cable radius changes '
                  f'(pulleys R = {min(params.guide_pulley_radii) * 1e3:g} mm)', fontsize=10)
-    return _save(fig, out / 'outputs_vs_cable_radius.png')
+    return save(fig, out / 'outputs_vs_cable_radius.png', DPI)
 
 
 def efficiency_vs_current(params, out: Path, gains=(0.0, 2.5e-4, 5e-4, 1e-3, 2e-3)) -> Path:
@@ -155,7 +147,7 @@ def efficiency_vs_current(params, out: Path, gains=(0.0, 2.5e-4, 5e-4, 1e-3, 2e-
     axes[1].legend(fontsize=7.5, loc='upper left')
     axes[0].set_title('efficiency against current: constant vs tension-dependent friction', fontsize=9)
     axes[1].set_title('needle grip force for the same friction laws', fontsize=9)
-    return _save(fig, out / 'efficiency_vs_current.png')
+    return save(fig, out / 'efficiency_vs_current.png', DPI)
 
 
 def make_all(params, out: Path, others=()) -> list[Path]:

@@ -6,6 +6,7 @@ from typing import Sequence
 
 import numpy as np
 
+from grip_force_ros.plotting import pyplot, save
 from grip_force_ros.rig.analysis import FULL, LINEAR, holdout_split
 from grip_force_ros.rig.estimator import ObserverSettings, _signals, motor_side_inputs
 
@@ -13,16 +14,9 @@ from grip_force_ros.rig.estimator import ObserverSettings, _signals, motor_side_
 SHOWN_RUNS = ('01', '43')
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def plot_timeseries(runs: Sequence, path: Path, cache: dict | None = None) -> Path:
     """Measured jaw torque vs the two estimators on held-out runs of the holdout split."""
-    plt = _plt()
+    plt = pyplot()
     cache = {} if cache is None else cache
     train, test = holdout_split(runs)
     full = FULL.make().fit(train, cache=cache)
@@ -43,15 +37,12 @@ def plot_timeseries(runs: Sequence, path: Path, cache: dict | None = None) -> Pa
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel('time (s)')
     axes[0, 0].legend(loc='lower right', fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=90)
 
 
 def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
     """Current against jaw torque while sliding: two friction branches and the fitted lines."""
-    plt = _plt()
+    plt = pyplot()
     settings = ObserverSettings()
     fig, ax = plt.subplots(figsize=(8, 6))
     colours = {1: 'tab:orange', -1: 'tab:blue'}
@@ -81,15 +72,12 @@ def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
     ax.set_ylabel('back-end current, 10 Hz low-pass (A)')
     ax.legend(fontsize=8, loc='center right')
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=90)
 
 
 def plot_regions(result: dict, path: Path) -> Path:
     """Held-out RMSE per region (both estimators), one panel per family."""
-    plt = _plt()
+    plt = pyplot()
     families = []
     for row in result['regions']:
         if row['family'] not in families:
@@ -114,15 +102,12 @@ def plot_regions(result: dict, path: Path) -> Path:
         ax.set_xlim(0, 20)
     np.atleast_1d(axes)[0].legend(fontsize=7, loc='lower right')
     np.atleast_1d(axes)[-1].set_xlabel('held-out RMSE (mN m); dashed: published 4.42 mN m')
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=90)
 
 
 def plot_effects(result: dict, path: Path) -> Path:
     """Held-out RMSE of the ladder, drop-one and add-one variants."""
-    plt = _plt()
+    plt = pyplot()
     rows = []
     for group in ('ladder', 'drop_one', 'add_one'):
         for r in result['effects'][group]:
@@ -142,10 +127,7 @@ def plot_effects(result: dict, path: Path) -> Path:
     ax.set_xlim(0, 48)
     ax.set_title('What each effect is worth: ladder (blue), removed from the full model (red), '
                  'added to it (green)', fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save(fig, path, dpi=90)
 
 
 def _fmt(value, std=None, scale=1.0, digits=3):

@@ -13,6 +13,7 @@ import numpy as np
 
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
+from grip_force_ros.plotting import pyplot
 from grip_force_ros.sim.offline import simulate
 from grip_force_ros.sim.plant import InstrumentSim
 from grip_force_ros.sim.step_response import metrics_of_signal
@@ -43,9 +44,7 @@ def step_record(current=0.35, obj='needle', pre=0.05, duration=0.2, dt=1e-4):
 
 def step_figure(out: Path, current=0.35) -> dict:
     """Write the step-response figure; return the metrics per object."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     numbers = {}
@@ -79,9 +78,7 @@ def step_figure(out: Path, current=0.35) -> dict:
 
 def effects_figure(out: Path) -> None:
     """Write grip force vs current loops (needle, slow sine) for no effect and each effect."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     p = make_params(QUIET)
     model = GripForceModel(p)
