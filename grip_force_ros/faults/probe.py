@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
@@ -264,13 +263,3 @@ class FaultProbe(Node):
     def clear_records(self) -> None:
         """Forget what was recorded so far (the limit monitor keeps counting)."""
         self.commands, self.targets, self.estimates, self.diagnostics = [], [], [], []
-
-
-def wait_until(predicate, timeout: float, poll: float = 0.005) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` s pass."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(poll)
-    return bool(predicate())

@@ -157,7 +157,7 @@ class Session:
         return len(targets) == samples and targets[0][0] >= since and all(t[2] > 0 for t in targets)
 
     def wait_gripping(self, timeout: float = READY_TIMEOUT) -> bool:
-        from grip_force_ros.faults.probe import wait_until
+        from grip_force_ros.nodes.harness import wait_until
         start = self.probe.now()
         return wait_until(lambda: self.gripping(start), timeout)
 
@@ -234,7 +234,7 @@ def _resume_jumps(rows: list[tuple]) -> list[float]:
 
 def run_message_case(session: Session, case: FaultCase) -> dict:
     """Inject one message, silence or restart fault and judge its outcome."""
-    from grip_force_ros.faults.probe import wait_until
+    from grip_force_ros.nodes.harness import wait_until
     probe, params = session.probe, session.params
     detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
                     'description': case.description}
@@ -398,7 +398,7 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
 
 def run_param_set_case(session: Session, case: FaultCase) -> dict:
     """A runtime parameter set: refused with a reason (old value kept), or bounded."""
-    from grip_force_ros.faults.probe import wait_until
+    from grip_force_ros.nodes.harness import wait_until
     probe, params = session.probe, session.params
     detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
                     'description': case.description}

@@ -111,6 +111,16 @@ class NodeProcess:
         self.stop()
 
 
+def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
+    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return bool(predicate())
+
+
 class RosRunner:
     """Nodes in this process on their own rclpy context, spun in a background thread.
 
@@ -159,12 +169,7 @@ class RosRunner:
     @staticmethod
     def wait_for(predicate: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:
         """Poll ``predicate`` until true or ``timeout`` s passed; returns its last value."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if predicate():
-                return True
-            time.sleep(poll)
-        return bool(predicate())
+        return wait_until(predicate, timeout, poll)
 
     def stop(self) -> None:
         if not self._stop.done():
