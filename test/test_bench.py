@@ -37,44 +37,33 @@ def test_ratio_handles_missing_values():
     assert math.isnan(ratio(float('nan'), 1.0))
 
 
-def test_match_commands_takes_newest_delivered_state():
-    from grip_force_ros.bench.child import match_commands
+def test_loop_latency_matches_commands_to_the_states_they_answer():
+    from grip_force_ros.sim.loop_latency import LoopLatency
     ms = 1_000_000
-    # states published every 1 ms at k ms, delivered 0.1 ms later
-    states = np.array([[k * ms, k * ms + ms // 10] for k in range(10)], np.int64)
-    # controller ticks at k + 0.5 ms, command arrives 0.1 ms after its tick
-    commands = np.array([[k * ms + ms // 2, k * ms + ms // 2 + ms // 10] for k in range(10)], np.int64)
-    r = match_commands(states, commands, 1e-3)
-    # each command answers the state published 0.5 ms before its tick: 0.6 ms round trip
-    assert r['latency']['samples'] == 10
-    assert r['latency']['p50_ms'] == pytest.approx(0.6)
-    assert r['latency']['max_ms'] == pytest.approx(0.6)
-    assert r['periods']['missed'] == 0 and r['stale_answers'] == 0
-    # a dropped controller tick is a missed period (the next command still answers its newest state)
-    r = match_commands(states, np.delete(commands, 4, axis=0), 1e-3)
-    assert r['periods']['missed'] == 1
-    # a slow state (delivered after the tick) makes the command answer the previous state
-    late = states.copy()
-    late[5, 1] = 5 * ms + 700_000
-    r = match_commands(late, commands, 1e-3)
-    assert r['latency']['max_ms'] == pytest.approx(1.6)
-    assert r['stale_answers'] == 1
+    loop = LoopLatency(memory=4)
+    for k in range(6):
+        loop.state_published(k * ms)
+    assert loop.command_received(5 * ms, 5 * ms + 300_000) == 300_000
+    assert loop.command_received(4 * ms, 5 * ms + 700_000) == 1_700_000  # a late answer still counts
+    assert loop.command_received(5 * ms, 6 * ms) is None                # second answer to one state
+    assert loop.command_received(5 * ms + 1, 6 * ms) is None            # a stamp never published
+    assert loop.command_received(0, 6 * ms) is None                     # fell out of the memory
+    for k in range(6, 9):                                               # 2, 3 leave unanswered
+        loop.state_published(k * ms)
+    s = loop.summary()
+    assert (s['round_trips'], s['answered'], s['other_commands'], s['states']) == (2, 2, 3, 9)
+    assert s['unanswered'] == 2 + 2        # 0 and 1 evicted at 4 and 5, then 2 and 3 (6 left, 4/5 answered)
+    assert s['max_ms'] == pytest.approx(1.7)
+    assert loop.summary()['round_trips'] == 0                            # reset
+    assert math.isnan(loop.summary()['p99_ms'])
 
 
-def test_stamped_commands_round_trip_is_arrival_minus_stamp():
-    from grip_force_ros.bench.child import stamped_commands
+def test_floor_and_product_count_unanswered_periods_alike():
+    """Missed periods = gaps in the answered stamps, for ping and for the product sim."""
+    from grip_force_ros.bench.stats import missed_periods
     ms = 1_000_000
-    states = np.array([[k * ms, k * ms + ms // 10] for k in range(10)], np.int64)
-    answered = [k for k in range(10) if k != 3]              # state 3 never answered
-    commands = np.array([[k * ms, k * ms + 300_000 + (2 * ms if k == 7 else 0)] for k in answered],
-                        np.int64)
-    r = stamped_commands(states, commands, 1e-3)
-    assert r['latency']['samples'] == 9
-    assert r['latency']['p50_ms'] == pytest.approx(0.3)
-    assert r['latency']['max_ms'] == pytest.approx(2.3)
-    assert r['worst'][0][1] == pytest.approx(2.3) and r['worst'][0][0] == pytest.approx(7e-3)
-    assert r['periods']['missed'] == 1                        # the unanswered state
-    assert r['sim_periods']['missed'] == 0 and r['stale_answers'] == 0
+    answered = np.array([k * ms for k in range(20) if k not in (5, 6)], np.int64)
+    assert missed_periods(answered, 1e-3)['missed'] == 2
 
 
 def test_model_speed_structure():
@@ -110,7 +99,7 @@ def test_bench_all_parts_tiny(tmp_path):
     from grip_force_ros.cli.bench import render
     from grip_force_ros.demo import find_config
     r = run_bench(1.0, config=str(find_config('paper_needle_driver')), log_minutes=1.0,
-                  model_size=2000, event_controller=True)
+                  model_size=2000)
     json.dumps(r)                                             # serialisable as --json prints it
     loop, model, diag = r['loop'], r['model'], r['diagnosis']
     for value in (loop['p99_ratio'], loop['missed_fraction'], model['forward_ratio'],
@@ -122,11 +111,11 @@ def test_bench_all_parts_tiny(tmp_path):
         assert 0 < s['p50_ms'] <= s['p99_ms'] <= s['max_ms'] < 1000
     assert 0 <= loop['missed_fraction'] <= 1
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
-    assert set(loop['cpu_percent']['product']) == {'probe', 'sim', 'controller', 'master'}
+    assert set(loop['cpu_percent']['product']) == {'sim', 'controller', 'master'}
     assert all(v > 0 for v in loop['cpu_percent']['product'].values())
-    event = loop['event_driven']                              # the bench's event-driven controller
-    assert event['product']['samples'] > 100 and math.isfinite(event['p99_ratio'])
+    # the shipped controller answers (nearly) every state, each command carrying its stamp
+    assert loop['product']['samples'] > 0.8 * 1000 * r['loop']['seconds']
     assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
-    assert 'event-driven' in text
+    assert 'timer skipped' in text

@@ -1,23 +1,18 @@
-"""The bench's own rclpy processes: ping / echo (the middleware floor) and the product probe.
+"""The bench's own rclpy processes: ping and echo, the middleware floor.
 
 Run by :mod:`grip_force_ros.bench.loop`, one process each::
 
     python -m grip_force_ros.bench.child ping  --seconds 20 [variant options]
     python -m grip_force_ros.bench.child echo  [variant options]
-    python -m grip_force_ros.bench.child probe --seconds 20 --period 0.001
 
 ``ping`` plays the sim: a 1 kHz timer publishes the actuator state
 (``sensor_msgs/JointState`` on :data:`topics.ACTUATOR_JS`) stamped with the
 wall clock (``time.time_ns``, the clock of rclpy's ROS time); ``echo`` plays the
 controller at its barest: it answers every state in the subscription callback
 with a current command (``JointState`` on :data:`topics.SERVO_CURRENT`) that
-carries the state's stamp. The round trip is the receive time minus that stamp.
-
-``probe`` measures the product: it listens (passively) to the real sim's actuator
-state and the real controller's command. The controller stamps each command with
-the stamp of the actuator state it was computed from, so the command's receive
-time minus its stamp is the sim -> controller -> sim round trip; the gaps between
-commands give the controller's missed periods.
+carries the state's stamp. The round trip is the receive time minus that stamp;
+a period is missed when its state got no answer. The product is measured the
+same way by the shipped sim node (:mod:`.product_sim`).
 
 Protocol on stdout (one line each, read by the parent): ``START`` when the
 measurement window opens (after discovery and a warm-up), then one JSON line
@@ -140,6 +135,8 @@ class Ping(Node):
         self.prealloc = opts.prealloc
         capacity = int((opts.seconds + 5.0) / opts.period) + 1000
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
+        self.answered = np.zeros(capacity, np.int64)     # ns, stamps of the answered states
+        self.n_answered = 0
         group = _callback_group(opts.callback_groups)
         sub_group = _callback_group(opts.callback_groups)
         self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, make_qos(opts.depth))
@@ -162,16 +159,22 @@ class Ping(Node):
         w.advance(self.summary)
 
     def on_answer(self, msg: JointState) -> None:
-        lat = time.time_ns() - stamp_ns(msg.header.stamp)
+        stamp = stamp_ns(msg.header.stamp)
+        lat = time.time_ns() - stamp
         w = self.window
         w.saw_answer()
         if w.measuring:
             w.record_latency(lat)
+            if self.n_answered < w.capacity:
+                self.answered[self.n_answered] = stamp
+                self.n_answered += 1
 
     def summary(self) -> dict:
         w = self.window
         out = {'latency': latency_summary(w.latencies[:w.n_latencies]),
-               'periods': missed_periods(w.ticks[:w.n_ticks], self.period),
+               # missed: periods whose state got no answer (as for the product)
+               'periods': missed_periods(np.sort(self.answered[:self.n_answered]), self.period),
+               'timer_periods': missed_periods(w.ticks[:w.n_ticks], self.period),
                'sent': w.sent, 'received': w.received}
         out['lost_fraction'] = 1.0 - w.received / w.sent if w.sent else float('nan')
         return out
@@ -222,108 +225,6 @@ class Echo(Node):
         self.pub.publish(out)
 
 
-class Probe(Node):
-    """Listens to the product: actuator states of the sim, current commands of the controller.
-
-    The controller runs on its own 1 kHz timer and stamps each command with its
-    clock at the tick. The state a command answers is the newest actuator state
-    delivered before that tick; the probe takes its own delivery time of each
-    state as the controller's (both are readers of the same publication on this
-    machine). Round trip of a command = its arrival here minus the stamp (the
-    sim's publish time) of the state it answers.
-    """
-
-    def __init__(self, opts):
-        super().__init__('bench_probe')
-        self.period = opts.period
-        self.match = opts.match
-        capacity = int((opts.seconds + 5.0) / opts.period) + 1000
-        self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
-        qos = make_qos(opts.depth)
-        # ns, wall clock: stamp and arrival of each actuator state and each command
-        self.states = np.zeros((capacity, 2), np.int64)
-        self.n_states = 0
-        self.commands = np.zeros((capacity, 2), np.int64)
-        self.n_commands = 0
-        self.create_subscription(JointState, topics.ACTUATOR_JS, self.on_state, qos)
-        self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_command, qos)
-        self.timer = self.create_timer(0.05, lambda: self.window.advance(self.summary))
-
-    def on_state(self, msg: JointState) -> None:
-        now = time.time_ns()
-        if self.window.measuring and self.n_states < self.window.capacity:
-            self.states[self.n_states] = stamp_ns(msg.header.stamp), now
-            self.n_states += 1
-
-    def on_command(self, msg: JointState) -> None:
-        now = time.time_ns()
-        w = self.window
-        w.saw_answer()
-        if w.measuring and self.n_commands < w.capacity:
-            self.commands[self.n_commands] = stamp_ns(msg.header.stamp), now
-            self.n_commands += 1
-
-    def summary(self) -> dict:
-        if self.match == 'stamp':
-            return stamped_commands(self.states[:self.n_states], self.commands[:self.n_commands],
-                                    self.period)
-        return match_commands(self.states[:self.n_states], self.commands[:self.n_commands],
-                              self.period)
-
-
-def stamped_commands(states: np.ndarray, commands: np.ndarray, period: float) -> dict:
-    """Round trips when each command carries the stamp of the state it answers (exact).
-
-    Same arrays and result as :func:`match_commands`; ``periods`` counts the sim
-    periods without an answer (gaps in the answered stamps).
-    """
-    commands = commands[np.argsort(commands[:, 0], kind='stable')]
-    round_trips = commands[:, 1] - commands[:, 0]
-    worst = np.argsort(round_trips)[-5:][::-1]
-    t0 = commands[0, 0] if len(commands) else 0
-    return {'latency': latency_summary(round_trips),
-            'worst': [(float((commands[i, 0] - t0) * 1e-9), float(round_trips[i] * 1e-6)) for i in worst],
-            'periods': missed_periods(commands[:, 0], period),
-            'sim_periods': missed_periods(np.sort(states[:, 0]), period),
-            'states': int(len(states)), 'commands': int(len(commands)),
-            'stale_answers': int(len(commands) - np.unique(commands[:, 0]).size)}
-
-
-def match_commands(states: np.ndarray, commands: np.ndarray, period: float) -> dict:
-    """Round trips and controller periods from the probe's records.
-
-    Parameters
-    ----------
-    states : ndarray, shape (n, 2)
-        Actuator states: sim stamp, arrival at the probe (ns, wall clock).
-    commands : ndarray, shape (m, 2)
-        Current commands: controller stamp (its tick), arrival at the probe (ns).
-    period : float
-        Control period (s).
-
-    Returns
-    -------
-    dict
-        ``latency`` (round trip, ms), ``periods`` (missed controller periods, from
-        the command stamps), ``sim_periods`` (from the state stamps), counts.
-    """
-    states = states[np.argsort(states[:, 1], kind='stable')]
-    commands = commands[np.argsort(commands[:, 0], kind='stable')]
-    newest = np.searchsorted(states[:, 1], commands[:, 0], side='right') - 1
-    ok = newest >= 0
-    round_trips = commands[ok, 1] - states[newest[ok], 0]
-    worst = np.argsort(round_trips)[-5:][::-1]
-    t0 = commands[0, 0] if len(commands) else 0
-    return {'latency': latency_summary(round_trips),
-            # the five longest round trips: (s since the first command, ms)
-            'worst': [(float((commands[ok][i, 0] - t0) * 1e-9), float(round_trips[i] * 1e-6))
-                      for i in worst],
-            'periods': missed_periods(commands[:, 0], period),
-            'sim_periods': missed_periods(np.sort(states[:, 0]), period),
-            'states': int(len(states)), 'commands': int(len(commands)),
-            'stale_answers': int(np.sum(np.diff(newest[ok]) == 0)) if ok.any() else 0}
-
-
 def _callback_group(kind: str):
     if kind == 'reentrant':
         return ReentrantCallbackGroup()
@@ -350,7 +251,7 @@ def _command() -> JointState:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.child')
-    p.add_argument('role', choices=('ping', 'echo', 'probe'))
+    p.add_argument('role', choices=('ping', 'echo'))
     p.add_argument('--seconds', type=float, default=10.0, help='measurement window (s)')
     p.add_argument('--warmup', type=float, default=1.0, help='after the first answer (s)')
     p.add_argument('--period', type=float, default=1e-3, help='loop period (s)')
@@ -360,9 +261,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--prealloc', action='store_true', help='reuse one message per publisher')
     p.add_argument('--answer', choices=('callback', 'timer'), default='callback',
                    help='echo: answer in the subscription callback or on a 1 kHz timer')
-    p.add_argument('--match', choices=('delivery', 'stamp'), default='delivery',
-                   help='probe: command stamped at the controller tick (match the newest state '
-                        'delivered before it) or with the answered state stamp (exact)')
     p.add_argument('--callback-groups', choices=('default', 'separate', 'reentrant'),
                    default='default')
     return p
@@ -373,7 +271,7 @@ def main(argv=None) -> int:
     rclpy.init()
     node = None
     try:
-        node = {'ping': Ping, 'echo': Echo, 'probe': Probe}[opts.role](opts)
+        node = {'ping': Ping, 'echo': Echo}[opts.role](opts)
         executor = make_executor(opts.executor)
         executor.add_node(node)
         window = getattr(node, 'window', None)

@@ -3,12 +3,15 @@
 * :func:`run_floor`: bare rclpy ping-pong between two processes (:mod:`.child`
   ``ping`` and ``echo``), the product's message types, one variant of the
   settings (executor, QoS depth, gc.freeze, preallocated messages, callback groups).
-* :func:`run_product`: the real ``sim_instrument``, ``controller`` and ``master``
-  executables with an instrument YAML, measured by :mod:`.child` ``probe``.
+* :func:`run_product`: the shipped ``controller`` and ``master`` executables and
+  the shipped sim node (measuring its own loop, :mod:`.product_sim`) with an
+  instrument YAML.
 
-Both return the same structure: ``latency`` (p50/p99/max round trip, ms),
-``periods`` (missed periods of the 1 kHz timer), ``cpu`` (% of one core per
-process), plus what is particular to each.
+Both are measured by the process that publishes the state, on its own clock:
+the answer carries the stamp of the state it answers. Both return the same
+structure: ``latency`` (p50/p99/max round trip, ms), ``periods`` (periods whose
+state got no answer), ``timer_periods`` (gaps of the state publisher's 1 kHz
+timer), ``cpu_percent`` (% of one core per process), plus what is particular to each.
 """
 from __future__ import annotations
 
@@ -151,13 +154,12 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
 
 
 def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
-                period: float = 1e-3, executor: str | None = None, controller: str = 'timer',
-                rt_priority: int = 0) -> dict:
-    """sim -> controller -> sim round trip at 1 kHz, the real executables.
+                executor: str | None = None, rt_priority: int = 0) -> dict:
+    """sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
 
-    Starts ``sim_instrument``, ``controller`` (``--params-file config``) and a
-    ``master`` repeating the needle grasp, then the probe (:mod:`.child` ``probe``)
-    that listens to the actuator state and the current command.
+    Starts the ``controller`` and a ``master`` repeating the needle grasp (the
+    shipped executables, ``--params-file config``), and the shipped sim node as
+    :mod:`.product_sim`, which keeps its loop's round trips for the window.
 
     Parameters
     ----------
@@ -166,25 +168,20 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     domain_id : int
         ROS_DOMAIN_ID of the run.
     config : str
-        Instrument YAML for the sim and the controller.
+        Instrument YAML for the sim, the controller and the master.
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
-    controller : str
-        'timer': the shipped ``controller`` (steps on its 1 kHz timer; commands
-        matched to states by delivery time); 'event': the bench's
-        :mod:`.event_controller` (steps on each actuator state; its commands carry
-        the answered state's stamp, so the round trip is exact).
     rt_priority : int
-        0: normal scheduling; 1..99: sim, controller and probe under SCHED_FIFO
-        at this priority (the master stays normal).
+        0: normal scheduling; 1..99: sim and controller under SCHED_FIFO at this
+        priority (the master stays normal).
 
     Returns
     -------
     dict
-        ``latency`` (ms, actuator-state stamp -> command received),
-        ``periods`` (missed controller periods, from the commands' arrival),
-        ``sim_periods``, ``cpu_percent`` per process, ``stale_answers`` (commands
-        that answered the same state as the previous one).
+        ``latency`` (ms, actuator-state stamp -> command arrival at the sim),
+        ``periods`` (sim periods with no answer), ``timer_periods`` (the sim's
+        timer), ``cpu_percent`` per process, ``other_commands`` (commands that
+        answer no fresh state: the controller's timer fallback), ``worst``.
     """
     extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
     env = ros_env(domain_id, extra)
@@ -193,26 +190,19 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     children = []
     try:
         rt = rt_priority
-        children.append(Child('sim', [executable('sim_instrument'), *params], env, rt_priority=rt))
-        controller_cmd = ([executable('controller')] if controller == 'timer' else
-                          python_module('grip_force_ros.bench.event_controller'))
-        children.append(Child('controller', [*controller_cmd, *params], env, rt_priority=rt))
+        children.append(Child('controller', [executable('controller'), *params], env, rt_priority=rt))
         children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
-        probe = Child('probe', python_module(CHILD, 'probe', '--seconds', str(seconds),
-                                             '--warmup', str(warmup), '--period', str(period),
-                                             '--depth', '10', '--match',
-                                             'delivery' if controller == 'timer' else 'stamp'),
-                      env, rt_priority=rt)
-        children.append(probe)
-        result = _window(probe, children[:3], seconds)
-        for c in children[:3]:
+        sim = Child('sim', python_module('grip_force_ros.bench.product_sim', '--seconds', str(seconds),
+                                         '--warmup', str(warmup), *params), env, rt_priority=rt)
+        children.append(sim)
+        result = _window(sim, children[:2], seconds)
+        for c in children[:2]:
             if not c.alive():
                 raise BenchError(f'{c.name} died during the run; last output:\n' + '\n'.join(c.tail))
     finally:
         stop_all(children)
     result['config'] = config
     result['executor'] = executor or 'node default'
-    result['controller'] = controller
     result['rt_priority'] = rt_priority
     return result
 
@@ -226,6 +216,9 @@ def compare(floor: dict, product: dict) -> dict:
         'max_ratio': ratio(pl['max_ms'], fl['max_ms']),
         'missed_fraction': product['periods']['missed_fraction'],
         'floor_missed_fraction': floor['periods']['missed_fraction'],
+        # gaps of the state publisher's own 1 kHz timer (part of the missed periods)
+        'timer_missed_fraction': product['timer_periods']['missed_fraction'],
+        'floor_timer_missed_fraction': floor['timer_periods']['missed_fraction'],
         'floor': {k: fl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
         'product': {k: pl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
         'cpu_percent': {'floor': floor['cpu_percent'], 'product': product['cpu_percent']},

@@ -52,37 +52,19 @@ def parse_domains(text: str | None) -> list[int] | None:
 
 
 def run_loop(seconds: float, domains=None, config: str = DEFAULT_CONFIG, variant: Variant = BEST,
-             product_executor: str | None = None, event_controller: bool = False, rt_priority: int = 0,
-             say=None) -> dict:
-    """The ``loop`` section: floor then product in one free domain, and their ratios.
-
-    With ``event_controller`` the product is run a second time with the bench's
-    event-driven controller (:mod:`.event_controller`), reported under
-    ``event_driven`` with its own ratios to the same floor.
-    """
+             product_executor: str | None = None, rt_priority: int = 0, say=None) -> dict:
+    """The ``loop`` section: floor then product in one free domain, and their ratios."""
     say = say or (lambda msg: None)
-    event = None
     variant = replace(variant, rt_priority=rt_priority)
     with DomainLock(domains) as domain:
         say(f'loop: floor ping-pong, {seconds:g} s, ROS_DOMAIN_ID {domain} ({variant.label()})')
         floor = run_floor(seconds, domain, variant)
         say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
         product = run_product(seconds, domain, config, executor=product_executor, rt_priority=rt_priority)
-        if event_controller:
-            say('loop: product again, controller stepping on each actuator state (bench variant)')
-            event = run_product(seconds, domain, config, executor=product_executor, controller='event',
-                                rt_priority=rt_priority)
     out = compare(floor, product)
-    if event is not None:
-        e = compare(floor, event)
-        out['event_driven'] = {k: e[k] for k in ('p99_ratio', 'p50_ratio', 'max_ratio', 'missed_fraction',
-                                                   'product', 'product_worst')}
-        out['event_driven']['cpu_percent'] = event['cpu_percent']
-        out['event_driven']['stale_answers'] = event['stale_answers']
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
                 'floor_lost_fraction': floor['lost_fraction'],
-                'product_stale_answers': product['stale_answers'],
-                'sim_missed_fraction': product['sim_periods']['missed_fraction'],
+                'product_fallback_commands': product['other_commands'],
                 'product_executor': product['executor'], 'rt_priority': rt_priority})
     return out
 
@@ -106,7 +88,7 @@ def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> l
 def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str = DEFAULT_CONFIG,
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
               variant_seconds: float | None = None, product_executor: str | None = None,
-              event_controller: bool = False, rt_priority: int = 0, say=None) -> dict:
+              rt_priority: int = 0, say=None) -> dict:
     """Everything ``grip-force bench`` measures, as the nested JSON dict.
 
     Parameters
@@ -127,8 +109,6 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str =
         Also measure the floor with every variant of :data:`VARIANTS`.
     product_executor : str, optional
         Executor of the product's nodes ('events' or 'single'); default theirs.
-    event_controller : bool
-        Also run the product with the event-driven controller variant.
     rt_priority : int
         0, or SCHED_FIFO priority of the 1 kHz processes of the floor and the product alike.
 
@@ -151,7 +131,7 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str =
                                  other_configs=(str(nonlinear),) if nonlinear.is_file() else ())
     if 'loop' in parts:
         out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor,
-                               event_controller=event_controller, rt_priority=rt_priority, say=say)
+                               rt_priority=rt_priority, say=say)
     if variants:
         out['variants'] = run_variants(variant_seconds or seconds, domains, say=say)
     if 'diagnosis' in parts:

@@ -31,9 +31,6 @@ def add_arguments(parser) -> None:
                         help='also measure the floor with each executor/QoS/gc/allocation variant')
     parser.add_argument('--variant-seconds', type=float, default=None,
                         help='window of each variant run (s, default --seconds)')
-    parser.add_argument('--event-controller', action='store_true',
-                        help='also run the product with a controller that steps on each actuator state '
-                             '(bench variant, grip_force_ros.bench.event_controller)')
     parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
                         help='run the 1 kHz processes of the floor and the product under SCHED_FIFO N '
                              '(1..99, like chrt -f N; needs CAP_SYS_NICE; default 0 = normal)')
@@ -71,12 +68,10 @@ def render(result: dict) -> str:
         lines.append(f"  p99 ratio {_f(loop['p99_ratio'])} (goal <= 1.5: {_goal(loop['p99_ratio'], 1.5)}); "
                      f"missed periods {_f(loop['missed_fraction'] * 100)} % "
                      f"(goal <= 0.1 %: {_goal(loop['missed_fraction'], 0.001)})")
-        ev = loop.get('event_driven')
-        if ev:
-            ep = ev['product']
-            lines.append(f"  product, event-driven controller (bench variant): p50 {_f(ep['p50_ms'])} ms  "
-                         f"p99 {_f(ep['p99_ms'])} ms  max {_f(ep['max_ms'])} ms  missed "
-                         f"{_f(ev['missed_fraction'] * 100)} %  p99 ratio {_f(ev['p99_ratio'])}")
+        lines.append(f"  of which the state publisher's own timer skipped: floor "
+                     f"{_f(loop['floor_timer_missed_fraction'] * 100)} %, product "
+                     f"{_f(loop['timer_missed_fraction'] * 100)} %; controller timer-fallback commands "
+                     f"{loop.get('product_fallback_commands', 'n/a')}")
         cpu = loop['cpu_percent']
         lines.append('  cpu % of one core: floor '
                      + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
@@ -141,8 +136,7 @@ def run(args) -> int:
         result = run_bench(args.seconds, parts, domains=parse_domains(args.domain_ids), config=config,
                            log_minutes=args.log_minutes, model_size=args.model_size,
                            variants=args.variants, variant_seconds=args.variant_seconds,
-                           product_executor=args.product_executor,
-                           event_controller=args.event_controller, rt_priority=args.rt_priority,
+                           product_executor=args.product_executor, rt_priority=args.rt_priority,
                            say=say)
     except BenchError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)

@@ -25,6 +25,14 @@ so the actuator state is expected at ``control_rate`` (the sim publishes at
 ``publish_rate`` = 1 kHz). Cancelling the timer stops the loop altogether (no
 step on states either).
 
+Output stamps: the outputs of a step on a fresh actuator state (accepted, with a
+non-zero stamp) carry that state's header stamp, the time of the measurement
+they were computed from, as the sensor data they derive from would. The
+instrument can then tell the age of each command (the sim measures the loop's
+round trip this way: arrival minus stamp, on its own clock). Steps of the timer
+fallback, and steps on a state that was rejected, duplicated or unstamped, carry
+the controller's clock.
+
 A malformed message (unknown or missing joint names, wrong array lengths, NaN)
 is rejected with its reason; the last good input is kept. All the control
 logic, the plausibility checks and the watchdog live in
@@ -162,22 +170,26 @@ class ControllerNode(Node):
 
     def _on_actuator(self, msg: JointState) -> None:
         """Actuator state: store it and run the control step on it (event-driven loop)."""
-        self._read_actuator(msg)
+        fresh = self._read_actuator(msg)
         if not self._timer.is_canceled():  # cancelled: the loop is stopped
             self.steps['on_state'] += 1
-            self._step(time.perf_counter())
+            self._step(time.perf_counter(), msg.header.stamp if fresh else None)
             self._stepped_on_state = True
 
-    def _read_actuator(self, msg: JointState) -> None:
+    def _read_actuator(self, msg: JointState) -> bool:
+        """Store the actuator state; True if it was accepted as a new, stamped sample."""
         now = self._now()
         fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
         try:
             (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
         except InputRejected as exc:
-            return self._reject('actuator', now, exc)
+            self._reject('actuator', now, exc)
+            return False
         velocity = drum[2] if len(drum) > 2 else 0.0
-        self._report(self.inputs.set_actuator(now, drum[0], drum[1], velocity,
-                                              stamp_seconds(msg.header.stamp)))
+        stamp = stamp_seconds(msg.header.stamp)
+        self._report(self.inputs.set_actuator(now, drum[0], drum[1], velocity, stamp))
+        # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
+        return self.inputs.actuator_time == now and stamp != 0.0
 
     def _on_force(self, msg: WrenchStamped) -> None:
         self._report(self.inputs.set_force(self._now(), msg.wrench.force.z,
@@ -216,10 +228,14 @@ class ControllerNode(Node):
             self._step(started)
         self._stepped_on_state = False
 
-    def _step(self, started: float) -> None:
-        """One control step, timed (``started``: perf_counter s, now)."""
+    def _step(self, started: float, answered_stamp=None) -> None:
+        """One control step, timed (``started``: perf_counter s, now).
+
+        ``answered_stamp``: header stamp of the fresh actuator state the step answers
+        (its outputs carry it), or None (they carry the controller's clock).
+        """
         self._last_step = started
-        self._control()
+        self._control(answered_stamp)
         timing = self.timing
         busy = time.perf_counter() - started
         timing['busy_sum'] += busy
@@ -235,12 +251,12 @@ class ControllerNode(Node):
                 timing['late'] += 1
         self._last_tick = started
 
-    def _control(self) -> None:
+    def _control(self, answered_stamp=None) -> None:
         stamp = self._now_ns()
         now = stamp.nanoseconds * 1e-9
         out = self.controller.step(now, self.inputs)
         self.last_output = out
-        stamp_msg = stamp.to_msg()
+        stamp_msg = answered_stamp if answered_stamp is not None else stamp.to_msg()
 
         servo = self._servo_msg
         servo.header.stamp = stamp_msg

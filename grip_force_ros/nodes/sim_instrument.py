@@ -6,12 +6,16 @@ Steps the plant in real time: a timer at ``publish_rate`` (1 kHz) advances the
 simulation by the time actually elapsed since the last step (capped at
 :data:`MAX_STEP`, so a stalled process slows the simulation instead of
 integrating one huge step), with the last accepted current command held.
-Publishes after each step:
-    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s)
+Publishes after each step, in this order (the actuator state first: the
+controller steps on it, so the other two are not on the loop's path):
     instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
                                       effort = measured current (A)
+    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s)
     grip/measured_force               force.z = load-cell grip force (N)
-and its status on ``/diagnostics`` at 1 Hz.
+and its status on ``/diagnostics`` at 1 Hz, with the loop's round trip over the
+last second: a command that carries the stamp of an actuator state it answers
+(the controller's convention) took arrival minus stamp, both on this node's clock
+(:class:`~grip_force_ros.sim.loop_latency.LoopLatency`).
 
 The plant's parameters are the 'instrument', 'sim' and 'effects' groups of the
 schema (``friction_scale`` and ``stiffness_scale`` make the plant differ from
@@ -33,6 +37,7 @@ from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_S
                                          InputRejected, read_joints, run_node)
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.sim import InstrumentSim
+from grip_force_ros.sim.loop_latency import LoopLatency
 
 GROUPS = ('instrument', 'sim', 'effects')
 #: Largest simulated step per timer period (s); longer stalls slow the simulation down.
@@ -56,6 +61,7 @@ class SimInstrumentNode(Node):
         self.last_rejection = ''
         self.commands = 0                # accepted commands
         self.capped_steps = 0            # periods whose elapsed time exceeded MAX_STEP
+        self.loop = LoopLatency(capacity=int(2 * params.publish_rate * DIAGNOSTICS_PERIOD) + 16)
 
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command,
                                  STATE_SUB_QOS)
@@ -83,6 +89,9 @@ class SimInstrumentNode(Node):
 
     # ------------------------------------------------------------------ input
     def _on_command(self, msg: JointState) -> None:
+        arrival = self.get_clock().now().nanoseconds
+        stamp = msg.header.stamp
+        self.loop.command_received(stamp.sec * 1_000_000_000 + stamp.nanosec, arrival)
         try:
             (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
         except InputRejected as exc:
@@ -116,18 +125,20 @@ class SimInstrumentNode(Node):
             self.capped_steps += 1
         self.sim.step(self.current_command, dt)
         m = self.sim.measure()
-        stamp = self.get_clock().now().to_msg()
+        now = self.get_clock().now()
+        stamp = now.to_msg()
+
+        act = self._actuator_msg
+        act.header.stamp = stamp
+        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
+        self._actuator_pub.publish(act)
+        self.loop.state_published(now.nanoseconds)
 
         js = self._joint_msg
         js.header.stamp = stamp
         js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
         js.velocity[1] = m.jaw_velocity
         self._joint_pub.publish(js)
-
-        act = self._actuator_msg
-        act.header.stamp = stamp
-        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
-        self._actuator_pub.publish(act)
 
         force = self._force_msg
         force.header.stamp = stamp
@@ -138,6 +149,7 @@ class SimInstrumentNode(Node):
         params = self._param.params
         wall = time.monotonic() - self._started
         warn = self.rejected or self.capped_steps
+        loop = self.loop.summary()
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
             name='grip_force_ros: sim_instrument',
@@ -153,6 +165,11 @@ class SimInstrumentNode(Node):
                 'commands_rejected': str(self.rejected),
                 'last_rejection': self.last_rejection or 'none',
                 'capped_steps': str(self.capped_steps),
+                # the last second: actuator state -> command answering it, this node's clock
+                'loop_round_trip_p50_ms': f"{loop['p50_ms']:.3f}",
+                'loop_round_trip_p99_ms': f"{loop['p99_ms']:.3f}",
+                'loop_round_trip_max_ms': f"{loop['max_ms']:.3f}",
+                'loop_states_unanswered': str(loop['unanswered']),
                 'friction_scale': f'{params.friction_scale:g}',
                 'stiffness_scale': f'{params.stiffness_scale:g}',
             }.items()])

@@ -1,0 +1,116 @@
+"""The product's measuring end: the shipped sim node, recording its loop for one window.
+
+``grip-force bench`` measures the product as it measures the floor: the process
+that publishes the state measures the round trip on its own clock. Here that
+process is the shipped :class:`~grip_force_ros.nodes.sim_instrument.SimInstrumentNode`
+(the same plant, timer and topics; nothing is overridden on the loop's path). The
+controller stamps each command with the actuator state it answers (its shipped
+convention), so the sim's :class:`~grip_force_ros.sim.loop_latency.LoopLatency`
+already sees every round trip; this module only keeps all of them for the window
+and prints the bench protocol of :mod:`.child` (``START``, then one JSON line).
+
+Run by :func:`grip_force_ros.bench.loop.run_product`::
+
+    python -m grip_force_ros.bench.product_sim --seconds 20 --warmup 2 \\
+        --ros-args --params-file config/paper_needle_driver.yaml
+"""
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+import time
+
+import numpy as np
+from rclpy.utilities import remove_ros_args
+
+from grip_force_ros.bench.child import _Window
+from grip_force_ros.bench.stats import latency_summary, missed_periods
+from grip_force_ros.nodes.common import run_node
+from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
+from grip_force_ros.sim.loop_latency import LoopLatency
+
+
+class _RecordingLoopLatency(LoopLatency):
+    """:class:`LoopLatency` that also keeps the answered stamps and round trips of a window."""
+
+    def __init__(self, window: _Window, **kwargs):
+        super().__init__(**kwargs)
+        self.window = window
+        self.answered_stamps = np.zeros(window.capacity, np.int64)   # ns
+        self.n_answered = 0
+        self.other_in_window = 0    # commands answering no fresh state (e.g. timer fallback)
+
+    def command_received(self, stamp_ns: int, arrival_ns: int) -> int | None:
+        round_trip = super().command_received(stamp_ns, arrival_ns)
+        w = self.window
+        w.saw_answer()
+        if not w.measuring:
+            return round_trip
+        if round_trip is None:
+            self.other_in_window += 1
+        else:
+            w.record_latency(round_trip)
+            if self.n_answered < w.capacity:
+                self.answered_stamps[self.n_answered] = stamp_ns
+                self.n_answered += 1
+        return round_trip
+
+
+class BenchSim(SimInstrumentNode):
+    """The shipped sim node, with its loop's round trips kept for one measurement window."""
+
+    def __init__(self, opts, **kwargs):
+        super().__init__(**kwargs)
+        self.period = 1.0 / self._param.params.publish_rate
+        capacity = int((opts.seconds + 5.0) / self.period) + 1000
+        self.window = _Window(self, opts.seconds, opts.warmup, capacity, gc_freeze=False)
+        self.finished = self.window.finished          # run_node stops when the window is over
+        self.loop = _RecordingLoopLatency(self.window)
+        self._bench_timer = self.create_timer(0.05, lambda: self.window.advance(self.summary))
+
+    def _tick(self) -> None:
+        w = self.window
+        if w.measuring:
+            w.record_tick(time.perf_counter_ns())
+            w.sent += 1
+        super()._tick()
+
+    def summary(self) -> dict:
+        w, loop = self.window, self.loop
+        answered = np.sort(loop.answered_stamps[:loop.n_answered])
+        return {'latency': latency_summary(w.latencies[:w.n_latencies]),
+                # a period is missed when no command answered a state of it (gaps in the
+                # answered stamps), whether the sim's timer or the controller skipped it
+                'periods': missed_periods(answered, self.period),
+                'timer_periods': missed_periods(w.ticks[:w.n_ticks], self.period),
+                'states': w.sent, 'answered': int(loop.n_answered),
+                'other_commands': loop.other_in_window,
+                'worst': _worst(answered, loop, w)}
+
+
+def _worst(answered: np.ndarray, loop: _RecordingLoopLatency, w: _Window) -> list:
+    """The five longest round trips: (s into the window, ms)."""
+    n = min(loop.n_answered, w.n_latencies)
+    if n == 0:
+        return []
+    stamps, rts = loop.answered_stamps[:n], w.latencies[:n]
+    t0 = stamps.min()
+    return [(float((stamps[i] - t0) * 1e-9), float(rts[i] * 1e-6)) for i in np.argsort(rts)[-5:][::-1]]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.product_sim')
+    p.add_argument('--seconds', type=float, default=10.0, help='measurement window (s)')
+    p.add_argument('--warmup', type=float, default=2.0, help='after the first answer (s)')
+    return p
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv if argv is None else argv)
+    opts = build_parser().parse_args(remove_ros_args(argv)[1:])
+    return run_node(functools.partial(BenchSim, opts), 'sim_instrument', argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
