@@ -17,6 +17,7 @@ from scipy.optimize import brentq
 from grip_force_ros.model import angle as _angle
 from grip_force_ros.model import contact as _contact
 from grip_force_ros.model import friction as _friction
+from grip_force_ros.model import tables as _tables
 from grip_force_ros.model import transmission as _tx
 from grip_force_ros.model.contact import OBJECTS, ModelError, check_object
 from grip_force_ros.params import ParameterError, check_consistency
@@ -116,6 +117,11 @@ class GripForceModel:
         self._torque_per_amp_at_rest = self.tension_per_amp * self._rn * (
             self._efficiency_at_rest - self.resistance_fraction)           # dM/dI at zero wrist (N*m/A)
         self._start_table = None if self.affine else self._current_table()   # see _starting_currents
+        # nonlinear but wrist-independent: lambda_n(F0) and I(M) are 1-D maps, fitted on
+        # first vectorised use (docs/model.md, speed; grip_force_ros.model.tables)
+        self._one_dimensional = not self.affine and self.mu > 0.0 and not self._wrist_matters
+        self._efficiency_fit = None               # (coefficients in F0, top F0 (N)), built lazily
+        self._current_fit = None                  # PiecewisePolynomial of I(M)/M, built lazily
 
     # ------------------------------------------------------------------ helpers
     def wrap_angles(self, wrist_angle=0.0):
@@ -205,8 +211,10 @@ class GripForceModel:
         block = np.empty((5,) + shape)
         grip, pull, torque, efficiency, drum_tension = (block[i, ...] for i in range(5))  # arrays, even 0-d
         np.multiply(self.tension_per_amp, current, out=drum_tension)            # F0 (N)
-        lam = self._chain_efficiency(drum_tension, wrist)     # lambda_n (-), float or array
-        efficiency[...] = lam
+        if self._one_dimensional and shape != ():
+            self._efficiency_from_fit(drum_tension, out=efficiency)           # lambda_n (-)
+        else:
+            efficiency[...] = self._chain_efficiency(drum_tension, wrist)     # lambda_n (-)
         if self.affine and not self._wrist_matters:           # lam is the constant _efficiency_at_rest
             np.multiply(self._torque_per_amp_at_rest, current, out=torque)
         else:
@@ -243,13 +251,17 @@ class GripForceModel:
             grip_force, wrist_angle, jaw_angle, motor_velocity, jaw_velocity))
         shape = np.broadcast_shapes(force.shape, wrist.shape, jaw.shape, mv.shape, jv.shape)
         force = np.broadcast_to(force, shape)
-        if force.size and not (force.min() >= 0.0 and force.max() < math.inf):   # NaN fails both
+        low, high = (force.min(), force.max()) if force.size else (0.0, 0.0)    # N
+        if not (low >= 0.0 and high < math.inf):                              # NaN fails both
             raise ModelError(f'grip force must be finite and >= 0 N, got {force[~(force >= 0.0)][:3]!r}')
         gain = self._contact_gain(obj, jaw)                   # F_J / max(M, 0) (1/m)
+        moving = bool(mv.any() or jv.any())
         if isinstance(gain, float):
-            if gain <= 0.0 and force.size and force.max() > 0.0:
+            if gain <= 0.0 and high > 0.0:
                 raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
                                  'at these jaw angles')
+            if self._one_dimensional and shape != () and gain > 0.0 and not moving:
+                return self._current_for_force_from_fit(force, gain, high)
             torque = force / gain if gain > 0.0 else np.zeros(shape)          # M needed (N*m)
         else:
             if np.any((gain <= 0.0) & (force > 0.0)):
@@ -257,12 +269,14 @@ class GripForceModel:
                                  'at these jaw angles')
             with np.errstate(divide='ignore', invalid='ignore'):
                 torque = np.where(force > 0.0, force / gain, 0.0)
-        if mv.any() or jv.any():
+        if moving:
             torque -= _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
         per_amp = self._torque_per_amp_at_zero_tension(wrist)   # dM/dI at I = 0 (N*m/A)
         if self.affine:
             torque /= per_amp                                      # in place: one fresh array per call
             return torque                                          # current (A)
+        if self._one_dimensional and shape != ():
+            return self._current_from_fit(torque, per_amp)
         return self._solve_current_array(torque, wrist, per_amp)
 
     # ------------------------------------------------------------------ vectorised helpers
@@ -343,6 +357,107 @@ class GripForceModel:
         if not loaded.all():
             np.copyto(tension, at_zero, where=~loaded)
         return tension
+
+    # Tolerances of the fitted maps (relative, checked when they are built): the exact
+    # chain itself rounds at ~1e-15, the Newton solve it replaces stops at ~1e-15.
+    EFFICIENCY_FIT_TOLERANCE = 1e-14
+    CURRENT_FIT_TOLERANCE = 5e-14
+    CURRENT_FIT_INTERVALS, CURRENT_FIT_DEGREE = 2048, 3     # cubics: the gather costs a pass per row
+
+    def _efficiency_fit_built(self):
+        """(coefficients in F0 (increasing powers, N^-k), top F0 (N)) of lambda_n(F0); None if no fit."""
+        if self._efficiency_fit is None:
+            top = self.tension_per_amp * 2.0 * max(self.params.max_current, 1e-3)   # F0 at twice max current (N)
+            zero = np.zeros(())
+
+            def exact(f0):
+                return self._chain_efficiency(np.asarray(f0, float), zero)
+            coefficients = _tables.fit_polynomial(exact, 0.0, top, self.EFFICIENCY_FIT_TOLERANCE)
+            self._efficiency_fit = (False,) if coefficients is None else (coefficients, top)
+        return None if len(self._efficiency_fit) == 1 else self._efficiency_fit
+
+    def _efficiency_from_fit(self, drum_tension, out):
+        """lambda_n (-) at drum tensions F0 (N) into ``out``, wrist-independent chain.
+
+        The fitted polynomial on (0, top]; the constant-friction value where F0 <= 0 (or
+        NaN), the exact chain above ``top``. Equal to :meth:`_chain_efficiency` within
+        :attr:`EFFICIENCY_FIT_TOLERANCE`.
+        """
+        fit = self._efficiency_fit_built()
+        if fit is None or drum_tension.size == 0:
+            out[...] = self._chain_efficiency(drum_tension, np.zeros(()))
+            return out
+        coefficients, top = fit
+        _tables.horner(coefficients, drum_tension, out=out)
+        if not drum_tension.min() > 0.0:                          # unloaded (or NaN): lambda at zero
+            np.copyto(out, self._efficiency_at_rest, where=~(drum_tension > 0.0))
+        if not drum_tension.max() <= top:                         # beyond the fit (or NaN)
+            beyond = drum_tension > top
+            out[beyond] = self._chain_efficiency(drum_tension[beyond], np.zeros(()))
+        return out
+
+    def _current_fit_built(self):
+        """PiecewisePolynomial of I(M) / (M / step) (A) over [0, M near the peak); None if none.
+
+        Divided by the position ``M / step`` (intervals, -), not by M: the caller has
+        the position at hand and multiplies by it (``I = fit * position``).
+        """
+        if self._current_fit is None:
+            per_amp = self._torque_per_amp_at_rest
+            fit = None
+            if self._start_table is not None and per_amp > 0.0:
+                top = float(self._start_table[0][-1]) * per_amp      # M at the table's last current (N*m)
+                zero = np.zeros(())
+
+                step = top / self.CURRENT_FIT_INTERVALS                  # N*m
+
+                def exact(torque):
+                    return self._solve_current_array(torque, zero, per_amp) / (torque / step)
+                fit = _tables.fit_piecewise(exact, top, self.CURRENT_FIT_INTERVALS, self.CURRENT_FIT_DEGREE,
+                                            self.CURRENT_FIT_TOLERANCE)
+            self._current_fit = (False,) if fit is None else (fit,)
+        return self._current_fit[0] or None
+
+    def _current_from_fit(self, torque, per_amp):
+        """Currents (A) with M(I) = torque (N*m), wrist-independent chain, all samples at once.
+
+        From the fitted table (:meth:`_current_fit_built`); ``torque / per_amp`` where
+        torque <= 0 (linear), :meth:`_solve_current_array` above the table (which
+        raises for unreachable torques). Equal to the exact solve within
+        :attr:`CURRENT_FIT_TOLERANCE`.
+        """
+        fit = self._current_fit_built()
+        if fit is None or torque.size == 0:
+            return self._solve_current_array(torque, np.zeros(()), per_amp)
+        position = np.multiply(torque, 1.0 / fit.step)             # M / step (-)
+        current = fit.at_positions(position)
+        current *= position                                       # I (A)
+        if not torque.min() > 0.0:                                # linear below zero torque
+            idle = ~(torque > 0.0)
+            current[idle] = torque[idle] / per_amp
+        if not position.max() < fit.intervals:                    # beyond the table: Newton
+            beyond = ~(position < fit.intervals)
+            current[beyond] = self._solve_current_array(torque[beyond], np.zeros(()), per_amp)
+        return current
+
+    def _current_for_force_from_fit(self, force, gain, largest):
+        """Currents (A) for grip forces (N) >= 0 at a constant contact gain (1/m), at rest.
+
+        As :meth:`_current_from_fit` on ``force / gain`` without forming the torques:
+        one array pass fewer. ``largest`` is ``force.max()`` (N).
+        """
+        fit = self._current_fit_built()
+        if fit is None:
+            return self._solve_current_array(force / gain, np.zeros(()), self._torque_per_amp_at_rest)
+        per_position = 1.0 / (gain * fit.step)                    # positions per newton (1/N)
+        position = np.multiply(force, per_position)               # M / step (-), >= 0
+        current = fit.at_positions(position)
+        current *= position                                       # I (A); 0 at zero force
+        if not largest * per_position < fit.intervals:            # = position.max(): beyond the table
+            beyond = ~(position < fit.intervals)
+            current[beyond] = self._solve_current_array(force[beyond] / gain, np.zeros(()),
+                                                        self._torque_per_amp_at_rest)
+        return current
 
     def _torque_per_amp_at_zero_tension(self, wrist):
         """dM/dI at zero current (N*m/A), float or array; ModelError if it is not positive."""
