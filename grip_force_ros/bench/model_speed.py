@@ -51,28 +51,38 @@ def vectorised_ratios(params, size: int = 100_000, repeats: int = 5, inverse_siz
     size : int
         Samples per array.
     inverse_size : int, optional
-        Samples for the inverse when the model is nonlinear (its inverse solves
-        per sample, slow); the ratio is scaled to the same per-sample basis.
+        Samples for the inverse when it solves per sample (tension-dependent friction
+        with a wrist-dependent wrap: vectorised Newton, slow); the ratio is scaled to
+        the same per-sample basis. Other inverses run on all ``size`` samples.
 
     Returns
     -------
     dict
         ``forward_ratio``, ``inverse_ratio`` (-), ``exp_ns_per_sample``,
         ``forward_ns_per_sample``, ``inverse_ns_per_sample`` (ns), ``affine`` (bool:
-        closed-form inverse), ``size``.
+        closed-form inverse), ``fitted`` (bool: the nonlinear maps come from fitted
+        tables), ``tables_build_ms`` (the first vectorised forward and inverse, which
+        build the tables; not in the ratios), ``size``.
     """
     model = GripForceModel(params)
+    a = operating_arrays(model, 8)                              # first calls: build the tables
+    t0 = time.perf_counter()
+    model.forward(a['current'], a['wrist'], a['jaw'], 'needle')
+    model.inverse(a['force'], a['wrist'], a['jaw'], 'needle')
+    build = time.perf_counter() - t0
     a = operating_arrays(model, size)
     x = a['current'] * 3.0
     t_exp = best_time(lambda: np.exp(x), repeats)
     t_fwd = best_time(lambda: model.forward(a['current'], a['wrist'], a['jaw'], 'needle'), repeats)
-    n_inv = size if model.affine or inverse_size is None else min(size, inverse_size)
+    per_sample = not model.affine and not model._one_dimensional    # vectorised Newton
+    n_inv = min(size, inverse_size) if per_sample and inverse_size is not None else size
     f, w, j = a['force'][:n_inv], a['wrist'][:n_inv], a['jaw'][:n_inv]
     t_inv = best_time(lambda: model.inverse(f, w, j, 'needle'), repeats if n_inv == size else 1)
     back = model.forward(model.inverse(f[:1000], w[:1000], j[:1000], 'needle'), w[:1000], j[:1000],
                          'needle').grip_force
     per = 1e9 / size
-    return {'size': size, 'affine': bool(model.affine),
+    return {'size': size, 'affine': bool(model.affine), 'fitted': bool(model._one_dimensional),
+            'tables_build_ms': build * 1e3,
             'exp_ns_per_sample': t_exp * per,
             'forward_ns_per_sample': t_fwd * per,
             'inverse_ns_per_sample': t_inv * 1e9 / n_inv,
@@ -151,6 +161,7 @@ def run_model(config: str, size: int = 100_000, steps: int = 20_000, repeats: in
     if other_configs:
         out['other_configs'] = {}
         for path in other_configs:
-            r = vectorised_ratios(load_params_file(path), size // 10, 3, inverse_size=500)
-            out['other_configs'][path] = {k: r[k] for k in ('forward_ratio', 'inverse_ratio', 'affine')}
+            r = vectorised_ratios(load_params_file(path), size // 10, repeats, inverse_size=500)
+            out['other_configs'][path] = {k: r[k] for k in ('forward_ratio', 'inverse_ratio', 'affine',
+                                                            'fitted', 'tables_build_ms')}
     return out
