@@ -1,0 +1,134 @@
+"""Fitted tables of the nonlinear model (grip_force_ros.model.tables) and their use.
+
+The tables replace exact computations on the vectorised fast path; every result here is
+held to the exact computation (the chain of pulleys, the bracketed scalar solve).
+"""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from grip_force_ros.model import GripForceModel, tables
+from grip_force_ros.model import friction
+from grip_force_ros.params import load_params_file, make_params
+
+FOUR = load_params_file('config/four_pulley_needle_driver.yaml')
+
+
+def test_horner_equals_polyval():
+    rng = np.random.default_rng(3)
+    coefficients = rng.normal(size=6)
+    x = rng.uniform(-2.0, 2.0, 200)
+    np.testing.assert_allclose(tables.horner(coefficients, x), np.polynomial.polynomial.polyval(x, coefficients),
+                               rtol=1e-13, atol=1e-13)
+    out = np.empty_like(x)
+    assert tables.horner(coefficients, x, out=out) is out
+
+
+def test_fit_polynomial_takes_the_lowest_degree_within_tolerance():
+    coefficients = tables.fit_polynomial(np.exp, 0.0, 0.5, 1e-14)
+    assert coefficients is not None
+    x = np.linspace(0.0, 0.5, 3001)
+    error = np.max(np.abs(tables.horner(coefficients, x) / np.exp(x) - 1.0))
+    assert error <= 1e-14
+    # one degree lower misses the tolerance: the degree is the lowest that makes it
+    lower = tables.fit_polynomial(np.exp, 0.0, 0.5, 1e-14, degrees=[coefficients.size - 2])
+    assert lower is None
+
+
+def test_fit_polynomial_gives_up_on_a_singular_map():
+    assert tables.fit_polynomial(np.sqrt, 0.0, 1.0, 1e-12) is None     # sqrt is not smooth at 0
+
+
+def test_piecewise_fit_stops_before_a_singularity():
+    def singular(x):
+        return 1.0 / np.sqrt(1.0 - x)                                   # blows up at x = 1
+    fit = tables.fit_piecewise(singular, 1.0, 64, 3, 1e-7)
+    assert fit is not None and 0.5 < fit.top < 1.0 and fit.intervals < 64
+    x = np.linspace(0.0, fit.top, 5001, endpoint=False)
+    np.testing.assert_allclose(fit(x), singular(x), rtol=1e-7)
+    assert tables.fit_piecewise(singular, 1.0, 1, 3, 1e-7) is None       # one cubic cannot
+
+
+@settings(max_examples=50, deadline=None)
+@given(x=st.lists(st.floats(0.0, 0.999), min_size=1, max_size=20))
+def test_piecewise_fit_matches_the_map_everywhere_inside(x):
+    fit = _COSINE_FIT
+    x = np.array(x) * fit.top
+    np.testing.assert_allclose(fit(x), np.cos(x) + 2.0, rtol=2e-14)
+
+
+_COSINE_FIT = tables.fit_piecewise(lambda x: np.cos(x) + 2.0, 3.0, 128, 4, 2e-14)
+
+
+# ----------------------------------------------------------------------------- in the model
+def exact_efficiency(m, current):
+    f0 = m.tension_per_amp * np.asarray(current, float)
+    return friction.chain_efficiency(m.mu, m.radii, m.params.cable_radius, m.wraps, f0, m.friction_gain)
+
+
+def test_the_four_pulley_model_uses_both_tables_beyond_max_current():
+    m = GripForceModel(FOUR)
+    assert m._one_dimensional
+    m.forward(np.array([0.1, 0.2]), 0.0, 0.0)
+    m.inverse(np.array([0.1, 0.2]), 0.0, 0.0)
+    coefficients, top = m._efficiency_fit_built()
+    assert top == pytest.approx(2.0 * FOUR.max_current * m.tension_per_amp)
+    assert coefficients.size <= 12
+    fit = m._current_fit_built()
+    assert fit.top > m._torque_scalar(FOUR.max_current, 0.0)             # covers the whole current range
+
+
+def test_paper_and_wrist_dependent_models_use_no_tables():
+    assert not GripForceModel(make_params())._one_dimensional           # constant friction: closed form
+    assert not GripForceModel(make_params().replace(tension_friction_gain=0.0008,
+                                                    wrist_wrap_gain=0.3))._one_dimensional
+
+
+def test_fitted_efficiency_equals_the_chain_inside_outside_and_at_the_edges():
+    m = GripForceModel(FOUR)
+    top_current = 2.0 * FOUR.max_current
+    current = np.concatenate([np.linspace(-0.3, 3.0, 4001), [0.0, -0.0, top_current, np.nextafter(top_current, 9.0),
+                                                               1e-300, np.nan]])
+    got = m.forward(current, 0.4, 0.1, 'rigid').efficiency
+    expect = exact_efficiency(m, current)
+    np.testing.assert_allclose(got, expect, rtol=2e-14)                  # NaN current: lambda at zero, as the chain
+    assert got[-1] == m._efficiency_at_rest
+
+
+@settings(max_examples=60, deadline=None)
+@given(currents=st.lists(st.floats(1e-6, 1.25), min_size=1, max_size=30),
+       obj=st.sampled_from(['needle', 'rigid', 'tissue']), jaw=st.floats(0.0, 1.4))
+def test_fitted_inverse_recovers_the_current_up_to_near_the_peak(currents, obj, jaw):
+    """Up to 1.25 A (the peak of M(I) is at ~1.29 A): table inside, Newton beyond, 1e-12."""
+    m = _FOUR_MODEL
+    current = np.array(currents)
+    force = m.forward(current, 0.2, jaw, obj).grip_force
+    np.testing.assert_allclose(m.inverse(force, 0.2, jaw, obj), current, rtol=1e-12)
+
+
+_FOUR_MODEL = GripForceModel(FOUR)
+
+
+def test_fitted_inverse_equals_the_bracketed_scalar_solve():
+    m = GripForceModel(FOUR)
+    torque = np.linspace(0.0, 1.05 * m._current_fit_built().top, 3001)    # N*m, past the table's end
+    gain = 1.0 / m._tip                                                   # needle: F_J = M / tip
+    got = m.inverse(torque * gain, 0.0, 0.0, 'needle')
+    expect = [m._solve_current(float(t), 0.0, 0.0) for t in torque]
+    np.testing.assert_allclose(got, expect, rtol=1e-13, atol=0.0)
+    assert got[0] == 0.0
+    with_velocity = m.inverse(torque * gain, 0.0, 0.0, 'needle', motor_velocity=0.0, jaw_velocity=-3.0)
+    inertial = 0.5 * m._rn * FOUR.jaw_mass * 3.0                          # added to M (N*m)
+    expect = [m._solve_current(float(t), 0.0, inertial) if t > inertial else (t - inertial) / m._torque_per_amp_at_rest
+              for t in torque]
+    np.testing.assert_allclose(with_velocity, expect, rtol=1e-13, atol=1e-18)
+
+
+def test_fitted_inverse_still_refuses_unreachable_forces():
+    m = GripForceModel(FOUR)
+    peak = max(m._torque_scalar(i, 0.0) for i in np.linspace(1.2, 1.4, 201))     # N*m, at ~1.29 A
+    with pytest.raises(Exception, match='beyond the largest'):
+        m.inverse(np.array([0.1, 1.01 * peak / m._tip]), 0.0, 0.0, 'needle')
+    assert math.isfinite(float(m.inverse(np.array([0.99 * peak / m._tip]), 0.0, 0.0, 'needle')[0]))
