@@ -132,3 +132,16 @@ def test_fitted_inverse_still_refuses_unreachable_forces():
     with pytest.raises(Exception, match='beyond the largest'):
         m.inverse(np.array([0.1, 1.01 * peak / m._tip]), 0.0, 0.0, 'needle')
     assert math.isfinite(float(m.inverse(np.array([0.99 * peak / m._tip]), 0.0, 0.0, 'needle')[0]))
+
+
+def test_scalar_inverse_uses_the_table_and_equals_the_bracketed_solve():
+    m = GripForceModel(FOUR)
+    assert m._current_rows is not None and len(m._current_rows) == m._current_fit_built().intervals
+    top = m._current_fit_built().top
+    rng = np.random.default_rng(5)
+    for torque in np.concatenate([rng.uniform(0.0, top, 300), [1e-12, np.nextafter(top, 0.0), top, 1.03 * top]]):
+        for obj, jaw in (('needle', 0.0), ('rigid', 0.4), ('tissue', 0.9)):
+            gain = float(m._contact_gain(obj, np.asarray(jaw)))
+            got = m.current_for_force_scalar(torque * gain, 0.3, jaw, obj)
+            assert got == pytest.approx(m._solve_current(torque * gain / gain, 0.3, 0.0), rel=1e-13)
+    assert m.current_for_force_scalar(0.0, 0.3, 0.0, 'needle') == 0.0

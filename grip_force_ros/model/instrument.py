@@ -139,7 +139,10 @@ class GripForceModel:
         # first vectorised use (docs/model.md, speed; grip_force_ros.model.tables)
         self._one_dimensional = not self.affine and self.mu > 0.0 and not self._wrist_matters
         self._efficiency_fit = None               # (coefficients in F0, top F0 (N)), built lazily
-        self._current_fit = None                  # PiecewisePolynomial of I(M)/M, built lazily
+        self._current_fit = None                  # PiecewisePolynomial of I(M) per position, see below
+        self._current_rows = None                 # its coefficients per interval, Python floats
+        if self._one_dimensional:                 # built now: the scalar inverse of the control step uses it
+            self._current_fit_built()
 
     # ------------------------------------------------------------------ helpers
     def wrap_angles(self, wrist_angle=0.0):
@@ -436,6 +439,8 @@ class GripForceModel:
                 fit = _tables.fit_piecewise(exact, top, self.CURRENT_FIT_INTERVALS, self.CURRENT_FIT_DEGREE,
                                             self.CURRENT_FIT_TOLERANCE)
             self._current_fit = (False,) if fit is None else (fit,)
+            if fit is not None:
+                self._current_rows = fit.coefficients.T.tolist()
         return self._current_fit[0] or None
 
     def _current_from_fit(self, torque, per_amp):
@@ -643,6 +648,16 @@ class GripForceModel:
             if per_amp <= 0.0:
                 raise ModelError(self._no_grip_message(lam))
             return torque / per_amp
+        rows = self._current_rows
+        if rows is not None:                      # the vectorised path's table, ~1 us instead of ~15
+            position = torque / self._current_fit[0].step                 # M / step (-), > 0
+            if position < len(rows):
+                index = int(position)
+                within = position - index
+                value = 0.0
+                for c in reversed(rows[index]):
+                    value = value * within + c
+                return value * position                                   # I (A)
         return self._solve_current(torque, wrist_angle, 0.0)
 
     # ------------------------------------------------------------------ nonlinear inverse
