@@ -18,17 +18,23 @@ def test_latency_summary_percentiles_in_ms():
     assert math.isnan(latency_summary([])['p99_ms'])
 
 
-def test_missed_periods_counts_gaps_not_jitter():
+def test_missed_periods_counts_periods_without_a_tick_not_jitter():
     period = 1e-3
     ticks = np.arange(1000) * 1_000_000                        # ns, perfect 1 kHz
     ticks[500:] += 3_000_000                                   # one gap of 4 periods: 3 missed
     ticks[100] += 400_000                                      # late but inside its period: jitter
+    ticks[200] += 700_000                                      # 0.7 late, the next on time: jitter
     s = missed_periods(ticks, period)
     assert s['missed'] == 3
     assert s['expected'] == 1002
     assert s['missed_fraction'] == pytest.approx(3 / 1002)
     assert s['interval_max_ms'] == pytest.approx(4.0)
+    assert s['late_fraction'] == pytest.approx(2 / 999)        # the 4-period gap and the 1.7 one
     assert missed_periods(np.arange(100) * 1_000_000, period)['missed'] == 0
+    # a dropped tick among jittered ones is still one missed period
+    rng = np.random.default_rng(0)
+    jittered = np.arange(2000) * 1_000_000 + rng.integers(0, 400_000, 2000)
+    assert missed_periods(np.delete(jittered, 700), period)['missed'] == 1
 
 
 def test_ratio_handles_missing_values():

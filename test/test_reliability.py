@@ -80,10 +80,9 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
         # sample may come first); when one happened, the resume must be bumpless
         assert d['recovered'] and d['limit_violations'] == 0, d
         assert d['max_resume_jump'] <= 0.5 * step, d
-        rows = [(stamp, c) for _, stamp, c in session.probe.commands]
-        targets = {stamp: f for _, stamp, f in session.probe.targets}
-        for (s0, c0), (s1, c1) in zip(rows, rows[1:]):
-            if targets.get(s0) == 0.0 and targets.get(s1, 0.0) > 0.0:
+        rows = session.probe.steps                  # (recv, stamp, command, target)
+        for (_, _, c0, f0), (_, _, c1, f1) in zip(rows, rows[1:]):
+            if f0 == 0.0 and f1 > 0.0:
                 resumed_from.append(abs(c0))
     print('resumed from |I| =', resumed_from)
     assert any(i > 0.01 for i in resumed_from), resumed_from   # A: resumed mid-ramp
@@ -96,9 +95,7 @@ def test_safe_output_ramps_at_the_slew_limit(session):
     d = run_message_case(session, _silence('instrument', ticks=60))
     assert d['passed'], d
     # the commands of the safe stretch: |I| decreasing by at most one slew step to 0 A
-    rows = [(stamp, command) for _, stamp, command in probe.commands]
-    targets = {stamp: f for _, stamp, f in probe.targets}
-    safe = [c for stamp, c in rows if targets.get(stamp) == 0.0]
+    safe = [command for _, _, command, target in probe.steps if target == 0.0]
     assert safe, 'no safe output recorded'
     assert all(abs(b) <= abs(a) + 1e-12 and abs(a - b) <= step * (1 + 1e-9)
                for a, b in zip(safe, safe[1:]))

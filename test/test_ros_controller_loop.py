@@ -16,7 +16,8 @@ import pytest
 from grip_force_ros import topics
 from grip_force_ros.nodes import controller as controller_module
 from grip_force_ros.nodes.common import joint_state
-from grip_force_ros.nodes.controller import MIN_STEP_SPACING_PERIODS, ControllerNode
+from grip_force_ros.nodes.controller import (FALLBACK_AFTER_PERIODS, MIN_STEP_SPACING_PERIODS,
+                                             ControllerNode)
 from grip_force_ros.nodes.harness import RosRunner
 
 pytestmark = pytest.mark.ros
@@ -42,9 +43,9 @@ def node(monkeypatch):
     step_times: list[float] = []
     control = ctl._control
 
-    def recorded_control():
+    def recorded_control(answered_stamp=None):
         step_times.append(clock.now)
-        control()
+        control(answered_stamp)
 
     ctl._control = recorded_control
     try:
@@ -127,8 +128,9 @@ def test_a_cancelled_timer_stops_the_loop(node):
 @pytest.mark.parametrize('seed', [1, 2, 3])
 def test_steps_keep_their_spacing_under_jitter(node, seed):
     """States with delivery jitter up to 0.8 period and 2 % lost, any timer phase: each state
-    is stepped on; the timer steps exactly at the ticks with no state since the previous tick,
-    so no two periods pass without a command."""
+    is stepped on; the timer steps exactly at the ticks that come FALLBACK_AFTER_PERIODS or
+    more after the last state (and half a period after the last step), so a late state
+    costs no extra step and no more than 2.5 periods pass without a command."""
     ctl, clock, steps = node
     rng = random.Random(seed)
     period = ctl._period
@@ -141,14 +143,48 @@ def test_steps_keep_their_spacing_under_jitter(node, seed):
     timer_steps = _run(ctl, clock, states + ticks)
     assert ctl.steps == {'on_state': len(states), 'on_timer': len(timer_steps)}
     assert len(steps) == len(states) + len(timer_steps)
-    previous = {b: a for a, b in zip(steps, steps[1:])}
-    min_spacing = MIN_STEP_SPACING_PERIODS * period - 1e-12
-    assert all(t - previous.get(t, -math.inf) >= min_spacing for t in timer_steps)
     state_times = sorted(t for _, t in states)
-    empty_ticks = [t for _, t in ticks
-                   if not any(t - period < s <= t for s in state_times[
-                       max(0, bisect.bisect_left(state_times, t - period) - 1):
-                       bisect.bisect_right(state_times, t) + 1])]
-    assert timer_steps == empty_ticks
+    previous_step = {b: a for a, b in zip(steps, steps[1:])}
+    fallback_after = FALLBACK_AFTER_PERIODS * period - 1e-12
+    min_spacing = MIN_STEP_SPACING_PERIODS * period - 1e-12
+    expected = []
+    for _, t in ticks:                                         # the rule, tick by tick
+        i = bisect.bisect_right(state_times, t) - 1
+        last_state = state_times[i] if i >= 0 else -math.inf
+        last_step = max([last_state] + [s for s in expected if s < t][-1:])
+        if t - last_state >= fallback_after and t - last_step >= min_spacing:
+            expected.append(t)
+    assert timer_steps == expected
+    assert all(t - previous_step.get(t, -math.inf) >= min_spacing for t in timer_steps)
+    lost = n - len(states)
+    assert len(timer_steps) <= 2 * lost + 5, 'fallback steps come from lost states, not jitter'
     gaps = [b - a for a, b in zip(steps, steps[1:])]
-    assert max(gaps) <= 2 * period + 1e-12
+    assert max(gaps) <= (FALLBACK_AFTER_PERIODS + 1.0) * period + 1e-12
+
+
+def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
+    """A fresh, stamped actuator state's stamp goes on the current command; timer steps,
+    duplicated and unstamped states get the controller's clock, the force outputs always."""
+    ctl, clock, steps = node
+    period = ctl._period
+
+    def deliver(stamp):
+        ctl._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
+        return ctl._servo_msg.header.stamp, ctl._estimate_msg.header.stamp
+
+    stamp = ctl.get_clock().now().to_msg()
+    stamp.nanosec = (stamp.nanosec // 1000) * 1000 + 123          # recognisable
+    servo, estimate = deliver(stamp)
+    assert (servo.sec, servo.nanosec) == (stamp.sec, stamp.nanosec)
+    assert (estimate.sec, estimate.nanosec) != (stamp.sec, stamp.nanosec)
+    clock.now += 0.5 * period
+    servo, _ = deliver(stamp)                                       # duplicate: no news
+    assert (servo.sec, servo.nanosec) != (stamp.sec, stamp.nanosec)
+    clock.now += 2 * period
+    ctl._tick()                                                     # fallback step
+    assert ctl.steps['on_timer'] == 1
+    fallback = ctl._servo_msg.header.stamp
+    assert (fallback.sec, fallback.nanosec) != (stamp.sec, stamp.nanosec)
+    zero = type(stamp)()                                            # unstamped driver
+    servo, _ = deliver(zero)
+    assert servo.sec > 0

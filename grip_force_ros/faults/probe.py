@@ -116,9 +116,15 @@ class FaultProbe(Node):
         self.limits = LimitMonitor(params.max_current, step)
         self.force_cap = params.max_grip_force
         self.force_violations: list[str] = []
-        # records: (probe receive time [s], controller stamp [s], value)
+        # records: (probe receive time [s], stamp [s], value); a command's stamp is the
+        # actuator state it answers (the probe's clock), the others' the controller's clock
         self.commands: list[tuple] = []
         self.targets: list[tuple] = []
+        # one row per control step: (receive time of the target [s], controller stamp [s],
+        # current command [A], target force [N]); the controller publishes the command
+        # first, and the probe receives both in publishing order, so a target belongs to
+        # the command received last before it
+        self.steps: list[tuple] = []
         self.estimates: list[tuple] = []
         self.diagnostics: list[tuple] = []   # (receive time, text, values dict)
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
@@ -245,7 +251,10 @@ class FaultProbe(Node):
         f = msg.wrench.force.z
         if not (math.isfinite(f) and f <= self.force_cap * (1 + 1e-9) + 1e-12):
             self.force_violations.append(f'target force {f!r} N above max_grip_force {self.force_cap} N')
-        self.targets.append((self.now(), self._stamp(msg), f))
+        now, stamp = self.now(), self._stamp(msg)
+        self.targets.append((now, stamp, f))
+        if self.commands:
+            self.steps.append((now, stamp, self.commands[-1][2], f))
 
     def _on_estimate(self, msg: WrenchStamped) -> None:
         self.estimates.append((self.now(), self._stamp(msg), msg.wrench.force.z))
@@ -263,3 +272,4 @@ class FaultProbe(Node):
     def clear_records(self) -> None:
         """Forget what was recorded so far (the limit monitor keeps counting)."""
         self.commands, self.targets, self.estimates, self.diagnostics = [], [], [], []
+        self.steps = []

@@ -214,13 +214,8 @@ class Session:
 
 # ---------------------------------------------------------------------------- analysis
 def _modes(probe, t0: float) -> list[tuple]:
-    """(receive time, stamp, command, target) of commands received after t0, target matched by stamp."""
-    target_at = {stamp: f for _, stamp, f in probe.targets}
-    out = []
-    for recv, stamp, command in probe.commands:
-        if recv >= t0 and stamp in target_at:
-            out.append((recv, stamp, command, target_at[stamp]))
-    return out
+    """(receive time, controller stamp, command, target) of the control steps received after t0."""
+    return [row for row in probe.steps if row[0] >= t0]
 
 
 def _resume_jumps(rows: list[tuple]) -> list[float]:

@@ -17,21 +17,24 @@ actuator state arrives (in its subscription callback), so each command answers
 the newest state without waiting for a free-running timer (two unsynchronised
 1 kHz timers, the sim's and the controller's, would add a 0-1 ms wait whose
 phase is fixed for a whole run). The ``control_rate`` timer stays as the
-watchdog and fallback: it steps when no state was stepped on since its previous
-tick (a late or lost state, or silence: the safe state still comes within two
-periods of ``watchdog_timeout``), never within half a period of the previous
-step. Every actuator state is stepped on: the PID assumes one step per period,
+watchdog and fallback: it steps when no state came for
+:data:`FALLBACK_AFTER_PERIODS` periods (a lost state, or silence: then it steps
+every period, and the safe state still comes within two periods of
+``watchdog_timeout``), never within half a period of the previous step. A state
+that is merely late (jitter under half a period) gets no extra step: an extra
+step would repeat the same measurement and cost both processes a callback. Every actuator state is stepped on: the PID assumes one step per period,
 so the actuator state is expected at ``control_rate`` (the sim publishes at
 ``publish_rate`` = 1 kHz). Cancelling the timer stops the loop altogether (no
 step on states either).
 
-Output stamps: the outputs of a step on a fresh actuator state (accepted, with a
-non-zero stamp) carry that state's header stamp, the time of the measurement
-they were computed from, as the sensor data they derive from would. The
-instrument can then tell the age of each command (the sim measures the loop's
-round trip this way: arrival minus stamp, on its own clock). Steps of the timer
-fallback, and steps on a state that was rejected, duplicated or unstamped, carry
-the controller's clock.
+Stamps: the current command of a step on a fresh actuator state (accepted,
+with a non-zero stamp) carries that state's header stamp, a reply stamp in the
+instrument's own clock: the instrument can tell the age of each command (the sim
+measures the loop's round trip this way, arrival minus stamp). Commands of the
+timer fallback, and of a step on a state that was rejected, duplicated or
+unstamped, carry the controller's clock. The force outputs and /diagnostics
+always carry the controller's clock at the step (an instrument with a wrong
+clock does not put wrong times on them).
 
 A malformed message (unknown or missing joint names, wrong array lengths, NaN)
 is rejected with its reason; the last good input is kept. All the control
@@ -61,6 +64,8 @@ DIAGNOSTICS_RATE = 10.0
 DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
 #: The timer does not step sooner than this many periods after the previous step:
 MIN_STEP_SPACING_PERIODS = 0.5
+#: The timer steps only when no actuator state came for this many periods:
+FALLBACK_AFTER_PERIODS = 1.5
 
 _MASTER_JOINTS = (topics.MASTER_JOINT,)
 _INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
@@ -118,8 +123,9 @@ class ControllerNode(Node):
         self._last_tick = None
         # Step scheduling (perf_counter s): see the module docstring.
         self._min_spacing = MIN_STEP_SPACING_PERIODS * self._period
+        self._fallback_after = FALLBACK_AFTER_PERIODS * self._period
         self._last_step = -math.inf        # when the last control step started
-        self._stepped_on_state = False     # since the timer's previous tick
+        self._last_state_step = -math.inf  # when the last step on an actuator state started
         self.steps = {'on_state': 0, 'on_timer': 0}   # control steps by trigger
         self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
         self.get_logger().info(
@@ -173,8 +179,9 @@ class ControllerNode(Node):
         fresh = self._read_actuator(msg)
         if not self._timer.is_canceled():  # cancelled: the loop is stopped
             self.steps['on_state'] += 1
-            self._step(time.perf_counter(), msg.header.stamp if fresh else None)
-            self._stepped_on_state = True
+            started = time.perf_counter()
+            self._last_state_step = started
+            self._step(started, msg.header.stamp if fresh else None)
 
     def _read_actuator(self, msg: JointState) -> bool:
         """Store the actuator state; True if it was accepted as a new, stamped sample."""
@@ -217,22 +224,22 @@ class ControllerNode(Node):
     def _tick(self) -> None:
         """The ``control_rate`` timer: watchdog and fallback of the event-driven loop.
 
-        Steps when no actuator state was stepped on since the previous tick (a
-        late or lost state; when they stop, the watchdog acts on the stale inputs
-        every period), never within :data:`MIN_STEP_SPACING_PERIODS` of the
-        previous step.
+        Steps when no actuator state came for :data:`FALLBACK_AFTER_PERIODS`
+        periods (a lost state; when they stop, every period, so the watchdog acts
+        on the stale inputs), never within :data:`MIN_STEP_SPACING_PERIODS` of
+        the previous step.
         """
         started = time.perf_counter()
-        if not self._stepped_on_state and started - self._last_step >= self._min_spacing:
+        if (started - self._last_state_step >= self._fallback_after
+                and started - self._last_step >= self._min_spacing):
             self.steps['on_timer'] += 1
             self._step(started)
-        self._stepped_on_state = False
 
     def _step(self, started: float, answered_stamp=None) -> None:
         """One control step, timed (``started``: perf_counter s, now).
 
         ``answered_stamp``: header stamp of the fresh actuator state the step answers
-        (its outputs carry it), or None (they carry the controller's clock).
+        (the current command carries it), or None (the controller's clock).
         """
         self._last_step = started
         self._control(answered_stamp)
@@ -256,10 +263,10 @@ class ControllerNode(Node):
         now = stamp.nanoseconds * 1e-9
         out = self.controller.step(now, self.inputs)
         self.last_output = out
-        stamp_msg = answered_stamp if answered_stamp is not None else stamp.to_msg()
+        stamp_msg = stamp.to_msg()
 
         servo = self._servo_msg
-        servo.header.stamp = stamp_msg
+        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
         servo.effort[0] = out.current_command
         self._servo_pub.publish(servo)
 
