@@ -145,3 +145,18 @@ def test_scalar_inverse_uses_the_table_and_equals_the_bracketed_solve():
             got = m.current_for_force_scalar(torque * gain, 0.3, jaw, obj)
             assert got == pytest.approx(m._solve_current(torque * gain / gain, 0.3, 0.0), rel=1e-13)
     assert m.current_for_force_scalar(0.0, 0.3, 0.0, 'needle') == 0.0
+
+
+def test_samples_outside_the_tables_raise_no_numpy_warnings():
+    """Far outside the fits the clipped evaluation cannot overflow; those samples take the exact path."""
+    m = GripForceModel(FOUR)
+    current = np.array([1e40, -1e300, -1e40, np.nan, 0.3, 3.0])                 # A
+    with np.errstate(all='ignore'):
+        expect = exact_efficiency(m, current)
+    with np.errstate(all='raise'):
+        got = m.forward(current, 0.0, 0.0).efficiency
+        np.testing.assert_allclose(got, expect, rtol=2e-14)
+        with pytest.raises(Exception, match='beyond the largest'):
+            m.inverse(np.array([1e20, 1.0]), 0.0, 0.0, 'needle')
+        moving = m.inverse(np.array([0.0, 1.0, 6.2]), 0.0, 0.0, 'needle', jaw_velocity=-1e3)  # torque < 0 first
+        assert moving[0] < 0.0 < moving[1] < moving[2]

@@ -411,10 +411,13 @@ class GripForceModel:
             out[...] = self._chain_efficiency(drum_tension, np.zeros(()))
             return out
         coefficients, top = fit
-        _tables.horner(coefficients, drum_tension, out=out)
-        if not drum_tension.min() > 0.0:                          # unloaded (or NaN): lambda at zero
+        low, high = drum_tension.min(), drum_tension.max()
+        inside = low > 0.0 and high <= top
+        # samples outside are replaced below; clipped, they cannot overflow on the way
+        _tables.horner(coefficients, drum_tension if inside else np.clip(drum_tension, 0.0, top), out=out)
+        if not low > 0.0:                                         # unloaded (or NaN): lambda at zero
             np.copyto(out, self._efficiency_at_rest, where=~(drum_tension > 0.0))
-        if not drum_tension.max() <= top:                         # beyond the fit (or NaN)
+        if not high <= top:                                       # beyond the fit (or NaN)
             beyond = drum_tension > top
             out[beyond] = self._chain_efficiency(drum_tension[beyond], np.zeros(()))
         return out
@@ -455,13 +458,16 @@ class GripForceModel:
         if fit is None or torque.size == 0:
             return self._solve_current_array(torque, np.zeros(()), per_amp)
         position = np.multiply(torque, 1.0 / fit.step)             # M / step (-)
+        low, high = position.min(), position.max()
+        beyond = None if high < fit.intervals else ~(position < fit.intervals)
+        if not (low > 0.0 and beyond is None):                    # replaced below; clipped, no overflow
+            np.clip(position, 0.0, fit.last_position, out=position)
         current = fit.at_positions(position)
         current *= position                                       # I (A)
-        if not torque.min() > 0.0:                                # linear below zero torque
+        if not low > 0.0:                                         # linear below zero torque
             idle = ~(torque > 0.0)
             current[idle] = torque[idle] / per_amp
-        if not position.max() < fit.intervals:                    # beyond the table: Newton
-            beyond = ~(position < fit.intervals)
+        if beyond is not None:                                    # beyond the table: Newton
             current[beyond] = self._solve_current_array(torque[beyond], np.zeros(()), per_amp)
         return current
 
@@ -476,10 +482,13 @@ class GripForceModel:
             return self._solve_current_array(force / gain, np.zeros(()), self._torque_per_amp_at_rest)
         per_position = 1.0 / (gain * fit.step)                    # positions per newton (1/N)
         position = np.multiply(force, per_position)               # M / step (-), >= 0
+        beyond = None
+        if not largest * per_position < fit.intervals:            # = position.max() < intervals
+            beyond = ~(position < fit.intervals)
+            np.minimum(position, fit.last_position, out=position)   # replaced below; clipped, no overflow
         current = fit.at_positions(position)
         current *= position                                       # I (A); 0 at zero force
-        if not largest * per_position < fit.intervals:            # = position.max(): beyond the table
-            beyond = ~(position < fit.intervals)
+        if beyond is not None:                                    # beyond the table: Newton
             current[beyond] = self._solve_current_array(force[beyond] / gain, np.zeros(()),
                                                         self._torque_per_amp_at_rest)
         return current

@@ -120,6 +120,12 @@ class PiecewisePolynomial:
         """Number of intervals (-)."""
         return self.coefficients.shape[1]
 
+    @property
+    def last_position(self) -> float:
+        """The largest position inside the table (-), just below ``intervals``: clipping
+        to it leaves every position inside unchanged."""
+        return float(np.nextafter(float(self.intervals), 0.0))
+
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Values at ``x`` (fresh array); see :meth:`at_positions`."""
         return self.at_positions(np.multiply(x, 1.0 / self.step))
