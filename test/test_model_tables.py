@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from grip_force_ros.model import GripForceModel, tables
+from grip_force_ros.model import GripForceModel, ModelError, tables
 from grip_force_ros.model import friction
 from grip_force_ros.params import load_params_file, make_params
 
@@ -160,3 +160,32 @@ def test_samples_outside_the_tables_raise_no_numpy_warnings():
             m.inverse(np.array([1e20, 1.0]), 0.0, 0.0, 'needle')
         moving = m.inverse(np.array([0.0, 1.0, 6.2]), 0.0, 0.0, 'needle', jaw_velocity=-1e3)  # torque < 0 first
         assert moving[0] < 0.0 < moving[1] < moving[2]
+
+
+@settings(max_examples=25, deadline=None)
+@given(mu=st.floats(0.03, 0.3), gain=st.floats(-5.0, -1.3), max_current=st.floats(0.05, 5.0),
+       seed=st.integers(0, 2 ** 31))
+def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max_current, seed):
+    """Random friction, tension gain (1e-5..0.05 1/N) and current range: tables or not, the same answers."""
+    m = GripForceModel(make_params().replace(pulley_friction_coefficient=mu, tension_friction_gain=10.0 ** gain,
+                                             max_current=max_current))
+    assert m._one_dimensional
+    current = np.random.default_rng(seed).uniform(0.0, 2.0 * max_current, 40)      # A
+    got = m.forward(current, 0.1, 0.0, 'needle')
+    np.testing.assert_allclose(got.efficiency, exact_efficiency(m, current), rtol=2e-14)
+    if m._torque_per_amp_at_rest <= 0.0:                          # lambda_n below the resistance: no grip
+        with pytest.raises(ModelError, match='no grip force at any current'):
+            m.inverse(np.array([0.0, 0.1]), 0.1, 0.0, 'needle')
+        return
+    rising = np.array([m._torque_scalar(i * (1 + 1e-6), 0.0) > m._torque_scalar(i, 0.0) for i in current])
+    current = current[rising & (got.jaw_torque > 0.0)]                            # M(I) invertible there
+    force = m.forward(current, 0.1, 0.0, 'needle').grip_force
+    expect = np.array([m._solve_current(float(t), 0.1, 0.0) for t in force * m._tip])
+    # near the peak of M(I) the inverse is ill-conditioned: a relative change of M moves I by
+    # M / (I dM/dI) times as much, for the exact solvers as for the table
+    slope = np.array([(m._torque_scalar(i * (1 + 1e-7), 0.1) - m._torque_scalar(i, 0.1)) / (i * 1e-7) for i in expect])
+    condition = force * m._tip / (expect * slope)
+    allowed = 1e-13 * (1.0 + condition) * expect
+    assert np.all(np.abs(m.inverse(force, 0.1, 0.0, 'needle') - expect) <= allowed)
+    scalar = np.array([m.current_for_force_scalar(float(f), 0.1, 0.0) for f in force])
+    assert np.all(np.abs(scalar - expect) <= allowed)

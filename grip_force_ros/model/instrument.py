@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
+from scipy.optimize import brentq, minimize_scalar
 
 from grip_force_ros.model import angle as _angle
 from grip_force_ros.model import contact as _contact
@@ -141,6 +141,7 @@ class GripForceModel:
         self._efficiency_fit = None               # (coefficients in F0, top F0 (N)), built lazily
         self._current_fit = None                  # PiecewisePolynomial of I(M) per position, see below
         self._current_rows = None                 # its coefficients per interval, Python floats
+        self._rising = None                       # see _rising_current
         if self._one_dimensional:                 # built now: the scalar inverse of the control step uses it
             self._current_fit_built()
 
@@ -284,6 +285,7 @@ class GripForceModel:
                 raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
                                  'at these jaw angles')
             if self._one_dimensional and shape != () and gain > 0.0 and not moving:
+                self._torque_per_amp_at_zero_tension(wrist)   # ModelError if no current grips
                 return self._current_for_force_from_fit(force, gain, high)
             torque = force / gain if gain > 0.0 else np.zeros(shape)          # M needed (N*m)
         else:
@@ -387,16 +389,53 @@ class GripForceModel:
     CURRENT_FIT_TOLERANCE = 5e-14
     CURRENT_FIT_INTERVALS, CURRENT_FIT_DEGREE = 2048, 3     # cubics: the gather costs a pass per row
 
+    def _rising_current(self) -> float:
+        """A current (A) safely below the peak of M(I) at zero wrist (or 2 max_current).
+
+        Two nodes short of the last rising node of a 2049-node grid over [0, 2 max_current],
+        refined on a second grid up to the first falling node when the peak comes early
+        (vectorised exact torque, ~0.3 ms). 0 when M does not rise.
+        """
+        if self._rising is not None:
+            return self._rising
+        high = 2.0 * max(self.params.max_current, 1e-3)                     # A
+        zero = np.zeros(())
+        for _ in range(2):
+            grid = np.linspace(0.0, high, 2049)                                # A
+            with np.errstate(all='ignore'):
+                falling = np.flatnonzero(~(np.diff(self._torque_array(grid, zero)) > 0.0))
+            if falling.size == 0:
+                self._rising = high
+                return high
+            if falling[0] >= 256:
+                break
+            high = grid[falling[0] + 1]                                        # the peak is before this
+        self._rising = float(grid[max(falling[0] - 2, 0)])
+        return self._rising
+
     def _efficiency_fit_built(self):
-        """(coefficients in F0 (increasing powers, N^-k), top F0 (N)) of lambda_n(F0); None if no fit."""
+        """(coefficients in F0 (increasing powers, N^-k), top F0 (N)) of lambda_n(F0); None if no fit.
+
+        Over F0 at [0, 2 max_current], or if no polynomial of degree <= 16 fits there
+        (steep tension gains), over [0, 2 I_rising] and [0, I_rising] (:meth:`_rising_current`).
+        """
         if self._efficiency_fit is None:
-            top = self.tension_per_amp * 2.0 * max(self.params.max_current, 1e-3)   # F0 at twice max current (N)
             zero = np.zeros(())
 
             def exact(f0):
                 return self._chain_efficiency(np.asarray(f0, float), zero)
-            coefficients = _tables.fit_polynomial(exact, 0.0, top, self.EFFICIENCY_FIT_TOLERANCE)
-            self._efficiency_fit = (False,) if coefficients is None else (coefficients, top)
+            full = 2.0 * max(self.params.max_current, 1e-3)                    # A
+            rising = self._rising_current()
+            self._efficiency_fit = (False,)
+            for current in sorted({full, min(full, 2.0 * rising), rising}, reverse=True):
+                if current <= 0.0:
+                    continue
+                top = self.tension_per_amp * current                            # N
+                with np.errstate(all='ignore'):
+                    coefficients = _tables.fit_polynomial(exact, 0.0, top, self.EFFICIENCY_FIT_TOLERANCE)
+                if coefficients is not None:
+                    self._efficiency_fit = (coefficients, top)
+                    break
         return None if len(self._efficiency_fit) == 1 else self._efficiency_fit
 
     def _efficiency_from_fit(self, drum_tension, out):
@@ -423,7 +462,10 @@ class GripForceModel:
         return out
 
     def _current_fit_built(self):
-        """PiecewisePolynomial of I(M) / (M / step) (A) over [0, M near the peak); None if none.
+        """PiecewisePolynomial of I(M) / (M / step) (A) over [0, M(I_rising)); None if none.
+
+        ``I_rising`` from :meth:`_rising_current`; the table may end earlier (the first
+        interval that misses :attr:`CURRENT_FIT_TOLERANCE`).
 
         Divided by the position ``M / step`` (intervals, -), not by M: the caller has
         the position at hand and multiplies by it (``I = fit * position``).
@@ -431,16 +473,20 @@ class GripForceModel:
         if self._current_fit is None:
             per_amp = self._torque_per_amp_at_rest
             fit = None
-            if self._start_table is not None and per_amp > 0.0:
-                top = float(self._start_table[0][-1]) * per_amp      # M at the table's last current (N*m)
-                zero = np.zeros(())
-
+            rising = self._rising_current() if per_amp > 0.0 else 0.0   # A
+            if rising > 0.0:
+                top = self._torque_scalar(rising, 0.0)                   # N*m, clear of the peak
                 step = top / self.CURRENT_FIT_INTERVALS                  # N*m
+                zero = np.zeros(())
 
                 def exact(torque):
                     return self._solve_current_array(torque, zero, per_amp) / (torque / step)
-                fit = _tables.fit_piecewise(exact, top, self.CURRENT_FIT_INTERVALS, self.CURRENT_FIT_DEGREE,
-                                            self.CURRENT_FIT_TOLERANCE)
+                try:
+                    with np.errstate(all='ignore'):
+                        fit = _tables.fit_piecewise(exact, top, self.CURRENT_FIT_INTERVALS,
+                                                    self.CURRENT_FIT_DEGREE, self.CURRENT_FIT_TOLERANCE)
+                except ModelError:          # the exact solve failed somewhere: no table, exact path
+                    fit = None
             self._current_fit = (False,) if fit is None else (fit,)
             if fit is not None:
                 self._current_rows = fit.coefficients.T.tolist()
@@ -559,8 +605,8 @@ class GripForceModel:
                 break
             value = self._torque_array(guess, w) - need
             step_size = 1e-7 * guess
-            slope = (self._torque_array(guess + step_size, w) - need - value) / step_size
-            with np.errstate(divide='ignore', invalid='ignore'):
+            with np.errstate(divide='ignore', invalid='ignore'):     # 0/0 fails the slope test below
+                slope = (self._torque_array(guess + step_size, w) - need - value) / step_size
                 step = -value / slope
             new = guess + step
             failed = ~(slope > 0.0) | ~(new > 0.0)
@@ -680,16 +726,23 @@ class GripForceModel:
         newton = self._newton_current(need, wrist_angle, guess)
         if newton is not None:
             return newton
-        low, high = 0.0, guess
+        low, high, before = 0.0, guess, 0.0
         for _ in range(200):
             value = self._torque_scalar(high, wrist_angle)
             if value >= need:
                 break
-            low, previous = high, value
+            before, low, previous = low, high, value
             high *= 1.5
             if self._torque_scalar(high, wrist_angle) <= previous:
-                raise ModelError(f'drive torque {need:.4g} N*m is beyond the largest this instrument '
-                                 f'reaches with tension-dependent friction ({previous:.4g} N*m)')
+                # the 1.5x step passed the peak of M: it lies in (before, high); the torque
+                # is reachable if the peak reaches it (then on the rising side, [0, peak])
+                peak = minimize_scalar(lambda i: -self._torque_scalar(i, wrist_angle), bounds=(before, high),
+                                       method='bounded', options={'xatol': 1e-13 * high})
+                if -peak.fun < need:
+                    raise ModelError(f'drive torque {need:.4g} N*m is beyond the largest this instrument '
+                                     f'reaches with tension-dependent friction ({-peak.fun:.4g} N*m)')
+                low, high = 0.0, float(peak.x)
+                break
         else:  # pragma: no cover - guarded by the monotonicity check
             raise ModelError(f'drive torque {need:.4g} N*m not reached')
         return brentq(lambda i: self._torque_scalar(i, wrist_angle) - need, low, high,
