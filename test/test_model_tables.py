@@ -189,3 +189,20 @@ def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max
     assert np.all(np.abs(m.inverse(force, 0.1, 0.0, 'needle') - expect) <= allowed)
     scalar = np.array([m.current_for_force_scalar(float(f), 0.1, 0.0) for f in force])
     assert np.all(np.abs(scalar - expect) <= allowed)
+
+
+def test_scalar_solve_reaches_torques_just_below_the_peak():
+    """Regression: the 1.5x bracket step could jump the peak of M(I) and call a reachable torque unreachable."""
+    m = GripForceModel(make_params().replace(pulley_friction_coefficient=0.19615398009993856,
+                                             tension_friction_gain=0.00026278885991678537,
+                                             max_current=4.986189182156594))
+    from scipy.optimize import minimize_scalar
+    top = minimize_scalar(lambda i: -m._torque_scalar(i, 0.0), bounds=(1.0, 1.3), method='bounded',
+                          options={'xatol': 1e-12})
+    peak, at_peak = -top.fun, top.x                                         # N*m, A (~1.16 A)
+    for fraction in (1 - 1e-3, 1 - 6e-6, 1 - 1e-7, 1 - 1e-9):               # the old code failed from ~1 - 6e-6
+        current = m._solve_current(fraction * peak, 0.0, 0.0)
+        assert m._torque_scalar(current, 0.0) == pytest.approx(fraction * peak, rel=1e-13)
+        assert current <= at_peak + 1e-9                                    # the rising side
+    with pytest.raises(ModelError, match='beyond the largest'):
+        m._solve_current(1.001 * peak, 0.0, 0.0)
