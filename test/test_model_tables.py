@@ -206,3 +206,15 @@ def test_scalar_solve_reaches_torques_just_below_the_peak():
         assert current <= at_peak + 1e-9                                    # the rising side
     with pytest.raises(ModelError, match='beyond the largest'):
         m._solve_current(1.001 * peak, 0.0, 0.0)
+
+
+def test_table_errors_and_their_figure(tmp_path):
+    from grip_force_ros.model.table_figure import plot_table_errors, table_errors
+    m = GripForceModel(FOUR)
+    errors = table_errors(m, np.linspace(0.01, 1.0, 60))
+    assert errors['efficiency'].max() <= m.EFFICIENCY_FIT_TOLERANCE
+    assert errors['inverse'].max() <= m.CURRENT_FIT_TOLERANCE
+    assert FOUR.max_current < errors['table_end_current'] < 1.0
+    assert np.all((errors['condition'] >= 1.0) & (errors['condition'] < 10.0))    # M concave, far from the peak
+    path = plot_table_errors('config/four_pulley_needle_driver.yaml', tmp_path / 'e.png', samples=40)
+    assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
