@@ -152,3 +152,25 @@ def test_scalar_inputs_keep_their_result_types():
             assert isinstance(value, np.float64)
         assert isinstance(r.efficiency, np.ndarray) and r.efficiency.shape == ()
         assert float(m.inverse(r.grip_force, 0.1, 0.2, 'needle')) == pytest.approx(0.3, rel=1e-12)
+
+
+@pytest.mark.parametrize('name', ['paper', 'four_pulley'])
+def test_velocity_and_shape_shortcuts_change_nothing(name):
+    """Float velocities skip the array check; other kinds of zero (and nonzero) give the same results."""
+    m = MODELS[name]()
+    current, wrist, jaw = inputs(3, (30,), (30,), ())
+    base = m.forward(current, wrist, jaw, 'rigid')
+    for zero in (0, np.float64(0.0), np.zeros(()), np.zeros(30), [0.0] * 30):
+        other = m.forward(current, wrist, jaw, 'rigid', zero, zero)
+        np.testing.assert_array_equal(other.jaw_torque, base.jaw_torque)
+    moving = m.forward(current, wrist, jaw, 'rigid', 12.0, -7.0).jaw_torque
+    for mv, jv in ((np.float64(12.0), np.float64(-7.0)), (np.full(30, 12.0), np.full(30, -7.0)), (12, -7)):
+        np.testing.assert_array_equal(m.forward(current, wrist, jaw, 'rigid', mv, jv).jaw_torque, moving)
+    assert np.all(np.isnan(m.forward(current, wrist, jaw, 'rigid', float('nan'), 0.0).jaw_torque))
+    force = base.grip_force
+    back = m.inverse(force, wrist, jaw, 'rigid')
+    np.testing.assert_array_equal(m.inverse(force, wrist, jaw, 'rigid', np.zeros(30), 0), back)
+    # shapes: (30,) with (1, 30) and (30, 1) broadcast as numpy does
+    grid = m.forward(current[None, :], wrist[:, None], jaw, 'rigid').grip_force
+    assert grid.shape == (30, 30)
+    np.testing.assert_allclose(np.diagonal(grid), base.grip_force, rtol=1e-15)
