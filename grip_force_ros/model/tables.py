@@ -143,9 +143,11 @@ class PiecewisePolynomial:
         scratch = np.empty((degree + 2,) + position.shape)
         rows, within = scratch[:degree + 1], scratch[degree + 1]
         np.subtract(position, index, out=within)                     # s in [0, 1) (-)
+        coefficients = self.coefficients
         for k in range(degree + 1):                                  # row by row: the fastest gather
-            # mode='wrap': an index out of range (a sample the caller replaces) wraps round
-            np.take(self.coefficients[k], index, out=rows[k], mode='wrap')
+            # mode='wrap': an index out of range (a sample the caller replaces) wraps round;
+            # the method, not np.take: ~1 us less a call
+            coefficients[k].take(index, out=rows[k], mode='wrap')
         value = rows[degree]
         for k in range(degree - 1, 0, -1):
             value *= within
