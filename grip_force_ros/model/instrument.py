@@ -135,8 +135,9 @@ class GripForceModel:
         self._torque_per_amp_at_rest = self.tension_per_amp * self._rn * (
             self._efficiency_at_rest - self.resistance_fraction)           # dM/dI at zero wrist (N*m/A)
         self._start_table = None if self.affine else self._current_table()   # see _starting_currents
-        # nonlinear but wrist-independent: lambda_n(F0) and I(M) are 1-D maps, fitted on
-        # first vectorised use (docs/model.md, speed; grip_force_ros.model.tables)
+        # nonlinear but wrist-independent: lambda_n(F0) and I(M) are 1-D maps, fitted
+        # (docs/model.md, speed; grip_force_ros.model.tables): I(M) now, lambda_n(F0) on
+        # the first vectorised forward
         self._one_dimensional = not self.affine and self.mu > 0.0 and not self._wrist_matters
         self._efficiency_fit = None               # (coefficients in F0, top F0 (N)), built lazily
         self._current_fit = None                  # PiecewisePolynomial of I(M) per position, see below
