@@ -135,8 +135,8 @@ class PiecewisePolynomial:
 
         Only meaningful for ``0 <= position < intervals``: elsewhere some interval's
         polynomial is evaluated (the caller replaces those samples). ``position``
-        is read only. One gather of ``degree + 1`` coefficient rows and Horner's rule
-        in one scratch block (one allocation, reused by the allocator from call to call).
+        is read only. One gather of ``degree + 1`` coefficient rows and Horner's rule,
+        both in one scratch block (one allocation, not ``degree + 2``).
         """
         degree = self.coefficients.shape[0] - 1
         index = position.astype(np.intp)                             # truncation = floor for x >= 0
@@ -171,7 +171,7 @@ def fit_piecewise(exact: ArrayMap, top: float, intervals: int, degree: int,
     top : float
         End of the range (units of x), > 0.
     intervals, degree : int
-        Grid size and per-interval degree.
+        Grid size and per-interval degree (>= 1).
     tolerance : float
         Largest relative error accepted (-).
 
@@ -180,6 +180,8 @@ def fit_piecewise(exact: ArrayMap, top: float, intervals: int, degree: int,
     PiecewisePolynomial or None
         None when even the first interval misses the tolerance.
     """
+    if degree < 1 or intervals < 1 or not top > 0.0:
+        raise ValueError(f'need degree >= 1, intervals >= 1, top > 0; got {degree}, {intervals}, {top}')
     step = top / intervals
     count = 2 * (degree + 1)
     nodes = 0.5 + 0.5 * np.cos(np.pi * (np.arange(count) + 0.5) / count)       # in (0, 1)
