@@ -6,12 +6,17 @@ Steps the plant in real time: a timer at ``publish_rate`` (1 kHz) advances the
 simulation by the time actually elapsed since the last step (capped at
 :data:`MAX_STEP`, so a stalled process slows the simulation instead of
 integrating one huge step), with the last accepted current command held.
-Publishes after each step, in this order (the actuator state first: the
-controller steps on it, so the other two are not on the loop's path):
+Publishes each step's measurements, all with the same stamp (the time of the
+measurement), in this order:
     instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
                                       effort = measured current (A)
+        at once: the controller steps on it;
     instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s)
     grip/measured_force               force.z = load-cell grip force (N)
+        when the current command answering that state has come in (or at the next
+        step, if none came), so that they do not compete with the loop for the CPU
+        while it is closing (2 cores on the bench machine: in an interleaved A/B
+        this took ~40 us off the median round trip, BENCHMARKS.md).
 and its status on ``/diagnostics`` at 1 Hz, with the loop's round trip over the
 last second: a command that carries the stamp of an actuator state it answers
 (the controller's convention) took arrival minus stamp, both on this node's clock
@@ -77,6 +82,7 @@ class SimInstrumentNode(Node):
                                         velocity=[0.0], effort=[0.0])
         self._force_msg = WrenchStamped()
         self._force_msg.header.frame_id = topics.JAW_FRAME
+        self._sensors_pending = False    # joint state and force of the last step not yet sent
 
         self._last = time.monotonic()
         self._started = self._last
@@ -102,6 +108,8 @@ class SimInstrumentNode(Node):
             return
         self.current_command = current
         self.commands += 1
+        if self._sensors_pending:
+            self._publish_sensors()
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, params, changed) -> None:
@@ -123,6 +131,8 @@ class SimInstrumentNode(Node):
         if dt > MAX_STEP:
             dt = MAX_STEP
             self.capped_steps += 1
+        if self._sensors_pending:      # no answer to the previous state came: publish them now
+            self._publish_sensors()
         self.sim.step(self.current_command, dt)
         m = self.sim.measure()
         now = self.get_clock().now()
@@ -138,12 +148,16 @@ class SimInstrumentNode(Node):
         js.header.stamp = stamp
         js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
         js.velocity[1] = m.jaw_velocity
-        self._joint_pub.publish(js)
-
         force = self._force_msg
         force.header.stamp = stamp
         force.wrench.force.z = m.grip_force
-        self._force_pub.publish(force)
+        self._sensors_pending = True   # sent once the command answering this state is in
+
+    def _publish_sensors(self) -> None:
+        """Joint state and load cell of the last step (stamped with the actuator state's time)."""
+        self._sensors_pending = False
+        self._joint_pub.publish(self._joint_msg)
+        self._force_pub.publish(self._force_msg)
 
     def _publish_diagnostics(self) -> None:
         params = self._param.params
