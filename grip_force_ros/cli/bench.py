@@ -88,7 +88,9 @@ def render(result: dict) -> str:
                      f"with the input setters {_f(model['step_and_inputs_share'] * 100)} %")
         for path, r in model.get('other_configs', {}).items():
             lines.append(f"  {path}: forward {_f(r['forward_ratio'])} x, inverse {_f(r['inverse_ratio'])} x"
-                         + ('' if r['affine'] else ' (nonlinear: inverse solved per sample)'))
+                         + ('' if r['affine'] else
+                            ' (nonlinear: fitted tables, checked against the exact model)'
+                            if r.get('fitted') else ' (nonlinear: exact solve per sample)'))
     diag = result.get('diagnosis')
     if diag:
         lines.append(f"diagnosis ({diag['minutes']:g} min at 1 kHz, {diag['rows']} rows, "
