@@ -188,3 +188,30 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
     zero = type(stamp)()                                            # unstamped driver
     servo, _ = deliver(zero)
     assert servo.sec > 0
+
+
+def test_command_at_once_forces_once_the_loop_has_closed(node):
+    """The current command goes out in the step; estimated and target force when the
+    instrument's joint state comes in, or before the next step's command."""
+    ctl, clock, steps = node
+    log = []
+
+    class Recorder:
+        def __init__(self, name):
+            self.name = name
+
+        def publish(self, msg):
+            log.append(self.name)
+
+    ctl._servo_pub, ctl._estimate_pub, ctl._target_pub = (
+        Recorder('command'), Recorder('estimate'), Recorder('target'))
+    _state(ctl)
+    assert log == ['command']
+    ctl._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
+                                   [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
+    assert log == ['command', 'estimate', 'target']
+    clock.now += ctl._period
+    _state(ctl)
+    clock.now += ctl._period
+    _state(ctl)                                                     # no joint state in between
+    assert log[3:] == ['command', 'estimate', 'target', 'command']
