@@ -27,17 +27,26 @@ def _command(stamp, value=0.1):
         effort=[value])
 
 
+def _target(stamp, force=1.0):
+    sec = int(stamp)
+    return types.SimpleNamespace(header=types.SimpleNamespace(
+        stamp=types.SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))),
+        wrench=types.SimpleNamespace(force=types.SimpleNamespace(z=force)))
+
+
 def test_recorder_bins_minutes_and_joins_them():
     rec = _Recorder(1e-3, start=0.0)
-    clock = iter(np.arange(0.0, 130.0, 0.01))       # 13 000 commands over 130 s (monotonic)
-    stamps = np.arange(13_000) * 1e-3 + 1000.0       # controller stamps, 1 ms apart
+    clock = iter(np.repeat(np.arange(0.0, 130.0, 0.01), 2))   # 13 000 steps over 130 s (monotonic;
+    #                                                             read by on_step and on_command)
+    stamps = np.arange(13_000) * 1e-3 + 1000.0       # controller step stamps, 1 ms apart
     stamps[7000:] += 0.004                           # one 5 ms gap in the second minute
     import grip_force_ros.faults.soak as soak
     real = soak.time.monotonic
     soak.time.monotonic = lambda: next(clock)
     try:
         for i, s in enumerate(stamps):
-            rec.on_command(_command(float(s), 0.2 if i % 2 else float('nan')))
+            rec.on_step(_target(float(s)))
+            rec.on_command(_command(float(s) - 2e-4, 0.2 if i % 2 else float('nan')))
     finally:
         soak.time.monotonic = real
     rec.finish()

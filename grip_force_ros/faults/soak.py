@@ -1,8 +1,9 @@
 """Soak: the closed loop at 1 kHz for minutes, watching memory, timing drift and missed periods.
 
 ``master`` (repeating needle grasp), ``sim_instrument`` and ``controller`` run as separate
-processes, as in the demo. A monitor node in this process records the header stamp of every
-current command (the controller's clock when its timer ran) and the controller's
+processes, as in the demo. A monitor node in this process records every current command,
+the header stamp of every target force (the controller's clock at each control step; the
+command itself carries the stamp of the actuator state it answers) and the controller's
 /diagnostics; ``psutil`` samples the resident memory (RSS) and CPU of each process.
 
 Reported (:func:`run_soak`):
@@ -10,7 +11,7 @@ Reported (:func:`run_soak`):
 * memory: RSS of each process after the warm-up and at the end (MB), and the slope of a
   straight-line fit over all samples after the warm-up (MB/min);
 * latency drift: controller period statistics (mean, std, p99, max, ms) of the first and
-  the last full minute, from the command stamps;
+  the last full minute, from the step stamps;
 * missed periods: command intervals longer than 1.5 control periods (per minute and in
   total), the controller's own ``late_periods`` counter, commands that never arrived
   (stamp gaps beyond one period that the controller did not report as late are counted
@@ -59,13 +60,13 @@ def _period_stats(intervals: np.ndarray, period: float) -> dict:
 
 
 class _Recorder:
-    """Command stamps and diagnostics, binned per minute (callbacks of the monitor node)."""
+    """Step stamps, commands and diagnostics, binned per minute (callbacks of the monitor node)."""
 
     def __init__(self, period: float, start: float):
         self.period = period
         self.start = start            # monotonic time when measuring starts
         self.lock = threading.Lock()
-        self.stamps = array.array('d')  # s, command stamps of the current minute
+        self.stamps = array.array('d')  # s, step stamps (target force) of the current minute
         self.minutes: list[dict] = []  # closed minutes
         self.last_stamp: float | None = None
         self.minute_index = 0
@@ -77,16 +78,21 @@ class _Recorder:
         self.max_abs_command = 0.0
 
     def on_command(self, msg) -> None:
-        now = time.monotonic()
-        if now < self.start:
+        if time.monotonic() < self.start:
             return
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         value = msg.effort[0] if len(msg.effort) else math.nan
         self.commands += 1
         if not math.isfinite(value):
             self.non_finite += 1
         else:
             self.max_abs_command = max(self.max_abs_command, abs(value))
+
+    def on_step(self, msg) -> None:
+        """A target force: one per control step, stamped with the controller's clock at it."""
+        now = time.monotonic()
+        if now < self.start:
+            return
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         minute = int((now - self.start) // 60.0)
         with self.lock:
             if minute != self.minute_index:
@@ -140,6 +146,7 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
     import psutil
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
 
     from grip_force_ros import topics
@@ -160,6 +167,7 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
     with RosRunner(executor_kind=os.environ.get('GRIP_FORCE_SOAK_MONITOR_EXECUTOR', 'events')) as ros:
         node = ros.plain_node('soak_monitor')
         node.create_subscription(JointState, topics.SERVO_CURRENT, rec.on_command, qos)
+        node.create_subscription(WrenchStamped, topics.TARGET_FORCE, rec.on_step, qos)
         node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, rec.on_diagnostics, 10)
         ros.start()
         procs = {
