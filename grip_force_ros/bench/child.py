@@ -82,11 +82,16 @@ class _Window:
         self.n_latencies = 0
         self.received = 0
         self.sent = 0
+        self.opened_ns = None     # wall clock (ns) when the window opened
         self.result: dict = {}
 
     @property
     def measuring(self) -> bool:
         return self.state == 'measure'
+
+    def counts(self, stamp_ns: int) -> bool:
+        """Whether the answer to a state stamped ``stamp_ns`` (wall clock) is in the window."""
+        return self.state == 'measure' and stamp_ns >= self.opened_ns
 
     def saw_answer(self) -> None:
         if self.state == 'discover':
@@ -114,6 +119,9 @@ class _Window:
                 gc.collect()
                 gc.freeze()
             self.state, self.t_state = 'measure', now
+            # only states published from now on count (an answer to an earlier one may
+            # have waited for the collection above)
+            self.opened_ns = time.time_ns()
             print('START', flush=True)
         elif self.state == 'measure' and now - self.t_state >= self.seconds:
             self.state = 'done'
@@ -163,7 +171,7 @@ class Ping(Node):
         lat = time.time_ns() - stamp
         w = self.window
         w.saw_answer()
-        if w.measuring:
+        if w.counts(stamp):
             w.record_latency(lat)
             if self.n_answered < w.capacity:
                 self.answered[self.n_answered] = stamp

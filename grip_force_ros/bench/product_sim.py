@@ -45,7 +45,7 @@ class _RecordingLoopLatency(LoopLatency):
         round_trip = super().command_received(stamp_ns, arrival_ns)
         w = self.window
         w.saw_answer()
-        if not w.measuring:
+        if not w.counts(stamp_ns):
             return round_trip
         if round_trip is None:
             self.other_in_window += 1
