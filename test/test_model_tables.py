@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from grip_force_ros.model import GripForceModel, ModelError, tables
 from grip_force_ros.model import friction
@@ -165,6 +165,7 @@ def test_samples_outside_the_tables_raise_no_numpy_warnings():
 @settings(max_examples=25, deadline=None)
 @given(mu=st.floats(0.03, 0.3), gain=st.floats(-5.0, -1.3), max_current=st.floats(0.05, 5.0),
        seed=st.integers(0, 2 ** 31))
+@example(mu=0.2397755385726311, gain=-3.0, max_current=0.5, seed=0)
 def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max_current, seed):
     """Random friction, tension gain (1e-5..0.05 1/N) and current range: tables or not, the same answers."""
     m = GripForceModel(make_params().replace(pulley_friction_coefficient=mu, tension_friction_gain=10.0 ** gain,
@@ -185,7 +186,10 @@ def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max
     # M / (I dM/dI) times as much, for the exact solvers as for the table
     slope = np.array([(m._torque_scalar(i * (1 + 1e-7), 0.1) - m._torque_scalar(i, 0.1)) / (i * 1e-7) for i in expect])
     condition = force * m._tip / (expect * slope)
-    allowed = 1e-13 * (1.0 + condition) * expect
+    # plus a floor of 1e-14 of the current range: the cubics are fitted over the whole range,
+    # so near 0 A their error is a few ulps of max_current, not of the sample (found by
+    # hypothesis: 8e-16 A at 2.7 mA with max_current 0.5 A)
+    allowed = 1e-13 * (1.0 + condition) * expect + 1e-14 * max_current
     assert np.all(np.abs(m.inverse(force, 0.1, 0.0, 'needle') - expect) <= allowed)
     scalar = np.array([m.current_for_force_scalar(float(f), 0.1, 0.0) for f in force])
     assert np.all(np.abs(scalar - expect) <= allowed)
