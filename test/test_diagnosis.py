@@ -160,9 +160,10 @@ def test_jaw_torque_logs_are_compared_in_newton_metres():
     assert result['verdict']['gap_after'] < 0.3 * result['verdict']['gap_before']
 
 
-def _sliding_rig(seed, seconds=40.0, dt=5e-3, friction=0.06, load_levels=(0.01, 0.03, 0.05)):
+def _sliding_rig(seed, seconds=40.0, dt=5e-3, friction=0.06, load_levels=(0.01, 0.03, 0.05), spring=None):
     """A jaw driven along a sine against a constant load per log, through Coulomb friction
-    larger than the load: the current flips sign at every stroke and sticks at reversals."""
+    larger than the load: the current flips sign at every stroke and sticks at reversals.
+    ``spring(motor_angle)``: an extra jaw torque (N*m) the drive must supply at each angle."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(seconds / dt)) * dt
     motor = 0.5 - 0.5 * np.cos(2 * np.pi * t / 5.0)
@@ -171,7 +172,7 @@ def _sliding_rig(seed, seconds=40.0, dt=5e-3, friction=0.06, load_levels=(0.01, 
     per_amp = float(_nominal({**_inputs(0, 1.0), 'current': np.full(200, 1.0)}, 'jaw_torque')[0])
     # the drive torque while sliding: the load plus the friction against the motion; while stuck the
     # current moves across the friction band (here: a ramp between the branches)
-    drive = load + friction * slide
+    drive = load + friction * slide + (0.0 if spring is None else spring(motor))
     current = drive / per_amp + rng.normal(0, 0.002, t.size)
     return {'t': t, 'current': current, 'motor_angle': motor, 'wrist_angle': np.zeros(t.size),
             'jaw_angle': 0.9 * motor, 'object': np.full(t.size, 'rigid'),
@@ -193,6 +194,77 @@ def test_jaw_torque_rig_is_loaded_through_the_stroke_and_names_pivot_friction():
     assert coulomb['params']['friction_torque_grid']['direction_state_of'] == 'motor_angle'
     assert coulomb['params']['force_step']['value'] == pytest.approx(-0.06, rel=0.2)
     assert v['gap_after_first'] < 0.4 * v['gap_before']                   # measured 35 -> 11 mN*m
+
+
+def _spring(motor):
+    """A spring over the stroke (N*m at the jaw, motor angle in rad): cable pretension and jaw."""
+    return 0.01 - 0.02 * (motor - 0.5) ** 2 / 0.25 + 0.005 * (motor - 0.5) / 0.5
+
+
+def _stroke_log(seed, spring=None):
+    """The sliding rig's motion with the model's own torque, plus ``spring(motor)`` and noise."""
+    log = _sliding_rig(seed)
+    rng = np.random.default_rng(seed + 100)
+    y = _nominal(log, 'jaw_torque') + (0.0 if spring is None else spring(log['motor_angle']))
+    return _with(log, y + rng.normal(0, 1e-3, y.size), 'jaw_torque')
+
+
+def test_position_spring_over_the_stroke_is_named_with_its_shape():
+    """A jaw torque that depends on the angle only (cable pretension, jaw spring): named, its
+    Legendre coefficients over the training stroke and peak-to-peak recovered; gone -> none."""
+    train = [_stroke_log(s, _spring) for s in (21, 22, 23, 24)]
+    test = [_stroke_log(s, _spring) for s in (25, 26)]
+    result = diagnose(train, test, params=PARAMS)
+    v = result['verdict']
+    assert v['effects'] == ['position_spring']
+    params = next(r for r in result['ranking'] if r['effect'] == 'position_spring')['params']
+    assert params['spring_angle']['value'] == 'motor_angle'
+    # the stroke 0..1 rad maps to x = 2 m - 1: spring = 0.01 - 0.02 x^2 + 0.005 x
+    # = (0.01 - 0.02/3) P0 + 0.005 P1 - (0.04/3) P2 (N*m)
+    for k, want in enumerate((0.01 - 0.02 / 3, 0.005, -0.04 / 3)):
+        coef = params[f'spring_legendre_{k}']
+        assert coef['value'] == pytest.approx(want, abs=1e-3)
+        assert coef['std'] < 1e-3
+    x = np.linspace(0.0, 1.0, 101)
+    assert params['spring_peak_to_peak']['value'] == pytest.approx(np.ptp(_spring(x)), rel=0.05)
+    assert v['gap_after'] < 0.2 * v['gap_before']
+    plain = diagnose([_stroke_log(s) for s in (21, 22, 23, 24)], [_stroke_log(s) for s in (25, 26)], params=PARAMS)
+    assert plain['verdict']['effects'] == ['none']
+
+
+def test_position_spring_is_not_named_without_a_spring():
+    """The spring's three columns do not explain friction alone, an offset or noise: on the plain
+    sliding rig (friction, no spring) and on grip logs with an offset or only noise it is not named."""
+    result = diagnose([_sliding_rig(s) for s in (21, 22, 23, 24)], [_sliding_rig(s) for s in (25, 26)],
+                      params=PARAMS)
+    assert 'position_spring' not in result['verdict']['effects']
+    log = _inputs(7)
+    rng = np.random.default_rng(8)
+    noise = diagnose([_with(log, 1.15 * _nominal(log) + rng.normal(0, 0.05, log['t'].size))], params=PARAMS)
+    assert noise['verdict']['effects'] == ['none']
+    offset = diagnose([_with(log, _nominal(log) + 0.4 + rng.normal(0, 0.02, log['t'].size))], params=PARAMS)
+    assert offset['verdict']['effect'] == 'force_sensor_offset'
+    assert 'position_spring' not in offset['verdict']['effects']
+
+
+def test_position_spring_columns_are_legendre_over_the_training_stroke():
+    from grip_force_ros.diagnosis.effects import EFFECTS, stroke_coordinate, stroke_range
+    motor = np.linspace(0.2, 1.2, 1001)
+    assert stroke_range(motor) == pytest.approx((0.205, 1.195), abs=1e-3)
+    assert stroke_range(np.full(10, 0.3)) == pytest.approx((0.2995, 0.3005))     # a still angle: no 1/0
+    x = stroke_coordinate(motor, (0.2, 1.2))
+    assert x[0] == pytest.approx(-1.0) and x[-1] == pytest.approx(1.0)
+    n = motor.size
+    frame = {'motor': motor, 'jaw': 0.9 * motor, 'nominal': np.ones(n), 'contact': np.r_[np.zeros(1), np.ones(n - 1)],
+             'gain': np.full(n, 3.0), 'stroke': {'motor': (0.2, 1.2), 'jaw': (0.18, 1.08)}}
+    design = EFFECTS['position_spring'].build(frame, 'motor_angle')
+    assert len(design.force_cols) == 3 and not design.angle_cols
+    np.testing.assert_allclose(design.force_cols[0][1:], 3.0)                     # G * P0
+    np.testing.assert_allclose(design.force_cols[1][1:], 3.0 * x[1:])             # G * P1
+    np.testing.assert_allclose(design.force_cols[2][1:], 3.0 * 0.5 * (3 * x[1:] ** 2 - 1))
+    assert all(c[0] == 0.0 for c in design.force_cols)                           # no load, no spring torque
+    jaw = EFFECTS['position_spring'].build(frame, 'jaw_angle')
+    np.testing.assert_allclose(jaw.force_cols[1][1:], 3.0 * x[1:], atol=1e-12)   # same stroke, mapped alike
 
 
 def test_json_contract_and_split_by_files():

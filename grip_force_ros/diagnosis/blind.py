@@ -18,6 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE
+from grip_force_ros.sim.effects import EFFECT_NAMES as SIM_EFFECT_NAMES
+
+#: Effects the blind set holds: those of the diagnosis vocabulary the sim can generate. The
+#: diagnosis still considers every effect of its vocabulary on every log (a verdict naming an
+#: effect outside this set is a false positive like any other).
+BLIND_EFFECTS = tuple(name for name in EFFECT_NAMES if name in SIM_EFFECT_NAMES)
 
 #: Effects seen only in the jaw-angle channel: their shrink is that of the angle gap.
 ANGLE_ONLY = tuple(name for name, e in EFFECTS.items() if not e.force_params and e.angle_params)
@@ -59,7 +65,7 @@ def cases(quick: bool = False, seed: int = 0, none_logs: int | None = None) -> l
     out = []
     k = seed * 1000
     levels = (1,) if quick else (0, 1, 2)
-    for name in EFFECT_NAMES:
+    for name in BLIND_EFFECTS:
         for lv in levels:
             out.append(BlindCase(((name, STRENGTHS[name][lv]),), k, EXTRAS.get(name, ())))
             k += 1

@@ -23,12 +23,19 @@ grid; the coefficients are linear least squares. Each effect's shape:
 | sensor_delay | (base = nominal(t - d)) | - | d |
 | torque_constant_drift | nominal * lowpass_tau(current^2)/I_max^2 (heat) | - | tau |
 | force_sensor_offset | 1 | - | - |
+| position_spring | contact * G * P_k(x), k = 0..2 | - | angle (motor or jaw) |
 
 ``dir(x)`` is a play operator output in [-1, 1]: the direction of the last motion
 of ``x`` with memory (stiction, dead band). Grids of the two friction effects hold
 (source, width) pairs: the drive torque / log tension (a jaw held in contact, the sim's
 pivot) or the motor angle (a jaw sliding under its load, as on a torque rig, where the
 friction direction persists through stick and reversals while the current swings).
+
+``position_spring`` is a jaw torque that depends on where the drive is, not on how it
+moves: cable pretension and the jaw's own return spring. ``P_k`` are Legendre
+polynomials of ``x`` in [-1, 1], the motor (drum) or jaw angle mapped over the stroke the
+training logs cover (:func:`stroke_range`, set on each frame by the engine); ``P_0`` is the
+spring's torque at mid-stroke, so on a log loaded everywhere it also holds a constant.
 """
 from __future__ import annotations
 
@@ -42,7 +49,7 @@ from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play
 #: The DESIGN.md vocabulary (``none`` is the verdict when no effect is needed).
 EFFECT_NAMES = ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
                 'tension_dependent_friction', 'viscoelastic_creep', 'sensor_delay',
-                'torque_constant_drift', 'force_sensor_offset')
+                'torque_constant_drift', 'force_sensor_offset', 'position_spring')
 NONE = 'none'
 
 
@@ -66,6 +73,8 @@ class Effect:
     angle_params: tuple = ()
     #: physical meaning of each coefficient: (name, unit, transform(coef, gain))
     describe: tuple = ()
+    #: derived figures of the fitted effect: summary(force_coefs, grid_value) -> {name: (value, unit)}
+    summary: Callable | None = None
 
     @property
     def n_params(self) -> int:
@@ -161,6 +170,54 @@ def _offset(f, _):
     return Design(f['nominal'], [np.ones_like(f['nominal'])])
 
 
+#: Angle signals a position spring may follow (frame key of each).
+SPRING_ANGLES = {'motor_angle': 'motor', 'jaw_angle': 'jaw'}
+#: Highest Legendre order of the position spring (P_0..P_SPRING_ORDER: SPRING_ORDER + 1 columns).
+SPRING_ORDER = 2
+#: Share of the samples left outside the stroke at each end (robust to noise and outliers).
+STROKE_QUANTILE = 0.005
+
+
+def stroke_range(angles: np.ndarray) -> tuple[float, float]:
+    """The stroke an angle covers (rad): its STROKE_QUANTILE and 1 - STROKE_QUANTILE quantiles.
+
+    A stroke narrower than 1 mrad is widened to 1 mrad about its middle (a jaw that never
+    moves leaves the spring a constant, not a division by zero).
+    """
+    lo, hi = (float(q) for q in np.quantile(angles, [STROKE_QUANTILE, 1.0 - STROKE_QUANTILE]))
+    if hi - lo < 1e-3:
+        mid = 0.5 * (lo + hi)
+        lo, hi = mid - 5e-4, mid + 5e-4
+    return lo, hi
+
+
+def stroke_coordinate(angle: np.ndarray, stroke: tuple[float, float]) -> np.ndarray:
+    """``angle`` (rad) mapped to [-1, 1] over ``stroke`` = (low, high) rad (beyond it: outside)."""
+    lo, hi = stroke
+    return 2.0 * (np.asarray(angle, float) - lo) / (hi - lo) - 1.0
+
+
+def _spring(f, source):
+    key = SPRING_ANGLES[source]
+    # the engine sets the stroke of the training logs on every frame, so that one spring
+    # means one torque per angle across logs; a frame alone uses its own stroke
+    stroke = f.get('stroke', {}).get(key) or stroke_range(f[key])
+    x = stroke_coordinate(f[key], stroke)
+    legendre = np.polynomial.legendre.legvander(x, SPRING_ORDER)
+    # jaw torque of the spring (N*m) -> measured column: G converts it to grip force (1 for torque)
+    scale = f['contact'] * f['gain']
+    return Design(f['nominal'], [scale * legendre[:, k] for k in range(SPRING_ORDER + 1)])
+
+
+def spring_summary(coefs, _grid_value=None) -> dict:
+    """Peak-to-peak (N*m) and the ends (N*m at x = -1, +1) of a fitted spring over its stroke."""
+    x = np.linspace(-1.0, 1.0, 201)
+    torque = np.polynomial.legendre.legval(x, np.asarray(coefs, float))
+    return {'spring_peak_to_peak': (float(np.ptp(torque)), 'N*m'),
+            'spring_at_stroke_low': (float(torque[0]), 'N*m'),
+            'spring_at_stroke_high': (float(torque[-1]), 'N*m')}
+
+
 def _rel(coef, gain):
     return coef / gain if gain else float('nan')
 
@@ -197,4 +254,8 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ('gain_loss',), (), (('gain_loss', '- (at full heat)', lambda c, g: -_rel(c, g)),)),
     Effect('force_sensor_offset', (None,), None, '', _offset,
            ('offset',), (), (('offset', 'unit of y', lambda c, g: c),)),
+    Effect('position_spring', tuple(SPRING_ANGLES), 'spring_angle', '- (which angle the spring follows)',
+           _spring, tuple(f'spring_legendre_{k}' for k in range(SPRING_ORDER + 1)), (),
+           tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c) for k in range(SPRING_ORDER + 1)),
+           spring_summary),
 )}

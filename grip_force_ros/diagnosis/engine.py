@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE
+from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE, SPRING_ANGLES, stroke_range
 from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, OBJECT_CODES, DiagnosisError, build_frame,
                                             load_decimated, measured_of)
 
@@ -314,6 +314,47 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
     return out
 
 
+def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, gain: float,
+              unit: str) -> dict:
+    """The fitted parameters of one effect with their physical meaning: its coefficients (force
+    columns, then angle columns) and stds, any derived figures, and its grid value."""
+    out = {}
+    for (pname, punit, transform), coef, std in zip(
+            effect.describe, list(force_coefs) + list(angle_coefs), list(force_stds) + list(angle_stds)):
+        val = float(transform(float(coef), gain))
+        scale = abs(val / coef) if coef else 1.0
+        out[pname] = {'value': val, 'std': float(std) * scale, 'unit': punit.replace('unit of y', unit)}
+    if effect.summary is not None:
+        for sname, (sval, sunit) in effect.summary(force_coefs[:len(effect.force_params)], value).items():
+            out[sname] = {'value': sval, 'std': None, 'unit': sunit, 'note': 'derived from the fitted coefficients'}
+    if effect.grid_name and isinstance(value, tuple):
+        # (which signal the direction state follows, its width)
+        source, width = value
+        out[effect.grid_name] = {'value': width, 'std': None, 'direction_state_of': source,
+                                 'unit': 'rad' if source == 'motor_angle' else
+                                 ('N*m' if source == 'drive_torque' else '-'),
+                                 'note': 'picked from a grid on the training parts'}
+    elif effect.grid_name:
+        out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
+                                 'note': 'picked from a grid on the training parts'}
+    return out
+
+
+def _set_strokes(train_frames, frames) -> None:
+    """Give every frame the stroke (rad) of each angle a position spring may follow, taken over
+    the loaded, steady samples of the training logs: one spring is one torque per angle in
+    every log (an input range, no measured value enters it)."""
+    strokes = {}
+    for key in set(SPRING_ANGLES.values()):
+        parts = [f[key][(f['contact'] > 0) & (f['steady'] > 0)] for f in train_frames]
+        values = np.concatenate(parts) if parts else np.zeros(0)
+        if values.size < 2:
+            values = np.concatenate([f[key] for f in train_frames])
+        strokes[key] = stroke_range(values)
+    for f in frames:
+        f['stroke'] = strokes
+
+
 def _fold_tests(frames, n_train_logs, have_test_logs, blocks, folds):
     """Held-out masks of each fold: the test logs, or interleaved time blocks of every log."""
     if have_test_logs:
@@ -350,6 +391,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     say(f'building frames of {len(logs)} log(s) at {analysis_rate:g} Hz')
     frames = [build_frame(log, model, measured=measured, default_object=default_object,
                           jaw_side_cable_length=jaw_side_cable_length) for log in logs]
+    _set_strokes(frames[:len(train_logs)], frames)
     data = _Data(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
     if test_logs:
         split = {'method': 'files', 'train_logs': len(train_logs), 'test_logs': len(test_logs),
@@ -426,24 +468,8 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         else:
             fit = {k: v for k, v in fit.items() if not k.startswith('resid')}
         fits[name] = fit
-        params_out = {}
         g = float(cf[0])
-        for (pname, punit, transform), coef, std in zip(
-                effect.describe, list(cf[1:]) + list(ca[4:]), list(sf[1:]) + list(sa[4:])):
-            val = float(transform(float(coef), g))
-            scale = abs(val / coef) if coef else 1.0
-            params_out[pname] = {'value': val, 'std': float(std) * scale,
-                                 'unit': punit.replace('unit of y', unit)}
-        if effect.grid_name and isinstance(value, tuple):
-            # (which signal the direction state follows, its width)
-            source, width = value
-            params_out[effect.grid_name] = {'value': width, 'std': None, 'direction_state_of': source,
-                                            'unit': 'rad' if source == 'motor_angle' else
-                                            ('N*m' if source == 'drive_torque' else '-'),
-                                            'note': 'picked from a grid on the training parts'}
-        elif effect.grid_name:
-            params_out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
-                                            'note': 'picked from a grid on the training parts'}
+        params_out = _describe(effect, value, cf[1:], sf[1:], ca[4:], sa[4:], g, unit)
         ranking.append({'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
                         'holdout_angle_rmse': math.sqrt(fit['test_mse_a']),
                         'train_rmse': math.sqrt(train_mse),
@@ -461,6 +487,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     named = [] if winner == NONE else [winner]
     final = base if winner == NONE else fits[winner]
     first_gap = math.sqrt(final['test_mse_f'])
+    second_params = None
     if winner != NONE:
         # a second effect on top of the first (pairs of effects): same margin, judged against
         # the first effect's held-out loss
@@ -475,16 +502,25 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                 return _combine(data, first_design, other, winner, name, fits, value)
             fit2 = _evaluate(data, pair, EFFECTS[name].grid)
             score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
+            say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
             if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
                 best2 = (score2, name, fit2)
         if best2 is not None:
             named.append(best2[1])
             final = best2[2]
+            # the second effect's parameters, fitted beside the first on every training sample
+            second = EFFECTS[best2[1]]
+            Xf, Xa = pair(final['value'], best2[1])
+            cf, ca, sf, sa, _ = _full_fit(data, Xf, Xa, rng)
+            nf, na = len(second.force_params), len(second.angle_params)
+            second_params = _describe(second, final['value'], cf[len(cf) - nf:], sf[len(sf) - nf:],
+                                      ca[len(ca) - na:], sa[len(sa) - na:], float(cf[0]), unit)
     gap_after = math.sqrt(final['test_mse_f'])
     angle_after = math.sqrt(final['test_mse_a'])
     resid_after = final['resid_f']
     verdict = {'effect': winner, 'effects': named or [NONE], 'gap_before': gap_before, 'gap_after': gap_after,
                'gap_after_first': first_gap,
+               'second_effect_params': second_params,
                'shrink': 1.0 - gap_after / gap_before if gap_before > 0 else 0.0,
                'unit': unit, 'measured': measured,
                'angle_gap_before': angle_before, 'angle_gap_after': angle_after, 'angle_unit': 'rad',

@@ -160,6 +160,12 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
     lines += ['', f"Rule: {v['rule']}.", '', '## 4. How far', '',
               f"![timeseries]({figs['timeseries'].name})", '',
               f"Held-out RMS gap {_fmt(v['gap_before'])} -> {_fmt(v['gap_after'])} {unit}.", '']
+    second = v.get('second_effect_params')
+    if second is not None and len(v.get('effects', [])) > 1:
+        ps = '; '.join(f"{k} = {_fmt(p['value'])}" + (f" ± {_fmt(p['std'], 2)}" if p.get('std') is not None else '')
+                       + f" {p['unit']}" for k, p in second.items())
+        lines += [f"Second effect `{v['effects'][1]}`, fitted beside `{v['effect']}` on the training "
+                  f"samples: {ps}.", '']
     path = out / 'report.md'
     path.write_text('\n'.join(lines))
     return path
