@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.diagnosis import diagnose
+from grip_force_ros.diagnosis import run_diagnosis, write_report
 from grip_force_ros.params import load_params_file
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,13 +22,18 @@ TEST = ('01', '03', '11', '13', '21', '23', '31', '33', '41', '43')
 
 
 @pytest.fixture(scope='module')
-def rig_result():
+def rig_diagnosis():
     if not DATA.is_dir():
         pytest.skip(f'rig data not found at {DATA}')
     from grip_force_ros.rig import read_run, to_contract_log
     logs = {name: to_contract_log(read_run(DATA / f'{name}.TXT')) for name in TRAIN + TEST}
     params = load_params_file(ROOT / 'config' / 'maryland_forceps.yaml')
-    return diagnose([logs[n] for n in TRAIN], [logs[n] for n in TEST], params)
+    return run_diagnosis([logs[n] for n in TRAIN], [logs[n] for n in TEST], params)
+
+
+@pytest.fixture(scope='module')
+def rig_result(rig_diagnosis):
+    return rig_diagnosis.result
 
 
 def test_rig_verdict_is_pivot_friction_following_the_motor(rig_result):
@@ -69,3 +74,10 @@ def test_rig_second_effect_is_the_position_spring(rig_result):
     assert spring['spring_peak_to_peak']['unit'] == 'N*m'
     # beside the friction it beats the constant the engine named before (10.9 mN*m)
     assert verdict['gap_after'] < 0.0105
+
+
+def test_rig_report_gives_the_second_effect_fitted_beside_the_first(rig_diagnosis, tmp_path):
+    text = write_report(rig_diagnosis, tmp_path).read_text()
+    assert '**Verdict: `pivot_coulomb_friction` + `position_spring`**' in text
+    line = next(x for x in text.splitlines() if x.startswith('Second effect `position_spring`'))
+    assert 'spring_peak_to_peak' in line and 'spring_angle' in line
