@@ -155,6 +155,13 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
             executor.spin_until_future_complete(finished, timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (_RCLError, RuntimeError):
+        # Ctrl-C / SIGINT shuts the context down under the executor: a callback already
+        # queued may then fail to publish ("publisher's context is invalid"), or the
+        # EventsExecutor (rclpy 7.1.x) may fail to hand it its arguments. That is the
+        # shutdown racing the callback, not a fault; while the context is up, it is.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
