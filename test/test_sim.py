@@ -236,7 +236,7 @@ def test_simulate_returns_the_log_contract():
 def test_effect_names_are_the_design_vocabulary():
     assert EFFECT_NAMES == ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
                             'tension_dependent_friction', 'viscoelastic_creep', 'sensor_delay',
-                            'torque_constant_drift', 'force_sensor_offset')
+                            'torque_constant_drift', 'force_sensor_offset', 'position_spring')
 
 
 def test_metrics_of_a_first_order_step():

@@ -192,11 +192,59 @@ def test_torque_constant_drift_follows_the_heat_of_the_current():
     assert sim.measure().current == pytest.approx(p.max_current, rel=1e-3)   # measured current unchanged
 
 
+def test_position_spring_takes_its_torque_at_the_jaw_off_the_grip_force():
+    """An opening jaw spring S (1 - phi/phi_r): in contact the object holds the drive moment
+    less the spring's, so the load cell reads S (1 - phi/phi_r) G less; the cable tension and
+    the drum angle (which load the drive) barely change."""
+    from grip_force_ros.model import contact
+    p = quiet()
+    strength, rest = 0.008, 0.8                       # N*m at the closed jaw, rad
+    for obj in ('needle', 'rigid'):
+        sim = InstrumentSim(p, obj, effects={'position_spring': strength, 'position_spring_rest_angle': rest})
+        ref = InstrumentSim(p, obj)
+        loading_ramp(sim, 0.3)
+        loading_ramp(ref, 0.3)
+        loaded, loaded_ref = hold_force(sim, 0.3, 0.3), hold_force(ref, 0.3, 0.3)
+        phi = loaded['jaw_angle']
+        gain = contact.contact_gain_scalar(obj, phi, p.jaw_moment_arm_tip, p.jaw_moment_arm_inner)
+        spring_force = strength * (1.0 - phi / rest) * gain     # N, 0.6 N here
+        assert spring_force > 0.5
+        assert loaded_ref['grip_force'] - loaded['grip_force'] == pytest.approx(spring_force, rel=0.01)
+        assert loaded['jaw_tension'] == pytest.approx(loaded_ref['jaw_tension'], rel=0.01)
+        # the load cell is not offset by it: the measured force is the contact's
+        assert sim.measure().grip_force == pytest.approx(loaded['grip_force'], rel=1e-9)
+
+
+def test_position_spring_moves_the_free_jaw_to_its_rest_angle_through_the_cable():
+    p = quiet()
+    strength, rest = 0.008, 0.8
+    sim = InstrumentSim(p, 'free', effects={'position_spring': strength, 'position_spring_rest_angle': rest})
+    ref = InstrumentSim(p, 'free')
+    energy = [sim.energy()]
+    for _ in range(6):
+        hold_force(sim, 0.0, 0.5)
+        hold_force(ref, 0.0, 0.5)
+        energy.append(sim.energy())
+    # no current: the spring opens the jaw (from initial_jaw_angle 0.6) to where it is 0,
+    # pulling the slack cable and turning the drum the other way (closing-positive angle)
+    assert p.initial_jaw_angle < rest
+    assert sim.truth()['jaw_angle'] == pytest.approx(rest, abs=1e-3)
+    assert ref.truth()['jaw_angle'] == pytest.approx(p.initial_jaw_angle, abs=1e-3)
+    shift = (rest - p.initial_jaw_angle) * p.drive_pulley_radius / p.drum_radius
+    assert ref.truth()['motor_angle'] - sim.truth()['motor_angle'] == pytest.approx(shift, rel=0.01)
+    # the spring's potential is part of the energy, and the damped plant only loses it
+    assert energy[0] == pytest.approx(0.5 * strength / rest * (rest - p.initial_jaw_angle) ** 2, rel=1e-9)
+    assert np.all(np.diff(energy) <= 1e-12) and energy[-1] < 1e-6 * energy[0]
+    # under an opening current the jaw goes to its open stop as without the spring
+    hold_force(sim, -0.05, 1.0)
+    assert sim.truth()['jaw_angle'] == pytest.approx(math.pi / 2, abs=1e-3)
+
+
 EFFECT_RANGES = {'pivot_coulomb_friction': (0.0, 0.02), 'viscous_friction': (0.0, 0.04),
                  'cable_hysteresis': (0.0, 0.3), 'backlash': (0.0, 0.15),
                  'tension_dependent_friction': (0.0, 0.004), 'viscoelastic_creep': (0.0, 0.5),
                  'sensor_delay': (0.0, 0.05), 'torque_constant_drift': (0.0, 0.5),
-                 'force_sensor_offset': (-1.0, 1.0)}
+                 'force_sensor_offset': (-1.0, 1.0), 'position_spring': (0.0, 0.02)}
 
 
 @settings(max_examples=20, deadline=None)

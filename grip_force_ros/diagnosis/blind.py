@@ -39,6 +39,9 @@ STRENGTHS = {
     'sensor_delay': (0.03, 0.06, 0.1),                    # s
     'torque_constant_drift': (0.5, 0.8, 0.9),             # -
     'force_sensor_offset': (0.3, -0.5, 0.8),              # N
+    # N*m opening at the closed jaw (rest angle 1 rad): 8-30 % of the jaw torque at 0.3 A
+    # (49 mN*m), 0.3-1.2 N of grip force at the tip; the da Vinci rig's fitted spring: 13 mN*m
+    'position_spring': (0.004, 0.008, 0.015),             # N*m
 }
 #: Extra sim parameters per effect: a small motor's winding heats within seconds.
 EXTRAS = {'torque_constant_drift': (('torque_constant_drift_time_constant', 10.0),)}

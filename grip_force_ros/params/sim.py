@@ -144,4 +144,13 @@ EFFECTS = [
         'Thermal time constant of torque_constant_drift.', min=1e-3, max=1e5),
     _fx('force_sensor_offset', 'double', 0.0, 'N',
         'Constant offset added to the load-cell grip force. 0 = off.', min=-50.0, max=50.0),
+    _fx('position_spring', 'double', 0.0, 'N*m',
+        'Return spring / cable pretension at the jaw: a torque opening the jaw that depends on '
+        'where the jaw is, this much at the closed jaw (0 rad), falling linearly to 0 at '
+        'position_spring_rest_angle (a preloaded torsion spring). It acts on the jaw dynamics '
+        'like any jaw torque, so in contact it takes its share of the drive moment from the '
+        'grip force. 0 = off.', min=0.0, max=0.1),
+    _fx('position_spring_rest_angle', 'double', 1.0, 'rad',
+        'Jaw angle at which the position_spring torque is zero (beyond it the spring closes '
+        'the jaw): spring rate = position_spring / this.', min=0.05, max=100.0),
 ]

@@ -18,6 +18,7 @@ EFFECT_NAMES: tuple[str, ...] = (
     'sensor_delay',                # s, load-cell transport delay
     'torque_constant_drift',       # -, K = K0*(1 - s*heat)
     'force_sensor_offset',         # N, load-cell offset
+    'position_spring',             # N*m, jaw return spring: opening torque at the closed jaw
 )
 
 

@@ -21,7 +21,15 @@ Equations of motion (torques in N*m)::
 
     J0 dw0/dt = gear K I - r0 T0 - drum_damping w0
     Jj dwj/dt = -r_n Tn (1 - f/lambda) + M_contact(phi, wj) - (jaw_damping + viscous) wj
-                + pivot friction + hysteresis and creep moments (effects)
+                + pivot friction + hysteresis, creep and position-spring moments (effects)
+
+The position spring (effect ``position_spring`` = S, ``position_spring_rest_angle`` =
+phi_r) is a preloaded torsion spring at the jaw: opening moment ``S (1 - phi / phi_r)``
+(N*m), S at the closed jaw, 0 at phi_r. It is a jaw torque like the others: it moves the
+free jaw (against the cable, which stretches and turns the drum) and, in contact, the
+object holds only what the drive moment leaves over, so the load cell reads
+``(r_n Tn (1 - f/lambda) - S (1 - phi/phi_r)) G`` at rest: the spring's share comes off the
+grip force (an opening spring; never on the load cell directly).
 
 ``r_n Tn f/lambda`` is the model's static resistance moment M' = f r_n F0
 (``drive_resistance_fraction`` f), applied as the model reads it: a loss proportional to
@@ -188,6 +196,8 @@ class InstrumentSim:
         self._drift_tau = p.torque_constant_drift_time_constant
         self._heat_current = p.max_current if p.max_current > 0.0 else 1.0
         self._offset = p.force_sensor_offset
+        self._spring_closed = p.position_spring                            # N*m at phi = 0
+        self._spring_rate = p.position_spring / p.position_spring_rest_angle  # N*m/rad
         self._noise = (p.current_noise_std, p.motor_angle_noise_std, p.motor_velocity_noise_std,
                        p.wrist_angle_noise_std, p.jaw_angle_noise_std, p.jaw_velocity_noise_std,
                        p.grip_force_noise_std)
@@ -354,6 +364,8 @@ class InstrumentSim:
         c_angle, c_k, c_arm = self._contact_angle, self._contact_k, self._contact_arm
         tissue, tissue_exp, tissue_rate = self._tissue, self._tissue_exp, self._tissue_rate
         stop_k, zeta2 = self._stop_k, self._zeta2
+        spring_closed, spring_rate = self._spring_closed, self._spring_rate
+        kj_cable += spring_rate                  # the position spring's stiffness, implicit too
         open_stop = JAW_OPEN_STOP
         alpha = 1.0 - math.exp(-h / self._tau_current) if self._tau_current > 0.0 else 1.0
         theta0, w0, phi, wj, x = self._theta0, self._w0, self._phi, self._wj, self._x
@@ -394,7 +406,8 @@ class InstrumentSim:
                 spring -= stop_k * (phi - open_stop)
                 k_loc += stop_k
                 c_loc += zeta2 * math.sqrt(stop_k * jj)
-            drive = -drive_arm * tn + hyst + creep + spring   # opening moments, N*m
+            # opening moments, N*m (the position spring: S (1 - phi/phi_r) = S - rate*phi)
+            drive = -drive_arm * tn + hyst + creep + spring + (spring_closed - spring_rate * phi)
             momentum = jj * wj + h * drive
             if coulomb > 0.0:
                 if abs(momentum) <= h * coulomb:
@@ -524,7 +537,8 @@ class InstrumentSim:
                 'torque_constant': self.params.torque_constant * (1.0 - self._drift * self._heat)}
 
     def energy(self) -> float:
-        """Mechanical energy stored in the plant (J): kinetic + cable + contact springs."""
+        """Mechanical energy stored in the plant (J): kinetic + cable + contact springs
+        + the position spring (0 at its rest angle)."""
         k1, k2, g2 = self._k1, self._k2, self._backlash_half
         u = self._x - self._rn * (self._coupling * self._wrist - self._phi)
         slack = u - g2 if u > g2 else (u + g2 if u < -g2 else 0.0)
@@ -539,5 +553,8 @@ class InstrumentSim:
                 spring = self._contact_k / rate * ((math.exp(rate * d) - 1.0) / rate - d)
             else:
                 spring = 0.5 * self._contact_k * d * d
+        if self._spring_rate > 0.0:            # opening moment rate*(phi_r - phi): potential
+            rest = self._spring_closed / self._spring_rate
+            spring += 0.5 * self._spring_rate * (rest - self._phi) ** 2
         return kinetic + cable + spring
 
