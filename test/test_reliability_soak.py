@@ -20,18 +20,20 @@ def test_period_stats_count_missed_periods():
     assert _period_stats(np.zeros(0), 1e-3) == {'periods': 0}
 
 
-def _command(stamp, value=0.1):
+def _header(stamp):
+    """A header stamped ``stamp`` (s)."""
     sec = int(stamp)
-    return types.SimpleNamespace(header=types.SimpleNamespace(
-        stamp=types.SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))),
-        effort=[value])
+    return types.SimpleNamespace(
+        stamp=types.SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9))))
+
+
+def _command(stamp, value=0.1):
+    return types.SimpleNamespace(header=_header(stamp), effort=[value])
 
 
 def _target(stamp, force=1.0):
-    sec = int(stamp)
-    return types.SimpleNamespace(header=types.SimpleNamespace(
-        stamp=types.SimpleNamespace(sec=sec, nanosec=int(round((stamp - sec) * 1e9)))),
-        wrench=types.SimpleNamespace(force=types.SimpleNamespace(z=force)))
+    return types.SimpleNamespace(header=_header(stamp),
+                                 wrench=types.SimpleNamespace(force=types.SimpleNamespace(z=force)))
 
 
 def test_recorder_bins_minutes_and_joins_them():

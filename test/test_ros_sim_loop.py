@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import joint_state
+from grip_force_ros.nodes.common import joint_state, stamp_nanoseconds
 from grip_force_ros.nodes.harness import RosRunner
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 
@@ -20,8 +20,7 @@ class _Recorder:
         self.name, self.log = name, log
 
     def publish(self, msg):
-        stamp = msg.header.stamp
-        self.log.append((self.name, stamp.sec * 1_000_000_000 + stamp.nanosec))
+        self.log.append((self.name, stamp_nanoseconds(msg.header.stamp)))
 
 
 @pytest.fixture

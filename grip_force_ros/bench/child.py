@@ -36,6 +36,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
+from grip_force_ros.nodes.common import stamp_nanoseconds
 from grip_force_ros.bench.stats import latency_summary, missed_periods
 
 #: Longest wait for the first answer before giving up (s).
@@ -58,11 +59,6 @@ def make_executor(kind: str):
     return SingleThreadedExecutor()
 
 
-def stamp_ns(stamp) -> int:
-    """builtin_interfaces/Time -> ns."""
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
 class _Window:
     """Discovery, warm-up and measurement window of a measuring process."""
 
@@ -78,7 +74,8 @@ class _Window:
         self.capacity = capacity
         self.ticks = np.zeros(capacity, np.int64)      # ns, perf_counter
         self.n_ticks = 0
-        self.latencies = np.zeros(capacity, np.int64)  # ns
+        self.latencies = np.zeros(capacity, np.int64)  # ns, round trip of each answer
+        self.answered = np.zeros(capacity, np.int64)   # ns, stamp of the state it answered
         self.n_latencies = 0
         self.received = 0
         self.sent = 0
@@ -102,11 +99,28 @@ class _Window:
             self.ticks[self.n_ticks] = t_ns
             self.n_ticks += 1
 
-    def record_latency(self, lat_ns: int) -> None:
+    def record_answer(self, stamp_ns: int, round_trip_ns: int) -> None:
+        """An answer in the window: the stamp of the state it answers and its round trip (ns)."""
         self.received += 1
         if self.n_latencies < self.capacity:
-            self.latencies[self.n_latencies] = lat_ns
+            self.answered[self.n_latencies] = stamp_ns
+            self.latencies[self.n_latencies] = round_trip_ns
             self.n_latencies += 1
+
+    def answer_summary(self, period: float) -> dict:
+        """Round trips, missed periods (states without an answer) and the timer's own gaps."""
+        answered = self.answered[:self.n_latencies]
+        round_trips = self.latencies[:self.n_latencies]
+        worst = np.argsort(round_trips)[-5:][::-1]
+        t0 = answered.min() if answered.size else 0
+        return {'latency': latency_summary(round_trips),
+                # a period is missed when no answer to a state of it came back, whether
+                # the publisher's timer or the answering side skipped it
+                'periods': missed_periods(np.sort(answered), period),
+                'timer_periods': missed_periods(self.ticks[:self.n_ticks], period),
+                # the five longest round trips: (s into the window, ms)
+                'worst': [(float((answered[i] - t0) * 1e-9), float(round_trips[i] * 1e-6))
+                          for i in worst]}
 
     def advance(self, summary) -> None:
         """Move through the states; call it from a periodic callback."""
@@ -143,8 +157,6 @@ class Ping(Node):
         self.prealloc = opts.prealloc
         capacity = int((opts.seconds + 5.0) / opts.period) + 1000
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
-        self.answered = np.zeros(capacity, np.int64)     # ns, stamps of the answered states
-        self.n_answered = 0
         group = _callback_group(opts.callback_groups)
         sub_group = _callback_group(opts.callback_groups)
         self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, make_qos(opts.depth))
@@ -167,23 +179,17 @@ class Ping(Node):
         w.advance(self.summary)
 
     def on_answer(self, msg: JointState) -> None:
-        stamp = stamp_ns(msg.header.stamp)
-        lat = time.time_ns() - stamp
+        stamp = stamp_nanoseconds(msg.header.stamp)
+        round_trip = time.time_ns() - stamp
         w = self.window
         w.saw_answer()
         if w.counts(stamp):
-            w.record_latency(lat)
-            if self.n_answered < w.capacity:
-                self.answered[self.n_answered] = stamp
-                self.n_answered += 1
+            w.record_answer(stamp, round_trip)
 
     def summary(self) -> dict:
         w = self.window
-        out = {'latency': latency_summary(w.latencies[:w.n_latencies]),
-               # missed: periods whose state got no answer (as for the product)
-               'periods': missed_periods(np.sort(self.answered[:self.n_answered]), self.period),
-               'timer_periods': missed_periods(w.ticks[:w.n_ticks], self.period),
-               'sent': w.sent, 'received': w.received}
+        out = w.answer_summary(self.period)
+        out.update({'sent': w.sent, 'received': w.received})
         out['lost_fraction'] = 1.0 - w.received / w.sent if w.sent else float('nan')
         return out
 

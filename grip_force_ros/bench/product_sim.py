@@ -21,24 +21,20 @@ import functools
 import sys
 import time
 
-import numpy as np
 from rclpy.utilities import remove_ros_args
 
 from grip_force_ros.bench.child import _Window
-from grip_force_ros.bench.stats import latency_summary, missed_periods
 from grip_force_ros.nodes.common import run_node
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 from grip_force_ros.sim.loop_latency import LoopLatency
 
 
 class _RecordingLoopLatency(LoopLatency):
-    """:class:`LoopLatency` that also keeps the answered stamps and round trips of a window."""
+    """:class:`LoopLatency` that also keeps the answers of a measurement window."""
 
     def __init__(self, window: _Window, **kwargs):
         super().__init__(**kwargs)
         self.window = window
-        self.answered_stamps = np.zeros(window.capacity, np.int64)   # ns
-        self.n_answered = 0
         self.other_in_window = 0    # commands answering no fresh state (e.g. timer fallback)
 
     def command_received(self, stamp_ns: int, arrival_ns: int) -> int | None:
@@ -50,10 +46,7 @@ class _RecordingLoopLatency(LoopLatency):
         if round_trip is None:
             self.other_in_window += 1
         else:
-            w.record_latency(round_trip)
-            if self.n_answered < w.capacity:
-                self.answered_stamps[self.n_answered] = stamp_ns
-                self.n_answered += 1
+            w.record_answer(stamp_ns, round_trip)
         return round_trip
 
 
@@ -77,26 +70,11 @@ class BenchSim(SimInstrumentNode):
         super()._tick()
 
     def summary(self) -> dict:
-        w, loop = self.window, self.loop
-        answered = np.sort(loop.answered_stamps[:loop.n_answered])
-        return {'latency': latency_summary(w.latencies[:w.n_latencies]),
-                # a period is missed when no command answered a state of it (gaps in the
-                # answered stamps), whether the sim's timer or the controller skipped it
-                'periods': missed_periods(answered, self.period),
-                'timer_periods': missed_periods(w.ticks[:w.n_ticks], self.period),
-                'states': w.sent, 'answered': int(loop.n_answered),
-                'other_commands': loop.other_in_window,
-                'worst': _worst(answered, loop, w)}
-
-
-def _worst(answered: np.ndarray, loop: _RecordingLoopLatency, w: _Window) -> list:
-    """The five longest round trips: (s into the window, ms)."""
-    n = min(loop.n_answered, w.n_latencies)
-    if n == 0:
-        return []
-    stamps, rts = loop.answered_stamps[:n], w.latencies[:n]
-    t0 = stamps.min()
-    return [(float((stamps[i] - t0) * 1e-9), float(rts[i] * 1e-6)) for i in np.argsort(rts)[-5:][::-1]]
+        w = self.window
+        out = w.answer_summary(self.period)
+        out.update({'states': w.sent, 'answered': w.n_latencies,
+                    'other_commands': self.loop.other_in_window})
+        return out
 
 
 def build_parser() -> argparse.ArgumentParser:

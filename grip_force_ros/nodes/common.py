@@ -110,6 +110,11 @@ def stamp_seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+def stamp_nanoseconds(stamp) -> int:
+    """builtin_interfaces/Time as integer nanoseconds (exact, for matching stamps)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
 def make_executor(context=None, kind: str | None = None):
     """An executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
 

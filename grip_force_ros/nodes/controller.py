@@ -27,8 +27,9 @@ watchdog and fallback: it steps when no state came for
 every period, and the safe state still comes within two periods of
 ``watchdog_timeout``), never within half a period of the previous step. A state
 that is merely late (jitter under half a period) gets no extra step: an extra
-step would repeat the same measurement and cost both processes a callback. Every actuator state is stepped on: the PID assumes one step per period,
-so the actuator state is expected at ``control_rate`` (the sim publishes at
+step would repeat the same measurement and cost both processes a callback.
+Every actuator state is stepped on: the PID assumes one step per period, so
+the actuator state is expected at ``control_rate`` (the sim publishes at
 ``publish_rate`` = 1 kHz). Cancelling the timer stops the loop altogether (no
 step on states either).
 

@@ -39,7 +39,7 @@ from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
-                                         InputRejected, read_joints, run_node)
+                                         InputRejected, read_joints, run_node, stamp_nanoseconds)
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.sim import InstrumentSim
 from grip_force_ros.sim.loop_latency import LoopLatency
@@ -96,8 +96,7 @@ class SimInstrumentNode(Node):
     # ------------------------------------------------------------------ input
     def _on_command(self, msg: JointState) -> None:
         arrival = self.get_clock().now().nanoseconds
-        stamp = msg.header.stamp
-        self.loop.command_received(stamp.sec * 1_000_000_000 + stamp.nanosec, arrival)
+        self.loop.command_received(stamp_nanoseconds(msg.header.stamp), arrival)
         try:
             (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
         except InputRejected as exc:
