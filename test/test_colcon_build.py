@@ -20,7 +20,8 @@ from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.harness import NodeProcess, RosRunner
+from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.nodes.processes import NodeProcess, ros_environment
 
 pytestmark = pytest.mark.ros
 
@@ -64,7 +65,8 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
     lib = install / PACKAGE / 'lib' / PACKAGE
     config = install / PACKAGE / 'share' / PACKAGE / 'config' / 'paper_needle_driver.yaml'
     site = next((install / PACKAGE / 'lib').glob('python3*/site-packages'))
-    env = {'PYTHONPATH': os.pathsep.join(p for p in [str(site), os.environ.get('PYTHONPATH')] if p)}
+    env = ros_environment(extra={'PYTHONPATH': os.pathsep.join(
+        p for p in [str(site), os.environ.get('PYTHONPATH')] if p)})
     seen: dict[str, int] = {}
 
     def count(topic):
@@ -88,7 +90,7 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
         try:
             ok = ros.wait_for(lambda: all(seen.get(t, 0) >= 20 for t in expected), 30.0)
             for name, proc in procs.items():
-                assert proc.proc.poll() is None, (tmp_path / f'{name}.log').read_text()
+                assert proc.popen.poll() is None, (tmp_path / f'{name}.log').read_text()
         finally:
             codes = {name: proc.stop() for name, proc in procs.items()}
     logs = {name: (tmp_path / f'{name}.log').read_text() for name in EXECUTABLES}

@@ -12,8 +12,8 @@ from grip_force_ros import topics
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.compare import calibration_csv, plant_scales
 from grip_force_ros.demo.naive_node import closing_share
-from grip_force_ros.demo.processes import (ProcessGroup, domain_in_use, pick_domain_ids,
-                                           ros_args, ros_environment)
+from grip_force_ros.nodes.processes import (ProcessGroup, domain_in_use, pick_domain_ids, ros_args,
+                                            ros_environment)
 from grip_force_ros.demo.run import TaskClock
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv

@@ -19,8 +19,9 @@ import json
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from grip_force_ros.bench.procs import BenchError, Child, executable, python_module, ros_env, stop_all
+from grip_force_ros.bench.procs import BenchError, Child, stop_all
 from grip_force_ros.bench.stats import ratio
+from grip_force_ros.nodes.processes import node_command, python_module, ros_args, ros_environment
 
 CHILD = 'grip_force_ros.bench.child'
 #: Longest wait for discovery plus warm-up before a window opens (s).
@@ -137,7 +138,7 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
         ``latency`` (ms), ``periods`` (missed periods of the ping timer),
         ``cpu_percent`` per process, ``lost_fraction``, ``variant``.
     """
-    env = ros_env(domain_id)
+    env = ros_environment(domain_id)
     common = variant.args() + ['--period', str(period)]
     children = []
     try:
@@ -184,16 +185,18 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         answer no fresh state: the controller's timer fallback), ``worst``.
     """
     extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
-    env = ros_env(domain_id, extra)
+    env = ros_environment(domain_id, extra)
     config = str(Path(config).resolve())
-    params = ['--ros-args', '--params-file', config, '--log-level', 'warn']
     children = []
     try:
         rt = rt_priority
-        children.append(Child('controller', [executable('controller'), *params], env, rt_priority=rt))
-        children.append(Child('master', [executable('master'), *params, '-p', 'repeat:=true'], env))
+        children.append(Child('controller', node_command('controller', config, log_level='warn'), env,
+                              rt_priority=rt))
+        children.append(Child('master', node_command('master', config, {'repeat': True}, log_level='warn'),
+                              env))
         sim = Child('sim', python_module('grip_force_ros.bench.product_sim', '--seconds', str(seconds),
-                                         '--warmup', str(warmup), *params), env, rt_priority=rt)
+                                         '--warmup', str(warmup),
+                                         *ros_args(config, log_level='warn')), env, rt_priority=rt)
         children.append(sim)
         result = _window(sim, children[:2], seconds)
         for c in children[:2]:

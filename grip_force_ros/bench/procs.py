@@ -1,5 +1,7 @@
-"""Child processes of the bench: start, read their protocol lines, CPU, stop; a free ROS domain.
+"""Child processes of the bench: their protocol lines and CPU time; an exclusive ROS domain.
 
+A :class:`Child` is a :class:`~grip_force_ros.nodes.processes.NodeProcess` (the
+package's one way to start and stop a node process) whose stdout the bench reads.
 No rclpy in this module (the parent never joins the DDS domain it measures).
 """
 from __future__ import annotations
@@ -7,9 +9,6 @@ from __future__ import annotations
 import fcntl
 import os
 import queue
-import signal
-import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -17,6 +16,8 @@ from pathlib import Path
 from typing import Sequence
 
 import psutil
+
+from grip_force_ros.nodes.processes import NodeProcess
 
 
 class BenchError(RuntimeError):
@@ -65,27 +66,6 @@ class DomainLock:
             self._file = None
 
 
-def ros_env(domain_id: int, extra: dict | None = None) -> dict:
-    """Environment of a ROS child: loopback discovery, the given domain, unbuffered output."""
-    env = dict(os.environ)
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['ROS_DOMAIN_ID'] = str(domain_id)
-    env['PYTHONUNBUFFERED'] = '1'
-    env.update(extra or {})
-    return env
-
-
-def python_module(module: str, *args: str) -> list[str]:
-    """Command line running ``python -m module args`` with this interpreter."""
-    return [sys.executable, '-m', module, *args]
-
-
-def executable(name: str) -> str:
-    """Path of a console script installed beside this interpreter (e.g. ``controller``)."""
-    candidate = Path(sys.executable).parent / name
-    return str(candidate) if candidate.exists() else name
-
-
 def realtime(priority: int):
     """A ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
 
@@ -110,8 +90,8 @@ def can_use_realtime(priority: int = 1) -> bool:
         return False
 
 
-class Child:
-    """One child process whose stdout lines are read in the background.
+class Child(NodeProcess):
+    """One child process whose stdout lines are read in the background, with its CPU time.
 
     Parameters
     ----------
@@ -120,26 +100,24 @@ class Child:
     cmd : list of str
         Command line.
     env : dict
-        Environment (see :func:`ros_env`).
+        Environment (see :func:`grip_force_ros.nodes.processes.ros_environment`).
+    rt_priority : int
+        0, or the SCHED_FIFO priority of the child (:func:`realtime`).
     """
 
-    def __init__(self, name: str, cmd: list[str], env: dict, cwd: str | None = None,
-                 rt_priority: int = 0):
-        self.name = name
-        self.cmd = cmd
+    def __init__(self, name: str, cmd: list[str], env: dict, rt_priority: int = 0):
+        super().__init__(name, command=cmd, env=env, pipe=True,
+                         preexec_fn=realtime(rt_priority) if rt_priority else None)
         self.lines: queue.Queue = queue.Queue()
         self.tail: list[str] = []
-        self.proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, bufsize=1,
-                                     preexec_fn=realtime(rt_priority) if rt_priority else None)
-        self.ps = psutil.Process(self.proc.pid)
+        self.ps = psutil.Process(self.pid)
         self._cpu0: float | None = None
         self._t0 = 0.0
         self.cpu_percent = float('nan')
         threading.Thread(target=self._read, daemon=True).start()
 
     def _read(self) -> None:
-        for line in self.proc.stdout:
+        for line in self.popen.stdout:
             line = line.rstrip('\n')
             self.tail = (self.tail + [line])[-20:]
             self.lines.put(line)
@@ -158,7 +136,7 @@ class Child:
             except queue.Empty:
                 continue
             if line is None:
-                raise BenchError(f'{self.name} exited (code {self.proc.wait()}); last output:\n'
+                raise BenchError(f'{self.name} exited (code {self.popen.wait()}); last output:\n'
                                  + '\n'.join(self.tail))
             if accept(line):
                 return line
@@ -174,28 +152,10 @@ class Child:
 
     def cpu_stop(self) -> float:
         """Close the window: CPU used as a percentage of one core."""
-        if self._cpu0 is not None and self.proc.poll() is None:
+        if self._cpu0 is not None and self.alive():
             wall = time.monotonic() - self._t0
             self.cpu_percent = 100.0 * (self.cpu_seconds() - self._cpu0) / wall if wall > 0 else float('nan')
         return self.cpu_percent
-
-    def alive(self) -> bool:
-        return self.proc.poll() is None
-
-    def stop(self, timeout: float = 5.0) -> int:
-        """SIGINT (a clean rclpy shutdown), then SIGTERM, then SIGKILL; the exit code."""
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
-            if self.proc.poll() is not None:
-                break
-            try:
-                self.proc.send_signal(sig)
-            except ProcessLookupError:
-                break
-            try:
-                self.proc.wait(wait)
-            except subprocess.TimeoutExpired:
-                continue
-        return self.proc.wait()
 
 
 def stop_all(children: Sequence[Child]) -> None:

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
+
+from grip_force_ros.nodes.processes import ensure_local_discovery
 
 #: subcommand -> module under grip_force_ros.cli
 COMMANDS = {
@@ -31,11 +32,6 @@ COMMANDS = {
 }
 
 
-def _ensure_local_discovery() -> None:
-    """Keep DDS on loopback unless the user chose a discovery range."""
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='grip-force', description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', metavar='COMMAND')
@@ -48,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    _ensure_local_discovery()
+    ensure_local_discovery()       # DDS on loopback unless the user chose a range
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, '_module', None):

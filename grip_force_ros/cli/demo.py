@@ -93,7 +93,7 @@ def print_report(result: dict, stream=sys.stdout) -> None:
 
 def run(args) -> int:
     from grip_force_ros.demo import find_config
-    from grip_force_ros.demo.processes import ProcessError, pick_domain_ids
+    from grip_force_ros.nodes.processes import ProcessError, pick_domain_ids
     from grip_force_ros.params import ParameterError, load_params_file
 
     _sigterm_as_interrupt()

@@ -10,7 +10,6 @@ happens, then reads the bag back and computes the figures of
 from __future__ import annotations
 
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,8 +20,8 @@ import numpy as np
 from grip_force_ros import topics
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import values_of
-from grip_force_ros.demo.processes import (ProcessError, ProcessGroup, node_command, ros_args,
-                                           ros_environment)
+from grip_force_ros.nodes.processes import (ProcessError, ProcessGroup, node_command, python_module,
+                                            ros_args, ros_environment)
 from grip_force_ros.params import read_params_yaml
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
 
@@ -139,14 +138,13 @@ def _node_argv(name: str, spec: RunSpec) -> list[str]:
     if name == 'master':
         overrides = dict(spec.master_values())
         overrides.update(HOLD_MASTER, exit_when_done=True)
-        return node_command('master') + ros_args(spec.config, overrides)
+        return node_command('master', spec.config, overrides)
     if name == 'sim_instrument':
-        return node_command('sim_instrument') + ros_args(spec.sim_config or spec.config,
-                                                         spec.sim_overrides)
+        return node_command('sim_instrument', spec.sim_config or spec.config, spec.sim_overrides)
     if spec.controller == 'naive':
-        return ([sys.executable, '-m', 'grip_force_ros.demo.naive_node']
+        return (python_module('grip_force_ros.demo.naive_node')
                 + ros_args(spec.config, spec.controller_overrides, node_name='controller'))
-    return node_command('controller') + ros_args(spec.config, spec.controller_overrides)
+    return node_command('controller', spec.config, spec.controller_overrides)
 
 
 def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float,

@@ -151,7 +151,8 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
 
     from grip_force_ros import topics
     from grip_force_ros.faults.runner import resolve_config
-    from grip_force_ros.nodes.harness import NodeProcess, RosRunner
+    from grip_force_ros.nodes.harness import RosRunner
+    from grip_force_ros.nodes.processes import NodeProcess
     from grip_force_ros.params import load_params_file
 
     config = resolve_config(config)
@@ -187,8 +188,8 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
             while time.monotonic() < end:
                 now = time.monotonic()
                 for name, proc in procs.items():
-                    if proc.proc.poll() is not None:
-                        raise RuntimeError(f'{name} exited with {proc.proc.returncode} '
+                    if not proc.alive():
+                        raise RuntimeError(f'{name} exited with {proc.popen.returncode} '
                                            f'(log: {logdir / (name + ".log")})')
                 if now >= t_start + WARMUP:
                     if not started_cpu:

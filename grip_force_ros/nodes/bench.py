@@ -22,14 +22,15 @@ from pathlib import Path
 from diagnostic_msgs.msg import DiagnosticArray
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.harness import NodeProcess, RosRunner
+from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.nodes.processes import NodeProcess, ensure_local_discovery, ros_environment
 
 CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'paper_needle_driver.yaml'
 
 
 def run(seconds: float, executor: str, config: Path = CONFIG) -> dict:
     """Run the loop for ``seconds`` and return the controller's timing figures."""
-    env = {'GRIP_FORCE_EXECUTOR': executor}
+    env = ros_environment(extra={'GRIP_FORCE_EXECUTOR': executor})
     latest: dict[str, str] = {}
 
     def on_diag(msg: DiagnosticArray) -> None:
@@ -72,7 +73,7 @@ def main(argv=None) -> int:
     parser.add_argument('--seconds', type=float, default=20.0)
     parser.add_argument('--executor', choices=('events', 'single'), default='events')
     args = parser.parse_args(argv)
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    ensure_local_discovery()
     print(json.dumps(run(args.seconds, args.executor)))
     return 0
 

@@ -1,28 +1,20 @@
-"""Run the nodes for tests, benchmarks and fault checks: in-process or as processes.
+"""Run nodes inside this process, for tests, benchmarks and fault checks.
 
-In-process (:class:`RosRunner`): nodes share one rclpy context and one
-executor spinning in a background thread, so a test can reach into a node
-(e.g. wrap ``controller.step`` to record every period). The spinning thread
-returns to Python every :data:`SPIN_SLICE` seconds: the EventsExecutor holds
-the GIL while it waits, and the test thread needs it too.
+:class:`RosRunner`: nodes share one rclpy context and one executor spinning in
+a background thread, so a test can reach into a node (e.g. wrap
+``controller.step`` to record every period). The spinning thread returns to
+Python every :data:`SPIN_SLICE` seconds: the EventsExecutor holds the GIL while
+it waits, and the test thread needs it too.
 
-As processes (:class:`NodeProcess`): ``python -m grip_force_ros.nodes.<name>
---ros-args ...``, the same code as the installed executables; each process has
-its own interpreter, which is what a 1 kHz plant next to a 1 kHz controller
-needs on a small machine.
-
-Every process started here inherits ROS_DOMAIN_ID and
-ROS_AUTOMATIC_DISCOVERY_RANGE from the caller (the test's conftest sets them).
+Nodes as separate processes (their own interpreter each, what a 1 kHz plant
+next to a 1 kHz controller needs on a small machine):
+:class:`grip_force_ros.nodes.processes.NodeProcess`.
 """
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
 import threading
 import time
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable
 
 import rclpy
 from rclpy.context import Context
@@ -34,81 +26,6 @@ from grip_force_ros.nodes.common import make_executor
 
 #: Longest time the spinning thread stays inside the executor before yielding (s).
 SPIN_SLICE = 0.01
-EXECUTABLES = ('controller', 'sim_instrument', 'master')
-
-
-def ros_arg_value(value: Any) -> str:
-    """A Python value as the YAML text of ``-p name:=value``."""
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(ros_arg_value(v) for v in value) + ']'
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, str):
-        return "'" + value.replace("'", "''") + "'"
-    return str(value)
-
-
-def node_command(executable: str, params_file: str | None = None,
-                 params: Mapping[str, Any] | None = None,
-                 remaps: Mapping[str, str] | None = None,
-                 python: str = sys.executable) -> list[str]:
-    """Command line that runs one of the node executables with this Python."""
-    if executable not in EXECUTABLES:
-        raise ValueError(f'unknown node executable {executable!r}; one of {EXECUTABLES}')
-    cmd = [python, '-m', f'grip_force_ros.nodes.{executable}', '--ros-args']
-    if params_file:
-        cmd += ['--params-file', str(params_file)]
-    for name, value in (params or {}).items():
-        cmd += ['-p', f'{name}:={ros_arg_value(value)}']
-    for src, dst in (remaps or {}).items():
-        cmd += ['-r', f'{src}:={dst}']
-    return cmd
-
-
-class NodeProcess:
-    """One node executable in its own process (stdout/stderr captured to a file or PIPE)."""
-
-    def __init__(self, executable: str, params_file: str | None = None,
-                 params: Mapping[str, Any] | None = None, log_path: str | None = None,
-                 env: Mapping[str, str] | None = None, command: Sequence[str] | None = None):
-        self.executable = executable
-        self.command = list(command) if command else node_command(executable, params_file, params)
-        self._log = open(log_path, 'w') if log_path else subprocess.DEVNULL
-        self.proc = subprocess.Popen(self.command, stdout=self._log, stderr=subprocess.STDOUT,
-                                     env={**os.environ, **(env or {})})
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def pause(self) -> None:
-        """Freeze the process (SIGSTOP): it publishes nothing until :meth:`resume`."""
-        self.proc.send_signal(signal.SIGSTOP)
-
-    def resume(self) -> None:
-        self.proc.send_signal(signal.SIGCONT)
-
-    def stop(self, timeout: float = 5.0) -> int:
-        """SIGINT, then SIGKILL if it does not exit in ``timeout`` s. Returns the exit code."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGCONT)
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self._log is not subprocess.DEVNULL:
-            self._log.close()
-        return self.proc.returncode
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.stop()
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:

@@ -1,0 +1,416 @@
+"""Nodes as child processes: their environment, command line and lifetime. No rclpy here.
+
+The one owner of
+
+* the ROS environment of a child (:func:`ros_environment`): DDS discovery on
+  loopback unless the user chose a range (:func:`ensure_local_discovery`, the
+  package's only Python copy of that rule), the domain id the caller gives;
+* the command line of a node (:func:`node_command`): the console script beside
+  this interpreter, else ``python -m grip_force_ros.nodes.<name>``, or what
+  ``GRIP_FORCE_NODE_<NAME>`` says; then ``--ros-args`` (:func:`ros_args`) with
+  every value as the YAML literal ROS parses (:func:`ros_arg_value`);
+* the process (:class:`NodeProcess`): started with its output in a log file,
+  paused, stopped with escalation (SIGINT, SIGTERM, SIGKILL) whatever happens;
+  :class:`ProcessGroup` starts several and stops them together, in reverse order;
+* a free ROS domain on this machine (:func:`pick_domain_ids`).
+
+The demo, the benchmarks, the fault check, the soak and the tests start nodes
+through this module. Nodes inside this process (a test reaching into a node):
+:class:`grip_force_ros.nodes.harness.RosRunner`.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, MutableMapping, Sequence
+
+#: The node executables of the package (console scripts of setup.py).
+NODE_EXECUTABLES = ('controller', 'sim_instrument', 'master')
+#: Environment variable of the DDS discovery range, and the package's default for it.
+DISCOVERY_RANGE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
+LOCAL_DISCOVERY = 'LOCALHOST'
+
+#: Fast DDS / RTPS port mapping (DDSI-RTPS spec 9.6.1.1): PB + DG * domain_id.
+_PORT_BASE = 7400
+_DOMAIN_GAIN = 250
+#: Largest domain id whose ports stay valid for every participant on Linux.
+MAX_DOMAIN_ID = 101
+
+
+class ProcessError(RuntimeError):
+    """A node process could not be started or died early."""
+
+
+# ---------------------------------------------------------------- environment
+def ensure_local_discovery(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
+    """Keep DDS discovery on this machine unless a range was chosen.
+
+    Parameters
+    ----------
+    env : mutable mapping, optional
+        Environment to complete in place (default: this process's ``os.environ``,
+        which rclpy started later in this process reads).
+
+    Returns
+    -------
+    mutable mapping
+        ``env``, with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` unless it was set.
+    """
+    env = os.environ if env is None else env
+    env.setdefault(DISCOVERY_RANGE, LOCAL_DISCOVERY)
+    return env
+
+
+def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | None = None,
+                    base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Environment of a ROS child process.
+
+    Parameters
+    ----------
+    domain_id : int, optional
+        ``ROS_DOMAIN_ID`` of the child; None keeps the one of ``base`` (e.g. a
+        test's own domain, set by its conftest).
+    extra : mapping, optional
+        Further variables, set last (e.g. ``GRIP_FORCE_EXECUTOR``, ``PYTHONPATH``).
+    base : mapping, optional
+        Environment to start from (default ``os.environ``; not modified).
+
+    Returns
+    -------
+    dict
+        ``base`` with loopback discovery unless chosen (:func:`ensure_local_discovery`),
+        the domain, unbuffered Python output and uncoloured ROS logs unless chosen,
+        and ``extra``.
+    """
+    env = dict(os.environ if base is None else base)
+    ensure_local_discovery(env)
+    if domain_id is not None:
+        env['ROS_DOMAIN_ID'] = str(int(domain_id))
+    env.setdefault('PYTHONUNBUFFERED', '1')
+    env.setdefault('RCUTILS_COLORIZED_OUTPUT', '0')
+    env.update(extra or {})
+    return env
+
+
+# ---------------------------------------------------------------- command line
+def ros_arg_value(value: Any) -> str:
+    """A Python value as the YAML literal of ``-p name:=value`` on a ROS command line.
+
+    Strings are quoted (``''`` and ``'true'`` or ``'1.0'`` stay strings), floats keep
+    their full precision (``repr``), booleans are ``true``/``false``, sequences lists.
+    """
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (list, tuple)):
+        return '[' + ','.join(ros_arg_value(v) for v in value) + ']'
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return "'" + value.replace("'", "''") + "'"
+    return str(value)
+
+
+def ros_args(params_file: str | os.PathLike | None = None,
+             params: Mapping[str, Any] | None = None, *, node_name: str | None = None,
+             remaps: Mapping[str, str] | None = None, log_level: str | None = None) -> list[str]:
+    """``--ros-args`` of a node: name remap, parameter file, ``-p`` values, remaps, log level.
+
+    Parameters
+    ----------
+    params_file : path, optional
+        ``--params-file`` (a ROS parameter YAML).
+    params : mapping, optional
+        Parameter name -> value, after the file (so they win), see :func:`ros_arg_value`.
+    node_name : str, optional
+        ``-r __node:=<node_name>``.
+    remaps : mapping, optional
+        Topic remaps ``-r from:=to``.
+    log_level : str, optional
+        ``--log-level`` (e.g. 'warn').
+    """
+    out = ['--ros-args']
+    if node_name:
+        out += ['-r', f'__node:={node_name}']
+    if params_file is not None:
+        out += ['--params-file', str(params_file)]
+    for name, value in (params or {}).items():
+        out += ['-p', f'{name}:={ros_arg_value(value)}']
+    for src, dst in (remaps or {}).items():
+        out += ['-r', f'{src}:={dst}']
+    if log_level:
+        out += ['--log-level', log_level]
+    return out
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    """Command line running ``python -m module args`` with this interpreter."""
+    return [sys.executable, '-m', module, *args]
+
+
+def node_executable(name: str) -> list[str]:
+    """The command that runs node ``name`` (without its arguments).
+
+    ``GRIP_FORCE_NODE_<NAME>`` in this process's environment (e.g.
+    ``GRIP_FORCE_NODE_SIM_INSTRUMENT``) replaces it, e.g. to run against another
+    build or a hardware driver (split like a shell would). Otherwise the console
+    script next to the running interpreter (a plain ``master`` on the PATH might
+    be someone else's program), else ``python -m grip_force_ros.nodes.<name>``.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not one of :data:`NODE_EXECUTABLES`.
+    """
+    if name not in NODE_EXECUTABLES:
+        raise ValueError(f'unknown node executable {name!r}; one of {NODE_EXECUTABLES}')
+    override = os.environ.get(f'GRIP_FORCE_NODE_{name.upper()}')
+    if override:
+        return shlex.split(override)
+    script = Path(sys.executable).parent / name
+    if script.is_file() and os.access(script, os.X_OK):
+        return [str(script)]
+    return python_module(f'grip_force_ros.nodes.{name}')
+
+
+def node_command(name: str, params_file: str | os.PathLike | None = None,
+                 params: Mapping[str, Any] | None = None, **ros_options: Any) -> list[str]:
+    """Full command line of node ``name``: :func:`node_executable` + :func:`ros_args`.
+
+    ``ros_options`` are the keyword arguments of :func:`ros_args` (``node_name``,
+    ``remaps``, ``log_level``).
+    """
+    return node_executable(name) + ros_args(params_file, params, **ros_options)
+
+
+# ---------------------------------------------------------------- processes
+class NodeProcess:
+    """One node (or any command) in its own process, stopped for sure.
+
+    Parameters
+    ----------
+    name : str
+        Label in reports; the node executable when ``command`` is not given.
+    params_file, params : optional
+        Arguments of :func:`node_command` (when ``command`` is not given).
+    command : sequence of str, optional
+        The whole command line (default ``node_command(name, params_file, params)``).
+    env : mapping, optional
+        The child's whole environment (default :func:`ros_environment`: this
+        process's, with loopback discovery unless chosen).
+    log_path : path, optional
+        File that receives stdout and stderr (default: discarded).
+    own_session : bool
+        Start the child in its own session: a Ctrl-C at the terminal reaches only
+        this process, which then stops the child; signals go to its process group.
+    pipe : bool
+        Read stdout and stderr from :attr:`popen` ``.stdout`` (text, line-buffered)
+        instead of a log file.
+    preexec_fn : callable, optional
+        Run in the child before ``exec`` (e.g. a scheduling policy).
+
+    Raises
+    ------
+    ProcessError
+        The command could not be started.
+    """
+
+    def __init__(self, name: str, params_file: str | os.PathLike | None = None,
+                 params: Mapping[str, Any] | None = None, *, command: Sequence[str] | None = None,
+                 env: Mapping[str, str] | None = None, log_path: str | os.PathLike | None = None,
+                 own_session: bool = False, pipe: bool = False,
+                 preexec_fn: Callable[[], None] | None = None):
+        self.name = name
+        self.command = list(command) if command is not None else node_command(name, params_file, params)
+        self.log_path = Path(log_path) if log_path is not None else None
+        self.own_session = own_session
+        text: dict[str, Any] = {}
+        if pipe:
+            stdout, text = subprocess.PIPE, {'text': True, 'bufsize': 1}
+        elif self.log_path is not None:
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
+            stdout = open(self.log_path, 'wb')  # noqa: SIM115 - closed below, Popen dup'ed it
+        else:
+            stdout = subprocess.DEVNULL
+        try:
+            self.popen = subprocess.Popen(self.command, env=dict(env) if env is not None else ros_environment(),
+                                          stdout=stdout, stderr=subprocess.STDOUT,
+                                          stdin=subprocess.DEVNULL, start_new_session=own_session,
+                                          preexec_fn=preexec_fn, **text)
+        except OSError as exc:
+            raise ProcessError(f'cannot start {name}: {exc}') from exc
+        finally:
+            if hasattr(stdout, 'close'):
+                stdout.close()
+
+    @property
+    def pid(self) -> int:
+        return self.popen.pid
+
+    def alive(self) -> bool:
+        return self.popen.poll() is None
+
+    def log_tail(self, lines: int = 15) -> str:
+        """The last ``lines`` lines of the log file ('' without one)."""
+        if self.log_path is None or not self.log_path.exists():
+            return ''
+        return '\n'.join(self.log_path.read_text(errors='replace').splitlines()[-lines:])
+
+    def signal(self, sig: int) -> None:
+        """Send ``sig`` to the process (to its process group when it has its own session)."""
+        try:
+            if self.own_session:
+                os.killpg(self.popen.pid, sig)
+            else:
+                self.popen.send_signal(sig)
+        except ProcessLookupError:
+            pass
+        except PermissionError:  # pragma: no cover - not our group after all
+            self.popen.send_signal(sig)
+
+    def pause(self) -> None:
+        """Freeze the process (SIGSTOP): it publishes nothing until :meth:`resume`."""
+        self.signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        self.signal(signal.SIGCONT)
+
+    def stop(self, grace: float = 5.0) -> int:
+        """SIGINT (a clean rclpy shutdown), SIGTERM after ``grace`` s, SIGKILL after 2 s more.
+
+        Returns
+        -------
+        int
+            The exit code (negative: the signal that ended it).
+        """
+        if self.alive():
+            self.signal(signal.SIGCONT)        # a paused process cannot handle SIGINT
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
+            if not self.alive():
+                break
+            self.signal(sig)
+            try:
+                self.popen.wait(wait)
+            except subprocess.TimeoutExpired:
+                continue
+        return self.popen.wait()
+
+    def __enter__(self) -> 'NodeProcess':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+@dataclass
+class ProcessGroup:
+    """Processes that run together and are always stopped together.
+
+    Use as a context manager: on exit (normal, exception or Ctrl-C) every
+    process gets SIGINT, then ``grace`` seconds, then SIGTERM, then SIGKILL,
+    all at once at each step. Each process runs in its own session so that a
+    Ctrl-C at the terminal reaches only the orchestrator, which then stops the
+    nodes in order.
+    """
+
+    env: dict[str, str]
+    log_dir: Path | None = None
+    grace: float = 3.0
+    processes: list[NodeProcess] = field(default_factory=list)
+
+    def start(self, name: str, argv: Sequence[str], *, label: str | None = None) -> NodeProcess:
+        """Start ``argv`` (its output goes to ``<log_dir>/<label>.log``)."""
+        label = label or name
+        log_path = self.log_dir / f'{label}.log' if self.log_dir is not None else None
+        proc = NodeProcess(label, command=argv, env=self.env, log_path=log_path, own_session=True)
+        self.processes.append(proc)
+        return proc
+
+    def check_alive(self, may_finish: tuple[str, ...] = ()) -> None:
+        """Raise :class:`ProcessError` naming any process that has exited.
+
+        Processes named in ``may_finish`` may have exited with code 0.
+        """
+        for p in self.processes:
+            code = p.popen.poll()
+            if code is not None and not (code == 0 and p.name in may_finish):
+                tail = p.log_tail()
+                raise ProcessError(f'{p.name} exited with code {code}'
+                                   + (f'; last output:\n{tail}' if tail else ''))
+
+    def stop(self) -> dict[str, int | None]:
+        """Stop all processes (reverse start order): SIGINT, wait, SIGTERM, SIGKILL.
+
+        Returns
+        -------
+        dict
+            Process label -> exit code.
+        """
+        running = [p for p in reversed(self.processes) if p.alive()]
+        for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
+                          (signal.SIGKILL, 2.0)):
+            for p in running:
+                p.signal(sig)
+            deadline = time.monotonic() + wait
+            while running and time.monotonic() < deadline:
+                running = [p for p in running if p.alive()]
+                if running:
+                    time.sleep(0.05)
+            if not running:
+                break
+        return {p.name: p.popen.poll() for p in self.processes}
+
+    def __enter__(self) -> 'ProcessGroup':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+# ---------------------------------------------------------------- domains
+def _udp_ports_in_use() -> set[int]:
+    try:
+        import psutil
+        return {c.laddr.port for c in psutil.net_connections(kind='udp') if c.laddr}
+    except Exception:  # noqa: BLE001 - psutil missing or not permitted: nothing known
+        return set()
+
+
+def domain_in_use(domain_id: int, ports: set[int] | None = None) -> bool:
+    """True if some process has bound a DDS port of ``domain_id`` on this machine."""
+    ports = _udp_ports_in_use() if ports is None else ports
+    low = _PORT_BASE + _DOMAIN_GAIN * domain_id
+    return any(low <= p < low + _DOMAIN_GAIN for p in ports)
+
+
+def pick_domain_ids(count: int = 1, *, start: int | None = None,
+                    candidates: Iterable[int] | None = None,
+                    exclude: Iterable[int] = ()) -> list[int]:
+    """``count`` ROS domain ids that no process on this machine is using.
+
+    The search starts at a pid-derived id (two runs started together rarely
+    pick the same one) and wraps around ``1..MAX_DOMAIN_ID``.
+
+    Raises
+    ------
+    ProcessError
+        If not enough free domains exist.
+    """
+    ports = _udp_ports_in_use()
+    if candidates is None:
+        first = (os.getpid() % MAX_DOMAIN_ID) + 1 if start is None else start
+        candidates = [((first - 1 + k) % MAX_DOMAIN_ID) + 1 for k in range(MAX_DOMAIN_ID)]
+    excluded = set(exclude)
+    chosen: list[int] = []
+    for d in candidates:
+        if d in excluded or d in chosen or domain_in_use(d, ports):
+            continue
+        chosen.append(d)
+        if len(chosen) == count:
+            return chosen
+    raise ProcessError(f'no {count} free ROS domain id(s) found')
