@@ -1,22 +1,27 @@
-"""Speed of the model and of the control step (numpy only, no rclpy).
+"""Speed of the model (numpy only, no rclpy).
 
-* vectorised :meth:`GripForceModel.forward` and :meth:`~GripForceModel.inverse`
-  over arrays of ``size`` samples, as a ratio to one ``numpy.exp`` over an array
-  of the same size (goal: forward <= 10x);
-* :meth:`GripController.step` in grip mode, model calls included (the force
-  estimate and the feedforward inverse), as a share of the control period
-  (goal <= 5 %); the input setters the node's callbacks call are timed beside it.
+* :func:`vectorised_ratios`: :meth:`GripForceModel.forward` and
+  :meth:`~GripForceModel.inverse` over arrays of ``size`` samples, as a ratio to
+  one ``numpy.exp`` over an array of the same size (goal: forward <= 10x); with
+  the control step's share of the period (:mod:`.control_step`) it makes the
+  ``model`` section of ``grip-force bench`` (:func:`run_model`);
+* :func:`scalar_paths`: microseconds per call of the control loop's scalar fast
+  paths, the stick band's update and inverse, and per sample of the hysteretic
+  history and the vectorised forward. Printed by
+  ``python -m grip_force_ros.bench.model_speed [config.yaml ...]``.
 
 Timings are the best of ``repeats`` (the least disturbed by other load).
 """
 from __future__ import annotations
 
+import sys
 import time
+import timeit
 
 import numpy as np
 
-from grip_force_ros.control import GripController
-from grip_force_ros.model import GripForceModel
+from grip_force_ros.bench.control_step import step_share
+from grip_force_ros.model import GripForceModel, HystereticGripForce, hysteretic_grip_force
 from grip_force_ros.params import load_params_file
 
 
@@ -90,65 +95,6 @@ def vectorised_ratios(params, size: int = 100_000, repeats: int = 5, inverse_siz
             'inverse_round_trip_error_N': float(np.max(np.abs(back - f[:1000])))}
 
 
-def step_share(params, steps: int = 20_000, repeats: int = 3) -> dict:
-    """Time of one :meth:`GripController.step` in grip mode, as a share of the period.
-
-    The controller runs on inputs like a grasp's hold phase: master closed past
-    contact, jaw on the needle, measured current near the hold current, each
-    sample a little different and newer (so no check short-cuts it).
-
-    Returns
-    -------
-    dict
-        ``step_us`` and ``inputs_us`` (best mean per period, us), ``step_share``
-        and ``step_and_inputs_share`` (of the period, -), ``period_ms``, ``mode``
-        (of the last step: must be 'grip'), ``feedforward`` (bool: the inverse ran).
-    """
-    ctrl = GripController(params)
-    inputs = ctrl.new_inputs()
-    period = ctrl.period
-    rng = np.random.default_rng(1)
-    n = steps
-    master = params.master_angle_min + 0.05 * (params.master_angle_max - params.master_angle_min) \
-        + rng.normal(0.0, 1e-4, n)                                 # rad, closed: grip
-    jaw = 0.004 + rng.normal(0.0, 1e-5, n)                          # rad, on the needle
-    wrist = 0.2 + rng.normal(0.0, 1e-4, n)                          # rad
-    current = 0.25 + rng.normal(0.0, 1e-3, n)                       # A
-    motor = 1.0 + rng.normal(0.0, 1e-4, n)                          # rad
-    master, jaw, wrist, current, motor = (v.tolist() for v in (master, jaw, wrist, current, motor))
-    clock = [1000.0]                                                # s, controller clock
-
-    def feed(k: int) -> float:
-        now = clock[0] = clock[0] + period
-        inputs.set_master(now, master[k], now)
-        inputs.set_instrument(now, wrist[k], jaw[k], 0.0, now)
-        inputs.set_actuator(now, current[k], motor[k], 0.0, now)
-        return now
-
-    # warm up into grip (bumpless transfer, force map state)
-    out = None
-    for k in range(2000):
-        out = ctrl.step(feed(k % n), inputs)
-    step = ctrl.step
-    best_step = best_inputs = float('inf')
-    for _ in range(repeats):
-        t_in = t_step = 0.0
-        for k in range(n):
-            t0 = time.perf_counter()
-            now = feed(k)
-            t1 = time.perf_counter()
-            out = step(now, inputs)
-            t2 = time.perf_counter()
-            t_in += t1 - t0
-            t_step += t2 - t1
-        best_step = min(best_step, t_step / n)
-        best_inputs = min(best_inputs, t_in / n)
-    return {'period_ms': period * 1e3, 'step_us': best_step * 1e6, 'inputs_us': best_inputs * 1e6,
-            'step_share': best_step / period, 'step_and_inputs_share': (best_step + best_inputs) / period,
-            'mode': out.mode, 'feedforward': bool(out.feedforward_current > 0.0),
-            'target_force_N': out.target_force, 'reasons': list(out.reasons)}
-
-
 def run_model(config: str, size: int = 100_000, steps: int = 20_000, repeats: int = 5,
               other_configs: tuple = ()) -> dict:
     """The ``model`` section of the bench for ``config`` (YAML path), plus others' ratios."""
@@ -164,3 +110,61 @@ def run_model(config: str, size: int = 100_000, steps: int = 20_000, repeats: in
             out['other_configs'][path] = {k: r[k] for k in ('forward_ratio', 'inverse_ratio', 'affine',
                                                             'fitted', 'setup_ms')}
     return out
+
+
+def scalar_paths(path: str, number: int = 20000) -> dict:
+    """Microseconds per call of the scalar paths and per sample of the vectorised forward.
+
+    Parameters
+    ----------
+    path : str
+        Instrument YAML.
+    number : int
+        Calls of the fastest path (the slower ones get a tenth).
+
+    Returns
+    -------
+    dict
+        ``grip_force_scalar_us``, ``current_for_force_scalar_us``,
+        ``hysteretic_update_us``, ``current_for_force_unloading_us`` (us per call),
+        ``hysteretic_history_per_sample_us``, ``forward_per_sample_us`` (us per sample).
+    """
+    model = GripForceModel(load_params_file(path))
+    force = model.grip_force_scalar(0.3, 0.2, 0.1, 'rigid')
+    out = {
+        'grip_force_scalar_us': timeit.timeit(lambda: model.grip_force_scalar(0.3, 0.2, 0.1, 'rigid'),
+                                              number=number) / number * 1e6,
+        'current_for_force_scalar_us': timeit.timeit(
+            lambda: model.current_for_force_scalar(force, 0.2, 0.1, 'rigid'), number=number // 10) / (number // 10) * 1e6,
+    }
+    stick = HystereticGripForce(model)
+    swing = [0.3, 0.25, 0.1, 0.35] * (number // 4)          # loading, band, slip back, loading
+    start = timeit.default_timer()
+    update = stick.update
+    for current in swing:
+        update(current, 0.2, 0.1, 'rigid')
+    out['hysteretic_update_us'] = (timeit.default_timer() - start) / len(swing) * 1e6
+    out['current_for_force_unloading_us'] = timeit.timeit(
+        lambda: stick.current_for_force(0.5 * force, 0.2, 0.1, 'rigid', 'unloading'),
+        number=number // 10) / (number // 10) * 1e6
+    history = 0.25 + 0.2 * np.sin(np.linspace(0, 60, 100_000))
+    out['hysteretic_history_per_sample_us'] = timeit.timeit(
+        lambda: hysteretic_grip_force(model, history, 0.2, 0.1, 'rigid'), number=3) / 3 / history.size * 1e6
+    currents = np.linspace(0, 0.5, 100_000)
+    out['forward_per_sample_us'] = timeit.timeit(lambda: model.forward(currents, 0.2, 0.1, 'rigid'),
+                                                 number=3) / 3 / currents.size * 1e6
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print :func:`scalar_paths` for each config (default: the paper and the four-pulley one)."""
+    paths = (argv if argv is not None else sys.argv[1:]) or [
+        'config/paper_needle_driver.yaml', 'config/four_pulley_needle_driver.yaml']
+    for path in paths:
+        figures = scalar_paths(path)
+        print(path + ': ' + ', '.join(f'{k} = {v:.3g}' for k, v in figures.items()))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,14 +1,15 @@
-"""Benchmark: control-loop timing of the real node processes (prints figures, asserts nothing).
+"""The controller node's own loop timing, per executor (rclpy; prints figures, asserts nothing).
 
 Starts sim_instrument, controller and a repeating master as separate processes
 (as the demo does), lets the loop run, then reads the controller's own timing
 from its /diagnostics: mean and max period, periods longer than 1.5x nominal,
 and the time spent in one tick. Run once per executor to compare::
 
-    .venv/bin/python -m grip_force_ros.nodes.bench --seconds 20 --executor events
-    .venv/bin/python -m grip_force_ros.nodes.bench --seconds 20 --executor single
+    .venv/bin/python -m grip_force_ros.bench.node_timing --seconds 20 --executor events
+    .venv/bin/python -m grip_force_ros.bench.node_timing --seconds 20 --executor single
 
-Set ROS_DOMAIN_ID (and ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) first.
+Set ROS_DOMAIN_ID first (DDS stays on loopback unless you chose a range). The
+round trip against the middleware floor is :mod:`.loop` (``grip-force bench``).
 """
 from __future__ import annotations
 
@@ -68,7 +69,8 @@ def run(seconds: float, executor: str, config: Path = CONFIG) -> dict:
     }
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
+    """Run :func:`run` with the command-line options and print its figures as JSON."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--seconds', type=float, default=20.0)
     parser.add_argument('--executor', choices=('events', 'single'), default='events')
