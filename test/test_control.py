@@ -219,6 +219,31 @@ def test_resume_after_stale_without_current_jump(params):
     assert out.estimated_force == pytest.approx(out.target_force, rel=0.02)
 
 
+@pytest.mark.parametrize('ramp', [0.1, 0.02, 0.0])
+def test_resume_ramp_time_sets_how_the_force_target_returns(params, ramp):
+    ctrl = GripController(params, resume_ramp_time=ramp)
+    inp = ctrl.new_inputs()
+    out, t = run_grip(ctrl, inp, n=300, master=0.0)
+    target = out.target_force                                     # N, the map's target
+    for k in range(35):                                          # 35 ms silence: safe
+        ctrl.step(t + k * PERIOD, inp)
+    t += 35 * PERIOD
+    feed(inp, t, 0.0, 0.04, ctrl.command)
+    out = ctrl.step(t, inp)
+    assert out.mode == 'grip' and out.estimated_force < 0.5 * target
+    if ramp == 0.0:                                              # no ramp: the map's target at once
+        assert out.target_force == target
+    else:                                                        # one period's climb from the estimate
+        step = params.grip_force_max * PERIOD / ramp
+        assert out.target_force == pytest.approx(out.estimated_force + step, rel=1e-12)
+
+
+@pytest.mark.parametrize('ramp', [-0.1, math.inf, math.nan])
+def test_resume_ramp_time_must_be_finite_and_not_negative(params, ramp):
+    with pytest.raises(ValueError, match='resume_ramp_time'):
+        GripController(params, resume_ramp_time=ramp)
+
+
 def test_free_to_grip_switch_is_bumpless(params):
     ctrl = GripController(params)
     inp = ctrl.new_inputs()

@@ -21,6 +21,31 @@ def _fmt(x: float) -> str:
     return 'inf' if not math.isfinite(x) else f'{x:.1f}'
 
 
+def plot_steps(params, path, title: str = '', model=None) -> None:
+    """Write the step-response figure (PNG) of :func:`grip_force_ros.control.tune.step_responses`."""
+    from grip_force_ros.control.tune import settling_time, step_responses
+    from grip_force_ros.plotting import pyplot
+    plt = pyplot()
+    steps = step_responses(params, model=model)
+    fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    for name, (t, y) in steps.items():
+        ax = ax_j if name.startswith('jaw') else ax_f
+        ax.plot(t * 1e3, y, label=f'{name}; 5% settling {settling_time(t, y) * 1e3:.0f} ms')
+    ax_f.axhline(1.0, color='k', lw=0.5, ls='--')
+    ax_j.axhline(1.0, color='k', lw=0.5, ls='--')
+    ax_f.set_ylabel('grip force / target (-)')
+    ax_j.set_ylabel('jaw angle / target (-)')
+    ax_j.set_xlabel('time (ms)')
+    ax_f.legend(fontsize=8)
+    ax_j.legend(fontsize=8)
+    ax_f.set_title(title or 'closed-loop unit step responses (nominal linear plant, 1 kHz PID)')
+    ax_f.grid(alpha=0.3)
+    ax_j.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def run(args) -> int:
     from grip_force_ros.control import tune
     from grip_force_ros.params import ParameterError, load_params_file
@@ -34,7 +59,7 @@ def run(args) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     png = out_dir / f'tune_{params.instrument_name}.png'
-    tune.plot_steps(tuned, png, title=f'{params.instrument_name}: unit step responses '
+    plot_steps(tuned, png, title=f'{params.instrument_name}: unit step responses '
                     '(nominal linear plant, 1 kHz PID)')
     steps = tune.step_responses(tuned)
     settling = {name: tune.settling_time(t, y) for name, (t, y) in steps.items()}

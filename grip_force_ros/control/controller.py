@@ -12,8 +12,8 @@ from grip_force_ros.control.pid import PID
 #: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
 
-#: Time (s) in which the force target climbs from the estimate to the force map's target
-#: when grip resumes after the safe state (the map's target is then a step).
+#: Default time (s) in which the force target climbs from the estimate to the force map's
+#: target when grip resumes after the safe state (the map's target is then a step).
 RESUME_RAMP_TIME = 0.1
 #: Band (fraction of the largest force target) around the feedback force inside which the
 #: feedforward keeps its branch (loading / unloading) instead of switching.
@@ -57,6 +57,15 @@ class GripController:
         ``GripForceModel(params)`` (with losses). A :class:`GripForceModel` also gets the
         direction-aware estimate (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`);
         any other model is used as the loading branch only.
+    resume_ramp_time : float
+        Time (s) in which the force target climbs from the estimate to the map's target,
+        for the full ``grip_force_max``, when grip resumes after the safe state; 0: no
+        ramp (the target steps at once, as before the ramp existed).
+
+    Raises
+    ------
+    ValueError
+        ``resume_ramp_time`` negative or not finite.
 
     Notes
     -----
@@ -64,7 +73,10 @@ class GripController:
     limit assume that period; ``now`` is used for the watchdog only.
     """
 
-    def __init__(self, params, model=None):
+    def __init__(self, params, model=None, *, resume_ramp_time: float = RESUME_RAMP_TIME):
+        if not (math.isfinite(resume_ramp_time) and resume_ramp_time >= 0.0):
+            raise ValueError(f'resume_ramp_time must be finite and >= 0 s, got {resume_ramp_time!r}')
+        self.resume_ramp_time = resume_ramp_time
         if model is None:
             from grip_force_ros.model import GripForceModel
             model = GripForceModel(params)
@@ -113,6 +125,8 @@ class GripController:
                                    if params.object_kind == 'needle' else 0.0)
         self.force_map = ForceMap.from_params(params)
         self.force_max = self.force_map.force_max                     # N
+        self.resume_ramp_step = (self.force_max * self.period / self.resume_ramp_time
+                                 if self.resume_ramp_time > 0.0 else math.inf)   # N per period
         self.limiter = CurrentLimiter(params.max_current, params.max_current_slew, self.period)
         bound = 2.0 * params.max_current + 1e-3                       # A, integrator guard
         self.force_pid = PID(params.force_kp, params.force_ki, params.force_kd,
@@ -241,7 +255,7 @@ class GripController:
             if previous_mode == 'safe':          # resume: ramp up from the present force
                 self.resume_force = force if force > 0.0 else 0.0
             if self.resume_force < target_force:
-                self.resume_force += self.force_max * self.period / RESUME_RAMP_TIME
+                self.resume_force += self.resume_ramp_step
                 if self.resume_force < target_force:
                     target_force = self.resume_force
                 else:

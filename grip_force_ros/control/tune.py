@@ -37,7 +37,6 @@ from itertools import product
 
 import numpy as np
 
-from grip_force_ros.plotting import pyplot
 
 #: Margins claimed (and tested) for every loop and every plant variant.
 CLAIM_GM_DB = 6.0
@@ -541,26 +540,3 @@ def settling_time(t: np.ndarray, y: np.ndarray, band: float = 0.05) -> float:
     outside = np.nonzero(np.abs(y - final) > band * max(abs(final), 1e-12))[0]
     return float(t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(t) else (
         0.0 if not outside.size else float(t[-1]))
-
-
-def plot_steps(params, path, title: str = '', model=None) -> None:
-    """Write the step-response figure (PNG) of :func:`step_responses`."""
-    plt = pyplot()
-    steps = step_responses(params, model=model)
-    fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    for name, (t, y) in steps.items():
-        ax = ax_j if name.startswith('jaw') else ax_f
-        ax.plot(t * 1e3, y, label=f'{name}; 5% settling {settling_time(t, y) * 1e3:.0f} ms')
-    ax_f.axhline(1.0, color='k', lw=0.5, ls='--')
-    ax_j.axhline(1.0, color='k', lw=0.5, ls='--')
-    ax_f.set_ylabel('grip force / target (-)')
-    ax_j.set_ylabel('jaw angle / target (-)')
-    ax_j.set_xlabel('time (ms)')
-    ax_f.legend(fontsize=8)
-    ax_j.legend(fontsize=8)
-    ax_f.set_title(title or 'closed-loop unit step responses (nominal linear plant, 1 kHz PID)')
-    ax_f.grid(alpha=0.3)
-    ax_j.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -14,7 +14,8 @@ forward) and a Newton solve of that chain (the inverse). Both maps are smooth, s
   bound towards the peak of M(I)). Each interval is checked when built; the table ends
   before the first interval that misses the tolerance.
 
-Outside the fitted range the caller computes the exact map. Plain numpy, no rclpy.
+Outside the fitted range the caller computes the exact map. :func:`table_errors`
+measures a model's tables against the exact computation. Plain numpy, no rclpy.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from typing import Callable
 import numpy as np
 from numpy.polynomial import Chebyshev, Polynomial
 
-__all__ = ['fit_polynomial', 'horner', 'PiecewisePolynomial', 'fit_piecewise']
+__all__ = ['fit_polynomial', 'horner', 'PiecewisePolynomial', 'fit_piecewise', 'table_errors']
 
 ArrayMap = Callable[[np.ndarray], np.ndarray]
 
@@ -201,3 +202,41 @@ def fit_piecewise(exact: ArrayMap, top: float, intervals: int, degree: int,
     if good == 0:
         return None
     return PiecewisePolynomial(np.ascontiguousarray(coefficients[:, :good]), step, step * good)
+
+
+def table_errors(model, currents: np.ndarray) -> dict:
+    """Relative errors (-) of a model's vectorised fast path at ``currents`` (A), zero wrist.
+
+    The accuracy check behind docs/model.md (speed) and its figure
+    (``python -m grip_force_ros.figures.model_tables``).
+
+    Parameters
+    ----------
+    model : GripForceModel
+        A nonlinear, wrist-independent instrument (its fitted tables are what is checked).
+    currents : ndarray
+        Motor currents (A), positive.
+
+    Returns
+    -------
+    dict
+        ``efficiency``: fitted lambda_n against the exact pulley chain;
+        ``inverse``: the vectorised inverse of the needle grip force against the
+        bracketed scalar solve; ``condition``: ``M / (I dM/dI)``, how much a relative
+        error of the torque grows in the current (the floor any solver shares);
+        ``table_end_current`` (A): where the inverse table ends (past it: Newton).
+    """
+    currents = np.asarray(currents, float)
+    zero = np.zeros(())
+    forward = model.forward(currents, zero, zero, 'needle')
+    exact_efficiency = model._chain_efficiency(model.tension_per_amp * currents, zero)
+    torque = forward.grip_force * model._tip                                  # N*m (needle: F_J = M / tip)
+    exact_current = np.array([model._solve_current(float(t), 0.0, 0.0) for t in torque])
+    inverse = model.inverse(forward.grip_force, zero, zero, 'needle')
+    slope = np.array([(model._torque_scalar(i * (1 + 1e-7), 0.0) - model._torque_scalar(i, 0.0)) / (i * 1e-7)
+                      for i in exact_current])                                 # dM/dI (N*m/A)
+    fit = model._current_fit_built()
+    return {'efficiency': np.abs(forward.efficiency / exact_efficiency - 1.0),
+            'inverse': np.abs(inverse / exact_current - 1.0),
+            'condition': torque / (exact_current * slope),
+            'table_end_current': None if fit is None else model._solve_current(fit.top, 0.0, 0.0)}

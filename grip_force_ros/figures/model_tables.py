@@ -1,7 +1,8 @@
-"""Accuracy of the fitted tables against the exact computation, as numbers and as a figure.
+"""Figure of docs/model.md (speed): accuracy of the fitted tables against the exact model.
 
-Run: ``.venv/bin/python -m grip_force_ros.model.table_figure [config.yaml] [out.png]``
-(defaults: the four-pulley config, ``docs/figures/model_tables_error.png``).
+Run: ``.venv/bin/python -m grip_force_ros.figures.model_tables [config.yaml] [out.png]``
+(defaults: the four-pulley config, ``docs/figures/model_tables_error.png``). The
+numbers come from :func:`grip_force_ros.model.tables.table_errors`.
 """
 from __future__ import annotations
 
@@ -10,41 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
-from grip_force_ros.model.instrument import GripForceModel
+from grip_force_ros.model import GripForceModel
+from grip_force_ros.model.tables import table_errors
 from grip_force_ros.params import load_params_file
-
-
-def table_errors(model: GripForceModel, currents: np.ndarray) -> dict:
-    """Relative errors (-) of the vectorised fast path at ``currents`` (A), zero wrist.
-
-    Returns
-    -------
-    dict
-        ``efficiency``: fitted lambda_n against the exact pulley chain;
-        ``inverse``: the vectorised inverse of the needle grip force against the
-        bracketed scalar solve; ``condition``: ``M / (I dM/dI)``, how much a relative
-        error of the torque grows in the current (the floor any solver shares);
-        ``table_end_current`` (A): where the inverse table ends (past it: Newton).
-    """
-    currents = np.asarray(currents, float)
-    zero = np.zeros(())
-    forward = model.forward(currents, zero, zero, 'needle')
-    exact_efficiency = model._chain_efficiency(model.tension_per_amp * currents, zero)
-    torque = forward.grip_force * model._tip                                  # N*m (needle: F_J = M / tip)
-    exact_current = np.array([model._solve_current(float(t), 0.0, 0.0) for t in torque])
-    inverse = model.inverse(forward.grip_force, zero, zero, 'needle')
-    slope = np.array([(model._torque_scalar(i * (1 + 1e-7), 0.0) - model._torque_scalar(i, 0.0)) / (i * 1e-7)
-                      for i in exact_current])                                 # dM/dI (N*m/A)
-    fit = model._current_fit_built()
-    return {'efficiency': np.abs(forward.efficiency / exact_efficiency - 1.0),
-            'inverse': np.abs(inverse / exact_current - 1.0),
-            'condition': torque / (exact_current * slope),
-            'table_end_current': None if fit is None else model._solve_current(fit.top, 0.0, 0.0)}
+from grip_force_ros.plotting import pyplot, save
 
 
 def plot_table_errors(config: str, path: Path, samples: int = 4000) -> Path:
     """Figure of :func:`table_errors` over (0, peak) of M(I) for ``config``; returns ``path``."""
-    from grip_force_ros.plotting import pyplot, save
     params = load_params_file(config)
     model = GripForceModel(params)
     rising = model._rising_current()                                           # A
@@ -77,6 +51,7 @@ def plot_table_errors(config: str, path: Path, samples: int = 4000) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Write the figure (arguments: config YAML, output PNG) and print its path."""
     args = argv if argv is not None else sys.argv[1:]
     config = args[0] if args else 'config/four_pulley_needle_driver.yaml'
     out = Path(args[1] if len(args) > 1 else 'docs/figures/model_tables_error.png')

@@ -1,6 +1,6 @@
 """Figures and numbers of docs/sim.md: step response, loops of every effect.
 
-Run: ``.venv/bin/python -m grip_force_ros.sim.figures --out docs/figures``
+Run: ``.venv/bin/python -m grip_force_ros.figures.sim_response --out docs/figures``
 (prints the step-response metrics; writes ``sim_step_response.png`` and
 ``sim_effects.png``).
 """
@@ -105,7 +105,8 @@ def effects_figure(out: Path) -> None:
     plt.close(fig)
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
+    """Write both figures into ``--out`` and print the step-response metrics."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--out', default='docs/figures', help='output folder')
     args = parser.parse_args(argv)

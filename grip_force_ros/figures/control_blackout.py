@@ -1,53 +1,58 @@
-"""Figure of the stick-band fix: a watchdog trip in a sensorless grip, before and after.
+"""Figure of the stick-band fix (docs/control.md): a watchdog trip in a sensorless grip, before and after.
 
-    .venv/bin/python -m grip_force_ros.control.figures [OUT.png]
+    .venv/bin/python -m grip_force_ros.figures.control_blackout [OUT.png]
 
 Runs :class:`GripController` on :class:`~grip_force_ros.sim.plant.InstrumentSim`
 (config/paper_needle_driver.yaml, needle_grasp, a 50 ms blackout of every input at
 t = 1.5 s) twice: as it was (loading-branch estimate and feedforward, no force ramp on
-resume) and as it is. Prints the hold force over 2.3-2.8 s; writes the PNG
-(default docs/figures/control_blackout_stick_band.png).
+resume: ``resume_ramp_time=0``) and as it is. Prints the hold force over 2.3-2.8 s;
+writes the PNG (default docs/figures/control_blackout_stick_band.png).
 """
 from __future__ import annotations
 
 import sys
-from contextlib import contextmanager
 
 import numpy as np
 
-from grip_force_ros.control import controller as _controller
+from grip_force_ros.control import GripController
+from grip_force_ros.model import GripForceModel
+from grip_force_ros.params import load_params_file
 from grip_force_ros.plotting import pyplot
+from grip_force_ros.sim.plant import InstrumentSim
+from grip_force_ros.trajectories import needle_grasp
 
 BLACKOUT = (1.5, 0.05)      # s: start, length
 SECONDS = 2.8               # s
 
 
 class _LoadingBranchOnly:
-    """The model's loading branch alone (what the controller used before the stick band)."""
+    """The model's loading branch alone (what the controller used before the stick band).
+
+    It offers the two scalar paths and nothing of the stick band, so the controller
+    uses it as the loading branch only.
+    """
 
     def __init__(self, model):
         self.grip_force_scalar = model.grip_force_scalar
         self.current_for_force_scalar = model.current_for_force_scalar
 
 
-@contextmanager
-def _no_resume_ramp():
-    saved = _controller.RESUME_RAMP_TIME
-    _controller.RESUME_RAMP_TIME = 1e-12
-    try:
-        yield
-    finally:
-        _controller.RESUME_RAMP_TIME = saved
-
-
 def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
-    """Closed loop with the blackout. Columns: t, target, sim grip force, estimate (N),
-    command, actual current (A), drum tension, jaw-side tension (N), efficiency (-)."""
-    from grip_force_ros.model import GripForceModel
-    from grip_force_ros.sim.plant import InstrumentSim
-    from grip_force_ros.trajectories import needle_grasp
+    """Closed loop with the blackout, as it is (``stick_band``) or as it was.
+
+    As it was: the model's loading branch only and no force ramp on resume.
+
+    Returns
+    -------
+    ndarray
+        Columns: t (s), target, sim grip force, estimate (N), command, actual current
+        (A), drum tension, jaw-side tension (N), efficiency (-); one row per 1 ms.
+    """
     model = GripForceModel(params)
-    ctrl = _controller.GripController(params, model if stick_band else _LoadingBranchOnly(model))
+    if stick_band:
+        ctrl = GripController(params, model)
+    else:
+        ctrl = GripController(params, _LoadingBranchOnly(model), resume_ramp_time=0.0)
     sim = InstrumentSim(params, obj='needle', seed=seed)
     inputs, traj, rows = ctrl.new_inputs(), needle_grasp(), []
     for k in range(int(round(SECONDS / 1e-3))):
@@ -65,14 +70,13 @@ def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
     return np.array(rows)
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
+    """Run both loops, print their hold forces and write the figure (argument: output PNG)."""
     plt = pyplot()
-    from grip_force_ros.params import load_params_file
     argv = sys.argv[1:] if argv is None else argv
     out = argv[0] if argv else 'docs/figures/control_blackout_stick_band.png'
     params = load_params_file('config/paper_needle_driver.yaml')
-    with _no_resume_ramp():
-        before = blackout_run(params, stick_band=False)
+    before = blackout_run(params, stick_band=False)
     after = blackout_run(params, stick_band=True)
     fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)
     for col, (title, log) in enumerate((('before: loading-branch estimate', before),

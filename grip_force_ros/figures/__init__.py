@@ -1,0 +1,13 @@
+"""The figure scripts of the docs: each draws one page's figures from the package's code.
+
+One module per figure (``python -m grip_force_ros.figures.<name>``; each prints the
+numbers it draws and writes PNGs under ``docs/figures/`` by default):
+
+* :mod:`.model_tables`: docs/model.md, the fitted tables against the exact model;
+* :mod:`.control_blackout`: docs/control.md, a watchdog trip in a sensorless grip
+  before and after the stick band;
+* :mod:`.sim_response`: docs/sim.md, the step response and the loops of every effect.
+
+Figures that are a command's output (``grip-force reproduce``, ``demo``, ``tune``,
+``realdata``) stay with the command. Drawing goes through :mod:`grip_force_ros.plotting`.
+"""
