@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from grip_force_ros.control import PID, ControlInputs, CurrentLimiter, ForceMap, GripController
+from grip_force_ros.control import PID, ControlInputs, CurrentLimiter, ForceMap, GripController, Mode
+from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
 
 PERIOD = 1e-3
@@ -323,6 +324,39 @@ def test_runtime_gain_change_is_bumpless_and_takes_effect(params):
     assert ctrl.force_pid.ki == 2 * params.force_ki
     assert out.target_force == pytest.approx(2.0 * 0.15 / 0.2)      # the new map is used
     assert out.estimated_force == pytest.approx(out.target_force, rel=0.02)
+
+
+def test_runtime_change_keeps_a_real_mode_for_diagnostics(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    out, t = run_grip(ctrl, inp, n=300, master=0.05)
+    assert out.mode is Mode.GRIP
+    ctrl.update_params(params.replace(force_ki=2 * params.force_ki))
+    status = ctrl.status(inp)
+    assert status['mode'] == 'grip' and type(status['mode']) is str    # not a pseudo-mode
+    assert ctrl.retuned
+    feed(inp, t, 0.05, 0.04, ctrl.command)
+    out = ctrl.step(t, inp)
+    assert out.mode is Mode.GRIP and not ctrl.retuned                    # preset done, flag cleared
+    assert {m.value for m in Mode} == {'free', 'grip', 'safe'}
+
+
+class _ScalarPathsOnly:
+    def __init__(self, model, **attributes):
+        self.grip_force_scalar = model.grip_force_scalar
+        self.current_for_force_scalar = model.current_for_force_scalar
+        self.__dict__.update(attributes)
+
+
+def test_stick_band_follows_the_models_declared_capability(params):
+    model = GripForceModel(params)
+    assert model.supports_stick_band is True
+    assert GripController(params, model).stick_band is not None
+    assert GripController(params, _ScalarPathsOnly(model)).stick_band is None
+    # a model object that carries the private helpers but says no is taken at its word
+    said_no = _ScalarPathsOnly(model, supports_stick_band=False, tension_per_amp=model.tension_per_amp,
+                               _efficiency_scalar=model._efficiency_scalar)
+    assert GripController(params, said_no).stick_band is None
 
 
 def test_status_for_diagnostics(params):

@@ -2,7 +2,7 @@
 
 Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
 
-    from grip_force_ros.control import GripController, ControlInputs, ControlOutput
+    from grip_force_ros.control import GripController, ControlInputs, ControlOutput, Mode
 
     ctrl = GripController(params)            # params: ParamSet (instrument + limits + controller)
     inputs = ctrl.new_inputs()               # ControlInputs, validated in one place
@@ -15,14 +15,15 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
                         stamp=nan)                                     # [A], [rad], [rad/s]
     inputs.set_force(receive_time, grip_force, stamp=nan)              # [N], load cell (optional)
     inputs.reject(source, receive_time, reason)   # a malformed message (missing joint, bad length)
-    # in the 1 kHz timer:
+    # once per control period (the node: on each fresh actuator state, its control_rate
+    # timer only as the fallback when no state came):
     out = ctrl.step(now, inputs)             # -> ControlOutput (a NamedTuple)
     out.current_command    # [A]  motor current command, |.| <= max_current, slew-limited
     out.target_force       # [N]  0 in free motion and in the safe state
     out.estimated_force    # [N]  grip force used as feedback (sensor, or the direction-aware
                            #      model estimate: model/hysteresis.py, the pulleys' stick band)
     out.pull_out_force     # [N]  needle pull-out force from the estimate (0 unless needle)
-    out.mode               # 'free' | 'grip' | 'safe'
+    out.mode               # Mode.FREE | Mode.GRIP | Mode.SAFE (a str enum: 'free', 'grip', 'safe')
     out.limits_hit         # tuple of 'current_limit', 'slew_limit'
     out.reasons            # tuple of str: why safe, what was clamped; () when all is well
     out.target_jaw_angle   # [rad] jaw target in free motion (measured jaw angle otherwise)
@@ -35,15 +36,17 @@ Sources are ``'master'``, ``'instrument'``, ``'actuator'`` and ``'force'`` (the 
 only required when ``force_sensor_enabled``).
 
 Safe state (documented choice): the current command ramps to 0 A at the slew limit
-(``max_current_slew``); ``mode == 'safe'`` from the first ``step`` after a required input
+(``max_current_slew``); ``mode is Mode.SAFE`` from the first ``step`` after a required input
 became stale (older than ``watchdog_timeout`` by its receive time), missing, or invalid
 (NaN/inf, out-of-range angle or current, stamp backwards or ahead of the receive time by
 more than ``stamp_future_tolerance``), with the reason in ``out.reasons``. A rejected sample
 is not stored (the last good value is kept) and its source stays faulted until a valid
 sample arrives. When all inputs are good again, control resumes bumplessly: the PID
 integrator is preset so the command continues from its last value (no current jump), and
-the force target ramps from the estimate to the map's target over ``RESUME_RAMP_TIME``
-(0.1 s for the full ``grip_force_max``).
+the force target ramps from the estimate to the map's target over ``resume_ramp_time``
+(constructor argument, default ``RESUME_RAMP_TIME`` = 0.1 s for the full ``grip_force_max``).
+A runtime parameter change (``update_params``) presets the PID on the next step, in whatever
+mode it is (the mode stays a real one: /diagnostics never shows another).
 A duplicate sample (same stamp as the last one) is ignored and does not refresh the
 watchdog. Master angles slightly outside [master_angle_min, master_angle_max] are clamped
 and flagged; beyond ``master_angle_tolerance`` they are invalid.
@@ -53,11 +56,11 @@ or grip force target), :class:`PID` (back-calculation anti-windup, filtered deri
 measurement, bumpless preset), :class:`CurrentLimiter` (current and slew limits, reports
 which hit). Loop design with python-control: :mod:`grip_force_ros.control.tune`.
 """
-from grip_force_ros.control.controller import ControlOutput, GripController
+from grip_force_ros.control.controller import ControlOutput, GripController, Mode
 from grip_force_ros.control.force_map import ForceMap
 from grip_force_ros.control.inputs import SOURCES, ControlInputs
 from grip_force_ros.control.limits import CurrentLimiter
 from grip_force_ros.control.pid import PID
 
-__all__ = ['GripController', 'ControlInputs', 'ControlOutput', 'ForceMap', 'PID',
+__all__ = ['GripController', 'ControlInputs', 'ControlOutput', 'Mode', 'ForceMap', 'PID',
            'CurrentLimiter', 'SOURCES']

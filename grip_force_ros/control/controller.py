@@ -1,6 +1,7 @@
 """GripController: one control period from plain inputs to a current command."""
 from __future__ import annotations
 
+import enum
 import math
 from typing import NamedTuple
 
@@ -30,6 +31,22 @@ _isfinite = math.isfinite
 _NO_REASONS: tuple = ()
 
 
+class Mode(enum.StrEnum):
+    """What the controller does in a period (a ``str``: /diagnostics shows the value).
+
+    FREE: the master is open, the jaw follows it (jaw-angle PID, no grip force).
+    GRIP: the master is closed past contact, the grip force follows the force map.
+    SAFE: a required input is missing, stale or invalid; the current ramps to 0 A.
+    """
+
+    FREE = 'free'
+    GRIP = 'grip'
+    SAFE = 'safe'
+
+
+_FREE, _GRIP, _SAFE = Mode.FREE, Mode.GRIP, Mode.SAFE
+
+
 class ControlOutput(NamedTuple):
     """Result of one control period (SI units)."""
 
@@ -37,7 +54,7 @@ class ControlOutput(NamedTuple):
     target_force: float         # N, grip force target (0 in free motion and safe state)
     estimated_force: float      # N, grip force feedback (sensor or model estimate)
     pull_out_force: float       # N, needle pull-out force from estimated_force (0 unless needle)
-    mode: str                   # 'free' | 'grip' | 'safe'
+    mode: Mode                  # free | grip | safe (a str)
     limits_hit: tuple           # of 'current_limit', 'slew_limit'
     reasons: tuple              # of str: why safe, what was clamped or unavailable
     target_jaw_angle: float     # rad, jaw target in free motion, else the measured jaw angle
@@ -54,9 +71,10 @@ class GripController:
     model : object, optional
         Provides ``grip_force_scalar(current, wrist, jaw, obj)`` and
         ``current_for_force_scalar(force, wrist, jaw, obj)``; default
-        ``GripForceModel(params)`` (with losses). A :class:`GripForceModel` also gets the
-        direction-aware estimate (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`);
-        any other model is used as the loading branch only.
+        ``GripForceModel(params)`` (with losses). A model whose ``supports_stick_band`` is
+        true (:attr:`GripForceModel.supports_stick_band`) also gets the direction-aware
+        estimate (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`); any other
+        model is used as the loading branch only.
     resume_ramp_time : float
         Time (s) in which the force target climbs from the estimate to the map's target,
         for the full ``grip_force_max``, when grip resumes after the safe state; 0: no
@@ -82,13 +100,14 @@ class GripController:
             model = GripForceModel(params)
         self.model = model
         self.stick_band = None          # HystereticGripForce, the stick band of the pulleys
-        if hasattr(model, '_efficiency_scalar') and hasattr(model, 'tension_per_amp'):
+        if getattr(model, 'supports_stick_band', False):
             from grip_force_ros.model.hysteresis import HystereticGripForce
             self.stick_band = HystereticGripForce(model)
         self.hysteresis = None          # the stick band when sensorless (set by _configure)
         self._configure(params)
         self.command = 0.0              # A, last output
-        self.mode = 'safe'              # starts safe until every input has arrived
+        self.mode = _SAFE               # starts safe until every input has arrived
+        self.retuned = False            # parameters changed at runtime: preset on the next step
         self.estimated_force = 0.0      # N, last good estimate
         self.last_now = -math.inf
         self.safe_steps = 0             # consecutive safe periods
@@ -148,14 +167,13 @@ class GripController:
         gripping, contact = self.force_map.gripping, self.force_map.contact_angle
         self._configure(params)
         self.force_map.gripping, self.force_map.contact_angle = gripping, contact
-        if self.mode != 'safe':
-            self.mode = 'retuned'       # not a real mode: forces the preset on the next step
+        self.retuned = True             # the next step presets the PID (bumpless)
         if abs(self.command) > params.max_current:
             self.command = math.copysign(params.max_current, self.command)
 
     def status(self, inputs: ControlInputs | None = None) -> dict:
         """Key/value strings for /diagnostics (state, counters, limits, rejected inputs)."""
-        out = {'mode': self.mode, 'current_command_A': f'{self.command:.4f}',
+        out = {'mode': self.mode.value, 'current_command_A': f'{self.command:.4f}',
                'estimated_force_N': f'{self.estimated_force:.3f}', 'periods': str(self.steps),
                'periods_with_limit_hit': str(self.limit_steps),
                'consecutive_safe_periods': str(self.safe_steps),
@@ -247,12 +265,13 @@ class GripController:
 
         gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity)
         previous_mode = self.mode
+        retuned, self.retuned = self.retuned, False
         feedforward = 0.0
         branch_switch = False
         if gripping:
-            mode = 'grip'
+            mode = _GRIP
             target_force = target if target < self.force_max else self.force_max
-            if previous_mode == 'safe':          # resume: ramp up from the present force
+            if previous_mode is _SAFE:           # resume: ramp up from the present force
                 self.resume_force = force if force > 0.0 else 0.0
             if self.resume_force < target_force:
                 self.resume_force += self.resume_ramp_step
@@ -297,13 +316,13 @@ class GripController:
                 measurement = target_force
             target_jaw = jaw
         else:
-            mode = 'free'
+            mode = _FREE
             target_force = 0.0
             self.branch = 'loading'
             self.resume_force = math.inf
             pid, setpoint, measurement = self.jaw_pid, target, jaw
             target_jaw = target
-        if mode != previous_mode or branch_switch:   # bumpless: continue from the last command
+        if mode is not previous_mode or branch_switch or retuned:   # bumpless: continue from the last command
             pid.preset(self.command - feedforward, setpoint, measurement)
         unlimited = feedforward + pid.update(setpoint, measurement)
         command, limits_hit = self.limiter.apply(unlimited, self.command)
@@ -328,7 +347,8 @@ class GripController:
                 self.hysteresis.drive_torque(self.filtered_current, self.last_wrist)
             except (ValueError, ArithmeticError):
                 self.hysteresis.reset()
-        self.mode = 'safe'
+        self.mode = _SAFE
+        self.retuned = False              # leaving safe presets the PID anyway
         self.safe_steps += 1
         self.last_reasons = reasons
         if limits_hit:
@@ -336,5 +356,5 @@ class GripController:
         self.force_map.reset()
         force = self.estimated_force
         jaw = inputs.jaw_angle
-        return ControlOutput(command, 0.0, force, self.pull_out_per_force * force, 'safe',
+        return ControlOutput(command, 0.0, force, self.pull_out_per_force * force, _SAFE,
                              limits_hit, reasons, jaw if _isfinite(jaw) else 0.0, 0.0)

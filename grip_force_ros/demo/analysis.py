@@ -9,6 +9,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from grip_force_ros.control import Mode
 from grip_force_ros.trajectories import Trajectory
 
 #: Share of the hold phase, at its end, over which the force counts as steady.
@@ -194,7 +195,7 @@ def safe_state_entries(diagnostics, window: tuple[float, float], offset: float =
                 continue
             mode = status['values'].get('mode')
             tt = t - offset
-            if mode == 'safe' and last != 'safe' and window[0] <= tt <= window[1]:
+            if mode == Mode.SAFE and last != Mode.SAFE and window[0] <= tt <= window[1]:
                 out.append({'t': round(tt, 3),
                             'reason': status['values'].get('reasons') or status['message']})
             last = mode

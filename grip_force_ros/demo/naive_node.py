@@ -21,6 +21,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
+from grip_force_ros.control import Mode
 from grip_force_ros.params import SPECS
 
 _USED = ('master_angle_min', 'master_contact_angle', 'grip_force_max', 'force_map_exponent',
@@ -56,14 +57,14 @@ class NaiveNode(Node):
         """mode 'safe' until the master arrives, then 'free' or 'grip' (as the controller)."""
         share = 0.0 if self.master_angle is None else closing_share(
             self.master_angle, self.values['master_contact_angle'], self.values['master_angle_min'])
-        mode = 'safe' if self.master_angle is None else ('grip' if share > 0 else 'free')
+        mode = Mode.SAFE if self.master_angle is None else (Mode.GRIP if share > 0 else Mode.FREE)
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = [DiagnosticStatus(
             level=DiagnosticStatus.OK if self.master_angle is not None else DiagnosticStatus.WARN,
             name='controller (naive map)', hardware_id='naive',
             message='no master yet' if self.master_angle is None else 'open loop',
-            values=[KeyValue(key='mode', value=mode),
+            values=[KeyValue(key='mode', value=mode.value),
                     KeyValue(key='naive_current_closed', value=f'{self.current_closed:.4f}')])]
         self.pub_diag.publish(msg)
 

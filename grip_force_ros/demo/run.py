@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from grip_force_ros import topics
+from grip_force_ros.control import Mode
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import values_of
 from grip_force_ros.nodes.processes import (ProcessError, ProcessGroup, node_command, python_module,
@@ -37,7 +38,7 @@ HOLD_MASTER = {'trajectory': 'needle_grasp', 'trajectory_file': '', 'time_scale'
 #: is started anyway (a controller without /diagnostics).
 READY_TIMEOUT = 4.0
 #: Controller modes (/diagnostics) that mean all its inputs, the master's included, arrive.
-READY_MODES = ('free', 'grip')
+READY_MODES = (Mode.FREE, Mode.GRIP)
 
 
 def default_duration() -> float:

@@ -24,6 +24,7 @@ import traceback
 from pathlib import Path
 
 from grip_force_ros import topics
+from grip_force_ros.control import Mode
 from grip_force_ros.faults.catalogue import FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
 
@@ -61,21 +62,6 @@ def resolve_config(path: str | os.PathLike) -> Path:
     raise FileNotFoundError(f'instrument config {path} not found')
 
 
-def controller_class():
-    """The controller node class of ``grip_force_ros.nodes.controller``."""
-    from rclpy.node import Node
-
-    from grip_force_ros.nodes import controller as module
-    for name in ('ControllerNode', 'GripControllerNode', 'Controller'):
-        cls = getattr(module, name, None)
-        if isinstance(cls, type) and issubclass(cls, Node):
-            return cls
-    for value in vars(module).values():
-        if isinstance(value, type) and issubclass(value, Node) and value.__module__ == module.__name__:
-            return value
-    raise ImportError('no rclpy Node class in grip_force_ros.nodes.controller')
-
-
 # ---------------------------------------------------------------------------- session
 class Session:
     """One in-process controller node and a fault probe, spun by one executor thread.
@@ -94,6 +80,7 @@ class Session:
         from rclpy.parameter import Parameter
 
         from grip_force_ros.faults.probe import FaultProbe
+        from grip_force_ros.nodes.controller import ControllerNode
 
         values = read_params_yaml(config)
         if sensor:
@@ -103,7 +90,7 @@ class Session:
         rclpy.init(context=self.context)
         overrides = [Parameter(k, value=list(v) if isinstance(v, (list, tuple)) else v)
                      for k, v in values.items()]
-        self.controller = controller_class()(parameter_overrides=overrides, context=self.context)
+        self.controller = ControllerNode(parameter_overrides=overrides, context=self.context)
         self.probe = FaultProbe(self.params, rate=self.params.control_rate, sensor=sensor,
                                 master_angle=GRIP_MASTER_ANGLE, context=self.context)
         self.executor = self._executor()
@@ -299,14 +286,14 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
         modes = [m for m in modes if m is not None]
         if modes:   # the controller reports its mode: free motion is not the safe state
-            grip_share = 1.0 - modes.count('safe') / len(modes)
+            grip_share = 1.0 - modes.count(Mode.SAFE) / len(modes)
         else:
             grip_share = (len(window) - len(safe_rows)) / max(len(window), 1)
         detail['grip_share'] = round(grip_share, 3)
         # A watchdog trip from a scheduling stall of a loaded machine is not this fault's
         # doing; a safe state for any other reason is.
         unsafe = [d[1] for d in probe.diagnostics
-                  if d[0] <= t1 + 0.005 and _diag_mode(d[2]) == 'safe' and 'stale' not in d[1]]
+                  if d[0] <= t1 + 0.005 and _diag_mode(d[2]) is Mode.SAFE and 'stale' not in d[1]]
         if unsafe:
             problems.append(f'went to the safe state: {unsafe[0][:200]}')
         if grip_share < 0.5:
@@ -341,13 +328,13 @@ def _implausible(held: dict, params) -> list:
     return bad
 
 
-def _diag_mode(values: dict):
-    """The controller mode in a /diagnostics key-value list ('free', 'grip', 'safe') or None."""
+def _diag_mode(values: dict) -> Mode | None:
+    """The controller :class:`~grip_force_ros.control.Mode` in a /diagnostics key-value list, or None."""
     for key in ('mode', 'state'):
-        v = values.get(key)
-        v = 'grip' if v == 'retuned' else v
-        if v in ('free', 'grip', 'safe'):
-            return v
+        try:
+            return Mode(values.get(key))
+        except ValueError:
+            continue
     return None
 
 

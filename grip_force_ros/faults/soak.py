@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from grip_force_ros.control import Mode
+
 #: Time given to discovery and the first grasp before measuring (s).
 WARMUP = 15.0
 #: RSS sampling interval (s).
@@ -122,7 +124,7 @@ class _Recorder:
             if self.diag_first is None:
                 self.diag_first = values
             self.diag = values
-            if values.get('mode') == 'safe':
+            if values.get('mode') == Mode.SAFE:
                 self.safe_reports.append(status.message)
 
     def finish(self) -> None:

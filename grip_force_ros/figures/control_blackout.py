@@ -28,8 +28,8 @@ SECONDS = 2.8               # s
 class _LoadingBranchOnly:
     """The model's loading branch alone (what the controller used before the stick band).
 
-    It offers the two scalar paths and nothing of the stick band, so the controller
-    uses it as the loading branch only.
+    It offers the two scalar paths, not :attr:`GripForceModel.supports_stick_band`, so
+    the controller uses it as the loading branch only.
     """
 
     def __init__(self, model):

@@ -103,6 +103,12 @@ class GripForceModel:
         If the geometry is inconsistent (see :func:`check_instrument`).
     """
 
+    #: Capability: this model describes the pulleys' stick band, so
+    #: :class:`~grip_force_ros.model.hysteresis.HystereticGripForce` can follow it and the
+    #: controller uses the direction-aware estimate and feedforward. A model object without
+    #: it (or False) is used as the loading branch only.
+    supports_stick_band = True
+
     def __init__(self, params: Any, losses: bool = True):
         check_instrument(params)
         p = params

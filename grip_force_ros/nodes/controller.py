@@ -59,7 +59,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.control import ControlInputs, GripController
+from grip_force_ros.control import ControlInputs, GripController, Mode
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node, stamp_seconds)
 from grip_force_ros.nodes.ros_params import declare_node_parameters
@@ -308,7 +308,7 @@ class ControllerNode(Node):
     def diagnostic_status(self, out) -> DiagnosticStatus:
         """The controller's DiagnosticStatus for the last output ``out``."""
         params = self._param.params
-        if out is None or out.mode == 'safe':
+        if out is None or out.mode is Mode.SAFE:
             level = DiagnosticStatus.ERROR
         elif out.limits_hit or out.reasons or self._limits_seen:
             level = DiagnosticStatus.WARN
@@ -318,7 +318,7 @@ class ControllerNode(Node):
         reasons = '; '.join(out.reasons) if out is not None and out.reasons else 'ok'
         values = dict(self.controller.status(self.inputs))
         values['limits_hit'] = ', '.join(sorted(self._limits_seen)) or 'none'
-        tripped = out is not None and out.mode == 'safe' and any(
+        tripped = out is not None and out.mode is Mode.SAFE and any(
             'stale' in r or 'input yet' in r for r in out.reasons)
         values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'

@@ -230,11 +230,12 @@ class NodeProcess:
         self.log_path = Path(log_path) if log_path is not None else None
         self.own_session = own_session
         text: dict[str, Any] = {}
+        log_file = None
         if pipe:
             stdout, text = subprocess.PIPE, {'text': True, 'bufsize': 1}
         elif self.log_path is not None:
             self.log_path.parent.mkdir(parents=True, exist_ok=True)
-            stdout = open(self.log_path, 'wb')  # noqa: SIM115 - closed below, Popen dup'ed it
+            stdout = log_file = open(self.log_path, 'wb')  # noqa: SIM115 - closed below, Popen dup'ed it
         else:
             stdout = subprocess.DEVNULL
         try:
@@ -245,8 +246,8 @@ class NodeProcess:
         except OSError as exc:
             raise ProcessError(f'cannot start {name}: {exc}') from exc
         finally:
-            if hasattr(stdout, 'close'):
-                stdout.close()
+            if log_file is not None:
+                log_file.close()
 
     @property
     def pid(self) -> int:
