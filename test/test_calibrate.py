@@ -6,8 +6,8 @@ import pytest
 
 from grip_force_ros.cli import main as cli_main
 from grip_force_ros.demo import find_config
-from grip_force_ros.demo.calibration import (CalibrationError, calibrated_yaml, fit_instrument,
-                                             steady_plateaus)
+from grip_force_ros.identify.calibration import (CalibrationError, calibrated_yaml, fit_instrument,
+                                                 steady_plateaus)
 from grip_force_ros.logs import write_csv
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.sim import simulate

@@ -32,7 +32,7 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from grip_force_ros.demo import find_config
-    from grip_force_ros.demo.calibration import calibrated_yaml, fit_instrument
+    from grip_force_ros.identify import calibrated_yaml, fit_instrument
     from grip_force_ros.logs import LogError, read_log
     from grip_force_ros.params import ParameterError, load_params_file
 

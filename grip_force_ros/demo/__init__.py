@@ -2,8 +2,6 @@
 
 Modules
 -------
-processes    start the node executables as separate processes, pick a free ROS
-             domain, stop everything (SIGINT, wait, SIGTERM, SIGKILL)
 recorder     rclpy node writing every recorded topic to a rosbag2 (MCAP, rosbags)
              and keeping the latest values for the live view
 messages     topic -> type, and plain values out of messages (shared with monitor)
@@ -11,12 +9,13 @@ series       read a demo bag back (rosbags) and resample it on one grid
 analysis     phases, hold-phase error, steady hold ratio, spread (numpy)
 plot         the summary PNG
 run          one run end to end (:func:`run_task`)
-calibration  fit instrument parameters from a load-cell grasp (numpy/scipy)
-compare      ``--compare-instruments``: calibrate, then four conditions on three plants
+compare      ``--compare-instruments``: calibrate (:mod:`grip_force_ros.identify`), then four
+             conditions on three plants
 naive_node   the naive baseline (current proportional to master closing) as a node
 
 Only ``recorder``, ``naive_node``, the ``run``/``compare`` orchestration and
-the monitor start or use rclpy; everything else is plain numpy.
+the monitor start or use rclpy; everything else is plain numpy. The node
+processes are started through :mod:`grip_force_ros.nodes.processes`.
 """
 from pathlib import Path
 

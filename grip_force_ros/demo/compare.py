@@ -182,7 +182,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         runs no starved node spoiled (``spread_<condition>_unspoiled``, None when fewer
         than two) and ``runs_still_spoiled``.
     """
-    from grip_force_ros.demo.calibration import calibrated_yaml, fit_instrument
+    from grip_force_ros.identify import calibrated_yaml, fit_instrument
     from grip_force_ros.nodes.processes import pick_domain_ids
     from grip_force_ros.logs import read_log
     from grip_force_ros.params import load_params_file
