@@ -1,4 +1,4 @@
-"""Logs: CSV and rosbag2 (MCAP, sqlite3) round trips in the DESIGN.md contract."""
+"""Logs: CSV and rosbag2 (MCAP, sqlite3) round trips in the docs/design.md contract."""
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st

@@ -13,7 +13,7 @@ ADDED_COLUMNS = ('grip_force_model', 'pull_out_force_model', 'jaw_angle_model')
 def add_arguments(parser) -> None:
     parser.add_argument('--config', required=True, metavar='YAML', help='instrument YAML')
     parser.add_argument('--input', required=True, metavar='LOG',
-                        help='log: CSV in the DESIGN.md contract, or a rosbag2 bag')
+                        help='log: CSV in the docs/design.md contract, or a rosbag2 bag')
     parser.add_argument('--output', required=True, metavar='CSV', help='CSV to write')
     parser.add_argument('--object', default='needle', choices=('free', 'rigid', 'tissue', 'needle'),
                         help="object for rows without an 'object' column (default: needle)")

@@ -89,7 +89,6 @@ class RecorderNode(Node):
                  node_name: str = 'grip_force_recorder', context=None):
         super().__init__(node_name, context=context)
         self.topic_types = {absolute(t): ty for t, ty in topic_types.items()}
-        self._short = {absolute(t): t for t in topic_types}
         self._lock = threading.Lock()
         self._latest: dict[str, tuple[float, bytes]] = {}
         self.counts: dict[str, int] = {t: 0 for t in self.topic_types}
@@ -154,11 +153,6 @@ class RecorderNode(Node):
 
         self._subs[topic] = self.create_subscription(message_class(type_name), topic, callback,
                                                      qos, raw=True)
-
-    @property
-    def subscribed(self) -> list[str]:
-        """Topics (as in topics.py) with a live subscription."""
-        return [self._short[t] for t in self._subs]
 
     # -- live values ---------------------------------------------------------
     def latest(self, topic: str) -> tuple[float, Any] | None:

@@ -5,7 +5,7 @@
 >>> result['verdict']['effect'], result['verdict']['gap_after']  # doctest: +SKIP
 
 ``diagnose(train_logs, test_logs=None, params=None, **options) -> dict`` follows the
-DESIGN.md JSON (verdict, ranking, regions) and adds ``split`` and ``calibration``.
+docs/design.md JSON (verdict, ranking, regions) and adds ``split`` and ``calibration``.
 ``run_diagnosis`` returns the same plus held-out series for plots;
 ``write_report`` writes the Markdown report with PNG figures; ``run_blindcheck``
 runs the blind check on simulated logs. See docs/diagnosis.md.

@@ -1,7 +1,7 @@
 """Blind check of the diagnosis: simulated logs with known effects, diagnosed without the answer.
 
 Each log is a run of :class:`grip_force_ros.sim.InstrumentSim` (the plant, with the
-sim's own versions of the DESIGN.md effects) under a varied, seeded excitation:
+sim's own versions of the docs/design.md effects) under a varied, seeded excitation:
 segments of a few seconds, each opening the jaw (free motion, negative current),
 closing it on a needle, tissue or rigid object and loading it with one of several
 current profiles (ramps, steps with holds, sines, smoothed noise), while the wrist
@@ -136,7 +136,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
 
 
 def generate_log(case: BlindCase, *, duration: float = 60.0, dt: float = 1e-3, params=None) -> dict:
-    """Simulate one blind log; returns only the DESIGN.md contract columns."""
+    """Simulate one blind log; returns only the docs/design.md contract columns."""
     from grip_force_ros.params import make_params
     from grip_force_ros.sim import InstrumentSim
 

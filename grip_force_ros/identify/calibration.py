@@ -2,7 +2,7 @@
 
 A lab holds the instrument on a load cell, squeezes at a few force levels and
 records current, joint angles and the measured grip force. This module takes
-that log (DESIGN.md data contract), keeps the quasi-static plateaus, and fits
+that log (docs/design.md data contract), keeps the quasi-static plateaus, and fits
 schema parameters of the grip-force model (by default the cable-pulley
 friction coefficient) by least squares on the plateau means, with a standard
 error from the fit's Jacobian. :func:`calibrated_yaml` writes the calibrated

@@ -1,4 +1,4 @@
-"""Logs for diagnosis: CSV and rosbag2 (MCAP or sqlite3) in the DESIGN.md data contract.
+"""Logs for diagnosis: CSV and rosbag2 (MCAP or sqlite3) in the docs/design.md data contract.
 
 A log is a ``dict[str, numpy.ndarray]`` with one row per sample:
 

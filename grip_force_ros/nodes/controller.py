@@ -13,8 +13,9 @@ Publishes, every control step (one per control period, ``control_rate``, 1 kHz):
     grip/target_force                 force.z = target grip force (N)
         when the instrument's next joint state comes in (the sim sends it once the
         command reached it), at the latest before the next step's command, so that
-        they do not compete with the loop for the CPU while it closes (in an
-        interleaved A/B, 3 pairs: p99 round trip 0.46-0.50 against 0.50-0.54 ms).
+        they do not compete with the loop for the CPU while it closes (measured:
+        BENCHMARKS.md, "The controller sends the estimated and target force after
+        the loop has closed").
 and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
 
 Loop timing, as hardware interfaces do it: the control step runs when a fresh

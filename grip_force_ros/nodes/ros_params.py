@@ -239,8 +239,3 @@ def declare_node_parameters(node, *args, **kwargs) -> 'NodeParameters':
     except ParameterError:
         node.destroy_node()
         raise
-
-
-def format_startup_error(node_name: str, exc: Exception) -> str:
-    """One line for stderr when a node refuses its parameters."""
-    return f'[{node_name}] refusing to start: {exc}'

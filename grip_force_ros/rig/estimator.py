@@ -174,7 +174,7 @@ def hold_observer(measurement: np.ndarray, weight: np.ndarray, gain: float,
 class ObserverSettings:
     """Structure and fixed settings of :class:`CableFrictionObserver`.
 
-    The effect switches name the DESIGN.md vocabulary they model; turning one off
+    The effect switches name the docs/design.md vocabulary they model; turning one off
     is how the analysis measures what each effect is worth on held-out runs.
 
     Attributes

@@ -4,7 +4,7 @@
 >>> run = read_run('Tool_4_Maryland_L_2/11.TXT')                  # doctest: +SKIP
 >>> run.frequency_hz, run.torque_level_percent                    # doctest: +SKIP
 (0.2, 20.0)
->>> log = to_contract_log(run)       # DESIGN.md CSV contract + extra columns
+>>> log = to_contract_log(run)       # docs/design.md CSV contract + extra columns
 
 One place normalises the raw file (:func:`read_run`); everything downstream
 sees SI values, closing-positive signs, and named fields.
@@ -207,7 +207,7 @@ EXTRA_COLUMNS = ('current_command', 'motor_shaft_angle', 'disk_torque', 'load_co
 
 
 def to_contract_log(run: RigRun) -> dict[str, np.ndarray]:
-    """The run as a log in the DESIGN.md CSV contract (``jaw_torque`` variant).
+    """The run as a log in the docs/design.md CSV contract (``jaw_torque`` variant).
 
     Columns: ``t`` (s), ``current`` (A), ``motor_angle`` (rad, input disk),
     ``wrist_angle`` (rad, 0: the rig does not move the wrist), ``jaw_angle`` (rad),

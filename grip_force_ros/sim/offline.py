@@ -1,4 +1,4 @@
-"""Offline simulation: a current profile in, a log in the DESIGN.md CSV contract out."""
+"""Offline simulation: a current profile in, a log in the docs/design.md CSV contract out."""
 from __future__ import annotations
 
 from typing import Any, Mapping
@@ -10,7 +10,7 @@ from grip_force_ros.sim.plant import InstrumentSim
 
 __all__ = ['simulate', 'LOG_COLUMNS']
 
-#: Columns of a log (DESIGN.md contract), in order.
+#: Columns of a log (docs/design.md contract), in order.
 LOG_COLUMNS = ('t', 'current', 'motor_angle', 'wrist_angle', 'jaw_angle', 'grip_force', 'object')
 
 
@@ -30,7 +30,7 @@ def simulate(params: Any, current_profile, dt: float, obj: str = 'needle',
     obj : str
         Object between the jaws.
     effects : dict, optional
-        Effect name -> strength (DESIGN.md names).
+        Effect name -> strength (docs/design.md names).
     seed : int
         Noise seed.
     wrist_profile : array_like, shape (n,), optional
@@ -42,7 +42,7 @@ def simulate(params: Any, current_profile, dt: float, obj: str = 'needle',
     Returns
     -------
     dict of ndarray
-        The DESIGN.md columns ``t`` (s, time after each step), ``current`` (A,
+        The docs/design.md columns ``t`` (s, time after each step), ``current`` (A,
         measured), ``motor_angle``, ``wrist_angle``, ``jaw_angle`` (rad), ``grip_force``
         (N, load cell), ``object`` (str array), plus the extra columns if asked.
 
