@@ -1,0 +1,101 @@
+"""Who may import what (docs/ARCHITECTURE.md, "Who owns what, who may import what")."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'grip_force_ros'
+
+#: Part of the package -> the parts it may import (docs/ARCHITECTURE.md, same table).
+MAY_IMPORT = {
+    'params': set(),
+    'topics': set(),
+    'plotting': set(),
+    'model': {'params'},
+    'logs': {'topics'},
+    'trajectories': {'params', 'topics'},
+    'control': {'model', 'params'},
+    'sim': {'model', 'params'},
+    'identify': {'model', 'params'},
+    'rig': {'plotting'},
+    'diagnosis': {'model', 'sim', 'logs', 'params', 'plotting'},
+    'reproduce': {'model', 'params', 'plotting'},
+    'figures': {'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
+    'nodes': {'control', 'sim', 'trajectories', 'params', 'topics'},
+    'demo': {'nodes', 'control', 'identify', 'model', 'logs', 'trajectories', 'params', 'topics',
+             'plotting'},
+    'faults': {'nodes', 'control', 'sim', 'params', 'topics'},
+    # demo: the shipped config lookup (demo.config_dir), until it has its own owner
+    'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics', 'demo'},
+    'cli': None,                                       # the command: anything
+}
+#: The only parts that import rclpy or ROS message packages.
+ROS_PARTS = {'nodes', 'demo', 'faults', 'bench'}
+ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
+               'geometry_msgs', 'diagnostic_msgs'}
+
+
+def part_of(path: Path) -> str:
+    """'control' for grip_force_ros/control/pid.py, 'topics' for grip_force_ros/topics.py."""
+    rel = path.relative_to(PACKAGE)
+    return rel.parts[0] if len(rel.parts) > 1 else rel.stem
+
+
+def imported(path: Path) -> list[tuple[int, str]]:
+    """(line, dotted name) of every absolute import in ``path``, inside functions too;
+    ``from grip_force_ros import topics`` gives 'grip_force_ros.topics'."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            if node.module == 'grip_force_ros':
+                out += [(node.lineno, f'grip_force_ros.{alias.name}') for alias in node.names]
+            else:
+                out.append((node.lineno, node.module))
+    return out
+
+
+def edges() -> list[tuple[str, str, str]]:
+    """(importing part, imported part, 'file:line') for every import between parts."""
+    out = []
+    for path in sorted(PACKAGE.rglob('*.py')):
+        if path.parent == PACKAGE and path.stem == '__init__':
+            continue
+        src = part_of(path)
+        for line, name in imported(path):
+            parts = name.split('.')
+            if parts[0] == 'grip_force_ros' and len(parts) > 1 and parts[1] != src:
+                out.append((src, parts[1], f'{path.relative_to(PACKAGE.parent)}:{line}'))
+    return out
+
+
+def test_every_part_is_in_the_table():
+    parts = {part_of(p) for p in PACKAGE.rglob('*.py')
+             if not (p.parent == PACKAGE and p.stem in ('__init__', '__main__'))}
+    assert parts == set(MAY_IMPORT)
+
+
+def test_parts_import_only_what_the_architecture_allows():
+    wrong = [f'{where}: {src} imports {dst}' for src, dst, where in edges()
+             if MAY_IMPORT[src] is not None and dst not in MAY_IMPORT[src]]
+    assert wrong == []
+
+
+def test_control_imports_only_the_model_and_the_schema():
+    used = {dst for src, dst, _ in edges() if src == 'control'}
+    assert 'model' in used and used <= {'model', 'params'}
+
+
+def test_rclpy_and_messages_only_in_the_ros_parts():
+    wrong = []
+    for path in sorted(PACKAGE.rglob('*.py')):
+        for line, name in imported(path):
+            if name.split('.')[0] in ROS_MODULES and part_of(path) not in ROS_PARTS:
+                wrong.append(f'{path.relative_to(PACKAGE.parent)}:{line}: {name}')
+    assert wrong == []
+
+
+def test_process_launching_has_no_rclpy():
+    names = {name.split('.')[0] for _, name in imported(PACKAGE / 'nodes' / 'processes.py')}
+    assert not names & ROS_MODULES
