@@ -1,1 +1,6 @@
-"""nodes"""
+"""The ROS 2 shells: one rclpy node per executable (controller, sim_instrument, master).
+
+Around them: QoS and message checks (``common``), parameter descriptors from the schema
+(``ros_params``), nodes started as child processes (``processes``, no rclpy) or inside
+this process (``harness``).
+"""
