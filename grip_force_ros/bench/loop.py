@@ -17,16 +17,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 
 from grip_force_ros.bench.procs import BenchError, Child, executable, python_module, ros_env, stop_all
 from grip_force_ros.bench.stats import ratio
+from grip_force_ros.params.files import instrument_path
 
 CHILD = 'grip_force_ros.bench.child'
 #: Longest wait for discovery plus warm-up before a window opens (s).
 START_TIMEOUT = 60.0
-#: The bench's default instrument for the product run.
-DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
 
 
 @dataclass(frozen=True)
@@ -153,7 +151,7 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
     return result
 
 
-def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
+def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
                 executor: str | None = None, rt_priority: int = 0) -> dict:
     """sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
 
@@ -167,8 +165,9 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         Measurement window (s).
     domain_id : int
         ROS_DOMAIN_ID of the run.
-    config : str
-        Instrument YAML for the sim, the controller and the master.
+    config : str, optional
+        Instrument YAML (path or shipped name) for the sim, the controller and the
+        master; default :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
     rt_priority : int
@@ -185,7 +184,7 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     """
     extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
     env = ros_env(domain_id, extra)
-    config = str(Path(config).resolve())
+    config = str(instrument_path(config).resolve())
     params = ['--ros-args', '--params-file', config, '--log-level', 'warn']
     children = []
     try:

@@ -67,10 +67,10 @@ def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
 
 def main(argv=None) -> int:
     plt = pyplot()
-    from grip_force_ros.params import load_params_file
+    from grip_force_ros.params import instrument_path, load_params_file
     argv = sys.argv[1:] if argv is None else argv
     out = argv[0] if argv else 'docs/figures/control_blackout_stick_band.png'
-    params = load_params_file('config/paper_needle_driver.yaml')
+    params = load_params_file(instrument_path())
     with _no_resume_ramp():
         before = blackout_run(params, stick_band=False)
     after = blackout_run(params, stick_band=True)

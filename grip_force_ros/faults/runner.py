@@ -26,8 +26,8 @@ from pathlib import Path
 from grip_force_ros import topics
 from grip_force_ros.faults.catalogue import FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
+from grip_force_ros.params.files import instrument_path
 
-DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
 #: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
 GRIP_MASTER_ANGLE = 0.1
 #: How long a case may take to recover after its fault window (s).
@@ -41,24 +41,6 @@ RESUME_JUMP_SHARE = 0.5
 ISOLATION_NS = '/faultcheck_param_file'
 #: Extra allowance on the watchdog latency for DDS delivery and timer jitter (s).
 WATCHDOG_SLACK = 0.002
-
-
-def resolve_config(path: str | os.PathLike) -> Path:
-    """An instrument YAML by path, or from the package's config/ directory."""
-    p = Path(path)
-    if p.exists():
-        return p
-    here = Path(__file__).resolve().parents[2] / path
-    if here.exists():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        shared = Path(get_package_share_directory('grip_force_ros')) / 'config' / p.name
-        if shared.exists():
-            return shared
-    except Exception:  # noqa: BLE001 - not in an ament workspace
-        pass
-    raise FileNotFoundError(f'instrument config {path} not found')
 
 
 def controller_class():
@@ -490,15 +472,16 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
 
 
 # ---------------------------------------------------------------------------- all of it
-def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike = DEFAULT_CONFIG,
+def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike | None = None,
                    progress=None) -> dict:
     """Run ``cases`` (default: the whole catalogue) and return the report.
 
     Parameters
     ----------
     cases : list of FaultCase, optional
-    config : path
-        Instrument YAML of the controller under test.
+    config : path or str, optional
+        Instrument YAML (path or shipped name) of the controller under test; default
+        :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
         ``progress(detail)`` after each case.
 
@@ -509,7 +492,7 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         why), ``details`` (one dict per case) and ``seconds``.
     """
     start = time.monotonic()
-    config = resolve_config(config)
+    config = instrument_path(config)
     cases = catalogue() if cases is None else list(cases)
     file_cases = [c for c in cases if c.kind == 'param_file']
     file_thread_result: list = []

@@ -130,7 +130,7 @@ class _Recorder:
             self._close_minute()
 
 
-def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_needle_driver.yaml',
+def run_soak(minutes: float = 10.0, config: str | os.PathLike | None = None,
              progress=None) -> dict:
     """Run the closed loop for ``minutes`` (after a warm-up) and return the figures.
 
@@ -138,8 +138,9 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
     ----------
     minutes : float
         Measured duration (min), after :data:`WARMUP` s.
-    config : path
-        Instrument YAML for the three processes.
+    config : path or str, optional
+        Instrument YAML (path or shipped name) for the three processes; default
+        :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
         ``progress(text)`` once a minute.
     """
@@ -150,11 +151,11 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
     from sensor_msgs.msg import JointState
 
     from grip_force_ros import topics
-    from grip_force_ros.faults.runner import resolve_config
     from grip_force_ros.nodes.harness import NodeProcess, RosRunner
     from grip_force_ros.params import load_params_file
+    from grip_force_ros.params.files import instrument_path
 
-    config = resolve_config(config)
+    config = instrument_path(config)
     params = load_params_file(config)
     period = 1.0 / params.control_rate
     logdir = Path(tempfile.mkdtemp(prefix='grip_force_soak_'))

@@ -10,7 +10,7 @@ import timeit
 import numpy as np
 
 from grip_force_ros.model import GripForceModel, HystereticGripForce, hysteretic_grip_force
-from grip_force_ros.params import load_params_file
+from grip_force_ros.params import instrument_path, load_params_file
 
 
 def bench(path: str, number: int = 20000) -> dict:
@@ -44,7 +44,7 @@ def bench(path: str, number: int = 20000) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     paths = (argv if argv is not None else sys.argv[1:]) or [
-        'config/paper_needle_driver.yaml', 'config/four_pulley_needle_driver.yaml']
+        str(instrument_path()), str(instrument_path('four_pulley_needle_driver'))]
     for path in paths:
         figures = bench(path)
         print(path + ': ' + ', '.join(f'{k} = {v:.3g}' for k, v in figures.items()))
