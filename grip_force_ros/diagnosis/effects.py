@@ -1,4 +1,8 @@
-"""The unmodelled effects of the DESIGN.md vocabulary, each a small augmentation of the model.
+"""How the diagnosis fits each unmodelled effect: a small augmentation of the model.
+
+The names, units and which effects the diagnosis fits are the effect registry's
+(:mod:`grip_force_ros.effects`, :data:`~grip_force_ros.effects.DIAGNOSED`); this module
+holds one regressor builder per diagnosed effect (:data:`EFFECTS`).
 
 Every effect adds a few regressors to one or both of two channels:
 
@@ -45,12 +49,13 @@ from typing import Callable
 import numpy as np
 
 from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
+from grip_force_ros.effects import DIAGNOSED, NONE
 
-#: The DESIGN.md vocabulary (``none`` is the verdict when no effect is needed).
-EFFECT_NAMES = ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
-                'tension_dependent_friction', 'viscoelastic_creep', 'sensor_delay',
-                'torque_constant_drift', 'force_sensor_offset', 'position_spring')
-NONE = 'none'
+#: The effects the diagnosis fits, in the registry's order (``none`` is the verdict when
+#: no effect is needed).
+EFFECT_NAMES: tuple[str, ...] = DIAGNOSED
+__all__ = ['EFFECT_NAMES', 'EFFECTS', 'NONE', 'Design', 'Effect', 'stroke_range', 'stroke_coordinate',
+           'spring_summary', 'SPRING_ANGLES']
 
 
 @dataclass
@@ -259,3 +264,6 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c) for k in range(SPRING_ORDER + 1)),
            spring_summary),
 )}
+if set(EFFECTS) != set(EFFECT_NAMES):  # pragma: no cover - a programming error
+    raise RuntimeError(f'diagnosis builders {sorted(EFFECTS)} do not match the registry\'s diagnosed '
+                       f'effects {sorted(EFFECT_NAMES)}')

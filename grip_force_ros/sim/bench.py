@@ -8,13 +8,12 @@ from __future__ import annotations
 import math
 import time
 
+from grip_force_ros.effects import strengths_at
 from grip_force_ros.params import make_params
 from grip_force_ros.sim.effects import EFFECT_NAMES
 from grip_force_ros.sim.plant import InstrumentSim
 
-ALL_ON = {'pivot_coulomb_friction': 0.005, 'viscous_friction': 0.005, 'cable_hysteresis': 0.1,
-          'backlash': 0.03, 'tension_dependent_friction': 5e-4, 'viscoelastic_creep': 0.1,
-          'sensor_delay': 0.02, 'torque_constant_drift': 0.1, 'force_sensor_offset': 0.1}
+ALL_ON = strengths_at('medium')   # every effect the sim has, at the registry's medium strength
 
 
 def time_steps(effects=None, obj='needle', steps=5000, dt=1e-3, repeats=3) -> float:
