@@ -16,17 +16,11 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
+from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS
 from grip_force_ros.sim import InstrumentSim
-
-#: Publishers as the real master/sim publish; subscriptions deep enough to miss nothing.
-PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                        reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 _TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
            'actuator': topics.ACTUATOR_JS, 'force': topics.MEASURED_FORCE}
@@ -159,7 +153,7 @@ class FaultProbe(Node):
 
     def _make_pub(self, source: str) -> None:
         msg_type = WrenchStamped if source == 'force' else JointState
-        self._pubs[source] = self.create_publisher(msg_type, _TOPICS[source], PUB_QOS)
+        self._pubs[source] = self.create_publisher(msg_type, _TOPICS[source], STATE_PUB_QOS)
 
     # ------------------------------------------------------------------ tick
     def samples(self, now: float) -> dict:

@@ -146,11 +146,11 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike | None = None,
     """
     import psutil
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
 
     from grip_force_ros import topics
+    from grip_force_ros.nodes.common import RECORD_QOS
     from grip_force_ros.nodes.harness import NodeProcess, RosRunner
     from grip_force_ros.params import load_params_file
     from grip_force_ros.params.files import instrument_path
@@ -159,8 +159,7 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike | None = None,
     params = load_params_file(config)
     period = 1.0 / params.control_rate
     logdir = Path(tempfile.mkdtemp(prefix='grip_force_soak_'))
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    qos = RECORD_QOS
     t_start = time.monotonic()
     rec = _Recorder(period, t_start + WARMUP)
     rss: dict[str, list[tuple[float, float]]] = {}
