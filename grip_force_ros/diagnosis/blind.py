@@ -29,6 +29,9 @@ BLIND_EFFECTS = tuple(name for name in EFFECT_NAMES if name in SIMULATED)
 #: Effects seen only in the jaw-angle channel: their shrink is that of the angle gap.
 ANGLE_ONLY = tuple(name for name, e in EFFECTS.items() if not e.force_params and e.angle_params)
 
+#: Object of a loaded segment -> its probability (the excitation's mix of contacts).
+OBJECT_MIX = {'needle': 0.45, 'tissue': 0.3, 'rigid': 0.25}
+
 #: Pairs of effects in the full check (medium strengths).
 PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'force_sensor_offset'),
          ('cable_hysteresis', 'torque_constant_drift'), ('backlash', 'tension_dependent_friction'))
@@ -85,7 +88,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
     i = 0
     while i < n:
         seg = int(rng.uniform(3.0, 8.0) / dt)
-        obj = str(rng.choice(['needle', 'tissue', 'rigid'], p=[0.45, 0.3, 0.25]))
+        obj = str(rng.choice(list(OBJECT_MIX), p=list(OBJECT_MIX.values())))
         open_n = int(rng.uniform(0.4, 0.9) / dt)
         t = np.arange(seg) * dt
         load_t = t[open_n:] - t[open_n]

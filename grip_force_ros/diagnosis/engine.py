@@ -20,8 +20,9 @@ from typing import Sequence
 import numpy as np
 
 from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE, SPRING_ANGLES, stroke_range
-from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, OBJECT_CODES, DiagnosisError, build_frame,
+from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, DiagnosisError, build_frame,
                                             load_decimated, measured_of)
+from grip_force_ros.objects import OBJECTS
 
 #: Held-out score margin for naming an effect: the mean-square error (both channels
 #: summed in log) must fall by at least this fraction, beyond the parameter penalty.
@@ -308,7 +309,7 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
     add('time under load', 'loaded > 5 s', loaded & (lt >= 5.0))
     obj = data.object[te]
     for code in np.unique(obj):
-        add('object', OBJECT_CODES[int(code)], obj == code)
+        add('object', OBJECTS[int(code)], obj == code)
     # a region holding every sample (a constant wrist, one object) says nothing: last
     out.sort(key=lambda r: (r['share_of_samples'] > 0.999, -r['share_of_gap']))
     return out

@@ -15,9 +15,8 @@ from scipy.signal import lfilter
 from grip_force_ros.logs import LogError, iter_log, measured_column, normalise_log
 from grip_force_ros.logs.columns import OBJECT_COLUMN
 from grip_force_ros.model.contact import contact_gain
+from grip_force_ros.objects import OBJECTS
 
-#: Object codes used inside frames (index into this tuple).
-OBJECT_CODES = ('free', 'rigid', 'tissue', 'needle')
 
 
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
@@ -265,7 +264,7 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     gain = np.zeros(t.size)              # contact gain G (1/m): grip force per drive torque
     for name in np.unique(objects):
         sel = objects == name
-        codes[sel] = OBJECT_CODES.index(str(name))
+        codes[sel] = OBJECTS.index(str(name))
         r = model.forward(current[sel], wrist[sel], jaw[sel], obj=str(name),
                           motor_velocity=motor_vel[sel], jaw_velocity=jaw_vel[sel])
         torque[sel] = r.jaw_torque

@@ -21,11 +21,11 @@ import math
 
 import numpy as np
 
+from grip_force_ros.objects import OBJECTS
+
 __all__ = ['OBJECTS', 'ModelError', 'contact_gain', 'contact_gain_scalar', 'needle_normal_forces',
            'needle_pull_out', 'PULL_OUT_PER_MU']
 
-#: Objects the jaw can hold. 'free' = nothing between the jaws (grip force 0).
-OBJECTS = ('free', 'rigid', 'tissue', 'needle')
 
 #: F_L / (mu' F_N1) for the three-point needle contact (-).
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0

@@ -13,6 +13,7 @@ parameters: all declared in the effect registry, :mod:`grip_force_ros.effects`.
 import math
 
 from grip_force_ros.effects import REGISTRY, SIMULATED
+from grip_force_ros.objects import OBJECTS
 from grip_force_ros.params.schema import ParamSpec
 
 
@@ -95,7 +96,7 @@ SIM = [
          min=-math.pi / 2, max=math.pi / 2),
     _sim('sim_object', 'string', 'needle', '',
          'Object between the jaws: free, rigid, tissue or needle.',
-         choices=('free', 'rigid', 'tissue', 'needle')),
+         choices=OBJECTS),
     _sim('current_noise_std', 'double', 0.002, 'A',
          'Std of white noise on the measured motor current.', min=0.0, max=1.0),
     _sim('motor_angle_noise_std', 'double', 1.0e-4, 'rad',

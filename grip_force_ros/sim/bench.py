@@ -11,7 +11,7 @@ import time
 from grip_force_ros.effects import strengths_at
 from grip_force_ros.params import make_params
 from grip_force_ros.sim.effects import EFFECT_NAMES
-from grip_force_ros.sim.plant import InstrumentSim
+from grip_force_ros.sim.plant import OBJECTS, InstrumentSim
 
 ALL_ON = strengths_at('medium')   # every effect the sim has, at the registry's medium strength
 
@@ -34,7 +34,7 @@ def main() -> None:
     assert set(ALL_ON) == set(EFFECT_NAMES)
     p = make_params()
     print(f'sim_rate {p.sim_rate:.0f} Hz -> {math.ceil(1e-3 * p.sim_rate)} sub-steps per 1 ms step')
-    for obj in ('free', 'needle', 'tissue', 'rigid'):
+    for obj in OBJECTS:
         print(f'{obj:7s} effects off : {time_steps(obj=obj) * 1e6:7.1f} us per 1 ms step (step + measure)')
     print(f'needle  all effects: {time_steps(ALL_ON) * 1e6:7.1f} us per 1 ms step (step + measure)')
 
