@@ -19,6 +19,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
+from grip_force_ros.control.inputs import SOURCES
 from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS
 from grip_force_ros.sim import InstrumentSim
 
@@ -104,7 +105,7 @@ class FaultProbe(Node):
         self.stamp_offset = {s: 0.0 for s in _TOPICS}   # s, permanent offset (sim clock reset)
         self.last_good_publish = {s: math.nan for s in _TOPICS}  # probe clock of the last good sample
         self._pubs = {}
-        for source in ('master', 'instrument', 'actuator', 'force'):
+        for source in SOURCES:
             self._make_pub(source)
         step = params.max_current_slew / params.control_rate
         self.limits = LimitMonitor(params.max_current, step)

@@ -24,7 +24,7 @@ import traceback
 from pathlib import Path
 
 from grip_force_ros import topics
-from grip_force_ros.faults.catalogue import FaultCase, bad_params_text, catalogue
+from grip_force_ros.faults.catalogue import SOURCES, FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
@@ -178,7 +178,7 @@ class Session:
         """Source -> the controller's receive time (s) of its last accepted sample."""
         inputs = getattr(self.controller, 'inputs', None)
         return {s: float(getattr(inputs, f'{s}_time', math.nan))
-                for s in ('master', 'instrument', 'actuator', 'force')}
+                for s in SOURCES}
 
     def rejected_count(self) -> int:
         """Samples the controller node has rejected so far (its ControlInputs counters)."""
@@ -229,7 +229,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             offset = case.mutate({'stamp': 0.0}, 0)[0]['stamp']
         done = probe.restart_sim(case.ticks, offset)
     else:
-        sources = ('master', 'instrument', 'actuator', 'force') if case.source == 'all' else (case.source,)
+        sources = SOURCES if case.source == 'all' else (case.source,)
         done = probe.inject(sources, case.mutate, case.ticks)
     last_good = dict(probe.last_good_publish)
     # the controller's receive time of the last good sample, read inside the window

@@ -59,7 +59,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.control import ControlInputs, GripController
+from grip_force_ros.control import SOURCES, ControlInputs, GripController
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node, stamp_seconds)
 from grip_force_ros.nodes.ros_params import declare_node_parameters
@@ -322,8 +322,7 @@ class ControllerNode(Node):
             'stale' in r or 'input yet' in r for r in out.reasons)
         values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
-        faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
-                                                               'force')]
+        faults = [getattr(self.inputs, f'{s}_fault') for s in SOURCES]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
         values['new_rejections'] = '; '.join(self._new_rejections) or 'none'
         timing = self.timing
