@@ -20,7 +20,7 @@ import yaml
 from grip_force_ros.params.controller import CONTROLLER, check_controller
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path, list_instruments
 from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
-from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, validate
+from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, markdown_table, validate
 from grip_force_ros.params.sim import EFFECTS, SIM
 
 SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + SIM + EFFECTS)
@@ -30,7 +30,7 @@ if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
 
 __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
            'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency',
-           'DEFAULT_INSTRUMENT', 'instrument_path', 'list_instruments']
+           'DEFAULT_INSTRUMENT', 'instrument_path', 'list_instruments', 'markdown_table']
 
 
 def specs_in(*groups: str) -> list[ParamSpec]:
