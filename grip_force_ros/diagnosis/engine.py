@@ -368,35 +368,49 @@ def _fold_tests(frames, n_train_logs, have_test_logs, blocks, folds):
     return [(block % folds) == k for k in range(folds)]
 
 
-def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, params=None, *,
-                  model=None, analysis_rate: float = 200.0, default_object: str = 'needle',
-                  blocks: int = BLOCKS, folds: int = FOLDS,
-                  min_improvement: float = MIN_IMPROVEMENT, param_penalty: float = PARAM_PENALTY,
-                  jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH,
-                  seed: int = 0, progress=None) -> Diagnosis:
-    """Diagnose the gap between the model and measured logs (see :func:`diagnose`)."""
-    if model is None:
-        from grip_force_ros.model import GripForceModel
-        if params is None:
-            from grip_force_ros.params import make_params
-            params = make_params()
-        model = GripForceModel(params)
-    say = progress or (lambda msg: None)
-    train_logs = list(train_logs)
-    test_logs = list(test_logs or [])
-    if not train_logs:
-        raise DiagnosisError('no logs to diagnose')
+def _default_model(params):
+    """The nominal model of ``params`` (the schema defaults when None)."""
+    from grip_force_ros.model import GripForceModel
+    if params is None:
+        from grip_force_ros.params import make_params
+        params = make_params()
+    return GripForceModel(params)
+
+
+def _prepare(train_logs, test_logs, model, analysis_rate, default_object, blocks, folds,
+             jaw_side_cable_length, say):
+    """Step 0: logs -> frames (training logs first) -> the pooled :class:`_Data` with its folds.
+
+    Returns
+    -------
+    data : _Data
+    frames : list of dict
+        One analysis frame per log.
+    measured : str
+        The measured column, 'grip_force' (N) or 'jaw_torque' (N*m).
+    """
     logs = [load_decimated(x, analysis_rate) for x in train_logs + test_logs]
     measured = measured_of(logs)
-    unit = UNITS[measured]
     say(f'building frames of {len(logs)} log(s) at {analysis_rate:g} Hz')
     frames = [build_frame(log, model, measured=measured, default_object=default_object,
                           jaw_side_cable_length=jaw_side_cable_length) for log in logs]
     _set_strokes(frames[:len(train_logs)], frames)
     data = _Data(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
-    if test_logs:
-        split = {'method': 'files', 'train_logs': len(train_logs), 'test_logs': len(test_logs),
-                 'description': f'fitted on {len(train_logs)} log(s), judged on {len(test_logs)} other log(s)'}
+    return data, frames, measured
+
+
+def _split(data: _Data, frames, n_train: int, n_test: int, blocks: int, folds: int,
+           analysis_rate: float) -> dict:
+    """How the logs were split into training and held-out parts (the result's ``split``).
+
+    Raises
+    ------
+    DiagnosisError
+        Too few samples in either part, or no predicted load in the training part.
+    """
+    if n_test:
+        split = {'method': 'files', 'train_logs': n_train, 'test_logs': n_test,
+                 'description': f'fitted on {n_train} log(s), judged on {n_test} other log(s)'}
     else:
         split = {'method': 'time_blocks', 'blocks': blocks, 'folds': folds,
                  'description': f'each log cut into {blocks} equal time blocks; {folds}-fold: fold k holds '
@@ -413,15 +427,30 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                   'transient_share': data.transient_share,
                   'transients': 'samples within 0.2 s of the predicted load starting or stopping '
                                 '(impact, fly-off) are left out of every fit and score'})
-    rng = np.random.default_rng(seed)
+    return split
 
-    # robust scale of the residual of the gain-calibrated nominal (MAD of the training samples)
+
+def _robust_force_scale(data: _Data) -> float:
+    """Robust scale (unit of y) of the residual of the gain-calibrated nominal: the MAD of the
+    training samples, times 1.4826 (a standard deviation for Gaussian noise)."""
     tr = data.train
     g0 = _lstsq(data.nominal[tr, None], data.y[tr])[0]
     r0 = data.y[tr] - g0 * data.nominal[tr]
-    data.force_scale = float(1.4826 * np.median(np.abs(r0 - np.median(r0))))
+    return float(1.4826 * np.median(np.abs(r0 - np.median(r0))))
 
-    # 1. nominal + calibration
+
+def _calibrate(data: _Data, rng, measured: str, jaw_side_cable_length: float):
+    """Step 1: the nominal model and what a lab calibrates anyway (force gain, jaw zero, ...).
+
+    Returns
+    -------
+    base : dict
+        Held-out fit of the calibrated nominal (:func:`_evaluate`).
+    gain : float
+        Force gain, measured / model (-).
+    calibration : dict
+        The result's ``calibration`` section.
+    """
     Xf0 = data.nominal[:, None]
     Xa0 = data.angle_base
     base = _evaluate(data, lambda _: (Xf0, Xa0), (None,))
@@ -446,9 +475,21 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         'note': 'calibrated as a lab would (values: fit on all training samples; the held-out gaps use '
                 'per-fold fits); not counted as an unmodelled effect',
     }
+    return base, gain, calibration
 
-    # 3. which effect
-    force_floor_ms = (FORCE_FLOOR * _rms(data.y[data.test])) ** 2
+
+def _rank_effects(data: _Data, base: dict, gain: float, rng, force_floor_ms: float,
+                  param_penalty: float, min_improvement: float, unit: str, say):
+    """Step 3: every effect fitted as an augmentation, ranked by held-out score (lower is better).
+
+    Returns
+    -------
+    ranking : list of dict
+        One entry per effect and one for ``none``, sorted by score.
+    fits : dict
+        Effect name -> its held-out fit; held-out residual arrays are kept only for the
+        best effect (memory).
+    """
     ranking = []
     fits = {}
     best_score = math.inf
@@ -480,45 +521,71 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                     'train_rmse': None, 'score': math.log(1.0 - min_improvement),
                     'n_params': 0, 'gain': gain, 'params': {}})
     ranking.sort(key=lambda r: r['score'])
-    winner = ranking[0]['effect']
+    return ranking, fits
 
-    # 4. how far
+
+def _second_effect(data: _Data, winner: str, fits: dict, rng, force_floor_ms: float,
+                   param_penalty: float, min_improvement: float, unit: str, say):
+    """Step 4a: a second effect on top of the first (pairs of effects).
+
+    Same margin as the first, judged against the first effect's held-out loss.
+
+    Returns
+    -------
+    tuple or None
+        (name, held-out fit of both effects, the second effect's described parameters,
+        fitted beside the first on every training sample), or None when no effect passes.
+    """
+    say('looking for a second effect')
+    first_design = data.designs(EFFECTS[winner], fits[winner]['value'])
+
+    def pair(value, name):
+        other = data.designs(EFFECTS[name], value)
+        return _combine(data, first_design, other, winner, name, fits, value)
+
+    best2 = None
+    for name in EFFECT_NAMES:
+        if name == winner:
+            continue
+        fit2 = _evaluate(data, lambda value, name=name: pair(value, name), EFFECTS[name].grid)
+        score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
+        say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
+        if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
+            best2 = (score2, name, fit2)
+    if best2 is None:
+        return None
+    _, name, final = best2
+    second = EFFECTS[name]
+    Xf, Xa = pair(final['value'], name)
+    cf, ca, sf, sa, _ = _full_fit(data, Xf, Xa, rng)
+    nf, na = len(second.force_params), len(second.angle_params)
+    described = _describe(second, final['value'], cf[len(cf) - nf:], sf[len(sf) - nf:],
+                          ca[len(ca) - na:], sa[len(sa) - na:], float(cf[0]), unit)
+    return name, final, described
+
+
+def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured: str,
+             param_penalty: float, min_improvement: float):
+    """Step 4b: how far the gap shrinks with every named effect (the result's ``verdict``).
+
+    Returns
+    -------
+    verdict : dict
+    final : dict
+        Held-out fit with every named effect (``base`` when none is named).
+    """
+    winner = ranking[0]['effect']
     gap_before = math.sqrt(base['test_mse_f'])
     angle_before = math.sqrt(base['test_mse_a'])
     named = [] if winner == NONE else [winner]
     final = base if winner == NONE else fits[winner]
     first_gap = math.sqrt(final['test_mse_f'])
     second_params = None
-    if winner != NONE:
-        # a second effect on top of the first (pairs of effects): same margin, judged against
-        # the first effect's held-out loss
-        say('looking for a second effect')
-        first_design = data.designs(EFFECTS[winner], fits[winner]['value'])
-        best2 = None
-        for name in EFFECT_NAMES:
-            if name == winner:
-                continue
-            def pair(value, name=name):
-                other = data.designs(EFFECTS[name], value)
-                return _combine(data, first_design, other, winner, name, fits, value)
-            fit2 = _evaluate(data, pair, EFFECTS[name].grid)
-            score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
-            say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
-            if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
-                best2 = (score2, name, fit2)
-        if best2 is not None:
-            named.append(best2[1])
-            final = best2[2]
-            # the second effect's parameters, fitted beside the first on every training sample
-            second = EFFECTS[best2[1]]
-            Xf, Xa = pair(final['value'], best2[1])
-            cf, ca, sf, sa, _ = _full_fit(data, Xf, Xa, rng)
-            nf, na = len(second.force_params), len(second.angle_params)
-            second_params = _describe(second, final['value'], cf[len(cf) - nf:], sf[len(sf) - nf:],
-                                      ca[len(ca) - na:], sa[len(sa) - na:], float(cf[0]), unit)
+    if second is not None:
+        name, final, second_params = second
+        named.append(name)
     gap_after = math.sqrt(final['test_mse_f'])
     angle_after = math.sqrt(final['test_mse_a'])
-    resid_after = final['resid_f']
     verdict = {'effect': winner, 'effects': named or [NONE], 'gap_before': gap_before, 'gap_after': gap_after,
                'gap_after_first': first_gap,
                'second_effect_params': second_params,
@@ -530,21 +597,57 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                        f'force + log ratio of the angle MSE, +{param_penalty} per parameter) is below '
                        f'log(1 - {min_improvement}); a second effect when it passes the same margin on '
                        f'top of the first; gap_after is with every named effect'}
+    return verdict, final
 
-    # 2. where
-    regions = _regions(data, base['resid_f'], unit)
 
+def _held_out_series(data: _Data, base: dict, resid_after: np.ndarray) -> dict:
+    """Held-out signals for the report's plots: measured, calibrated nominal, with the effects."""
+    te = data.test
+    return {'t': data.t[te], 'log_index': data.log_index[te], 'y': data.y[te],
+            'calibrated': (data.y - base['resid_f'])[te], 'after': (data.y - resid_after)[te],
+            'resid_before': base['resid_f'][te], 'resid_after': resid_after[te],
+            'jaw': data.jaw[te], 'jaw_before': (data.jaw - base['resid_a'])[te],
+            'current': data.current[te], 'wrist': data.wrist[te], 'jaw_velocity': data.jaw_velocity[te],
+            'load_time': data.load_time[te], 'current_rate': data.current_rate[te]}
+
+
+def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, params=None, *,
+                  model=None, analysis_rate: float = 200.0, default_object: str = 'needle',
+                  blocks: int = BLOCKS, folds: int = FOLDS,
+                  min_improvement: float = MIN_IMPROVEMENT, param_penalty: float = PARAM_PENALTY,
+                  jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH,
+                  seed: int = 0, progress=None) -> Diagnosis:
+    """Diagnose the gap between the model and measured logs (see :func:`diagnose`).
+
+    The steps of the module docstring, in order; ``seed`` seeds the block bootstrap of
+    the coefficients' standard deviations (one generator, drawn in step order).
+    """
+    model = _default_model(params) if model is None else model
+    say = progress or (lambda msg: None)
+    train_logs = list(train_logs)
+    test_logs = list(test_logs or [])
+    if not train_logs:
+        raise DiagnosisError('no logs to diagnose')
+    data, frames, measured = _prepare(train_logs, test_logs, model, analysis_rate, default_object,
+                                      blocks, folds, jaw_side_cable_length, say)
+    unit = UNITS[measured]
+    split = _split(data, frames, len(train_logs), len(test_logs), blocks, folds, analysis_rate)
+    rng = np.random.default_rng(seed)
+    data.force_scale = _robust_force_scale(data)
+    base, gain, calibration = _calibrate(data, rng, measured, jaw_side_cable_length)      # 1.
+    force_floor_ms = (FORCE_FLOOR * _rms(data.y[data.test])) ** 2
+    ranking, fits = _rank_effects(data, base, gain, rng, force_floor_ms, param_penalty,     # 3.
+                                  min_improvement, unit, say)
+    winner = ranking[0]['effect']
+    second = None if winner == NONE else _second_effect(                                    # 4.
+        data, winner, fits, rng, force_floor_ms, param_penalty, min_improvement, unit, say)
+    verdict, final = _verdict(base, fits, ranking, second, unit, measured, param_penalty,
+                              min_improvement)
+    regions = _regions(data, base['resid_f'], unit)                                          # 2.
     result = {'verdict': verdict, 'ranking': ranking, 'regions': regions, 'split': split,
               'calibration': calibration, 'measured': measured, 'unit': unit,
               'samples': {'train': int(data.train.sum()), 'test': int(data.test.sum())}}
-    te = data.test
-    series = {'t': data.t[te], 'log_index': data.log_index[te], 'y': data.y[te],
-              'calibrated': (data.y - base['resid_f'])[te], 'after': (data.y - resid_after)[te],
-              'resid_before': base['resid_f'][te], 'resid_after': resid_after[te],
-              'jaw': data.jaw[te], 'jaw_before': (data.jaw - base['resid_a'])[te],
-              'current': data.current[te], 'wrist': data.wrist[te], 'jaw_velocity': data.jaw_velocity[te],
-              'load_time': data.load_time[te], 'current_rate': data.current_rate[te]}
-    return Diagnosis(result, series)
+    return Diagnosis(result, _held_out_series(data, base, final['resid_f']))
 
 
 def diagnose(train_logs: Sequence, test_logs: Sequence | None = None, params=None, **kwargs) -> dict:
