@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from grip_force_ros.cli import main as cli_main
-from grip_force_ros.model import GripForceModel, ModelError
+from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import ParameterError, load_params_file, specs_in
 
 ROOT = Path(__file__).resolve().parents[1]

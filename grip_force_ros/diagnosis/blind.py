@@ -190,7 +190,8 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
         angle_only = v['effect'] in ANGLE_ONLY
         shrink = (1.0 - v['angle_gap_after'] / v['angle_gap_before']) if angle_only else v['shrink']
         per_log.append({'truth': list(truth), 'strengths': [s for _, s in case.effects],
-                        'verdict': v['effect'], 'named': v.get('effects', [v['effect']]), 'right': right, 'gap_before': v['gap_before'],
+                        'verdict': v['effect'], 'named': v.get('effects', [v['effect']]), 'right': right,
+                        'gap_before': v['gap_before'],
                         'gap_after': v['gap_after'], 'force_shrink': v['shrink'], 'shrink': shrink,
                         'angle_gap_before': v['angle_gap_before'], 'angle_gap_after': v['angle_gap_after'],
                         'runner_up': v['runner_up']})

@@ -40,7 +40,7 @@ moves: cable pretension and the jaw's own return spring. ``P_k`` are Legendre
 polynomials of ``x`` in [-1, 1], the motor (drum) or jaw angle mapped over the stroke the
 training logs cover (:func:`stroke_range`, set on each frame by the engine); ``P_0`` is the
 spring's torque at mid-stroke, so on a log loaded everywhere it also holds a constant.
-"""
+"""  # noqa: E501 - Markdown table rows are kept whole
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -117,7 +117,8 @@ def _coulomb(f, grid_value):
         # motion, its direction follows the drive's angle through stick; while the drive sticks
         # (inside the play's band: standing, or reversing) the friction takes up any change of the
         # current, so the transmitted load is the one of the last sliding sample
-        force_dir, sliding = _cached(f, ('play_sliding_motor', width), lambda: play_sliding(f['motor'], width))
+        force_dir, sliding = _cached(f, ('play_sliding_motor', width),
+                                     lambda: play_sliding(f['motor'], width))
         base = _cached(f, ('held_nominal', width), lambda: hold_where_stuck(f['nominal'], sliding))
         angle_dir = _cached(f, ('play_jaw_model', width),
                             lambda: play(f['jaw_model'], width))
@@ -261,7 +262,8 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ('offset',), (), (('offset', 'unit of y', lambda c, g: c),)),
     Effect('position_spring', tuple(SPRING_ANGLES), 'spring_angle', '- (which angle the spring follows)',
            _spring, tuple(f'spring_legendre_{k}' for k in range(SPRING_ORDER + 1)), (),
-           tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c) for k in range(SPRING_ORDER + 1)),
+           tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c)
+                 for k in range(SPRING_ORDER + 1)),
            spring_summary),
 )}
 if set(EFFECTS) != set(EFFECT_NAMES):  # pragma: no cover - a programming error

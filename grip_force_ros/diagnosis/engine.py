@@ -327,7 +327,8 @@ def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, g
         out[pname] = {'value': val, 'std': float(std) * scale, 'unit': punit.replace('unit of y', unit)}
     if effect.summary is not None:
         for sname, (sval, sunit) in effect.summary(force_coefs[:len(effect.force_params)], value).items():
-            out[sname] = {'value': sval, 'std': None, 'unit': sunit, 'note': 'derived from the fitted coefficients'}
+            out[sname] = {'value': sval, 'std': None, 'unit': sunit,
+                          'note': 'derived from the fitted coefficients'}
     if effect.grid_name and isinstance(value, tuple):
         # (which signal the direction state follows, its width)
         source, width = value

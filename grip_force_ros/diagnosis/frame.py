@@ -17,8 +17,6 @@ from grip_force_ros.logs.columns import OBJECT_COLUMN
 from grip_force_ros.model.contact import contact_gain
 from grip_force_ros.objects import OBJECTS
 
-
-
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
 SETTLE_TIME = 0.2
 #: Jaw-side free length of the cable (m) for the stick phase of the pulley friction: an
@@ -247,7 +245,8 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     if t.size < 20:
         raise DiagnosisError(f'log too short for a diagnosis ({t.size} samples after averaging)')
     dt = float(np.median(np.diff(t)))
-    raw = {k: np.asarray(log[k], float) for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
+    raw = {k: np.asarray(log[k], float)
+           for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
     # samples with a missing (non-finite) value are carried as 0 and left out of every fit
     finite = np.logical_and.reduce([np.isfinite(v) for v in raw.values()])
     if finite.sum() < 20:

@@ -13,7 +13,7 @@ Reading aligns every topic on the time stamps (``header.stamp``; the bag's
 receive time when a stamp is zero) of the actuator topic, by linear interpolation
 (``object``: the last value published). Messages of one topic usually share one
 byte layout; those are decoded together with numpy instead of one by one.
-"""
+"""  # noqa: E501 - Markdown table rows are kept whole
 from __future__ import annotations
 
 import shutil

@@ -121,7 +121,7 @@ def build_report(out: Path, config: Path | None = None) -> tuple[list, Path]:
               "| reading | static M' / (r_n F0) | slope, lambda_3 = 0.765 | slope, lambda_3 = "
               f'{lam:.3f} (model) |', '|---|---|---|---|']
     for (name, fraction, s_paper), (_, _, s_ours) in zip(resistance_readings(params, 0.765),
-                                                          resistance_readings(params, lam)):
+                                                         resistance_readings(params, lam)):
         lines.append(f'| {name} | {fraction:.3f} | {s_paper:+.4f} | {s_ours:+.4f} |')
     lines += ['', 'The paper reports 0.28 N*m/A.', '', '## Figures', '']
     for fig in figures:

@@ -311,7 +311,7 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
             say(f'effect {label}: {cand.name}')
             if cand.name == LINEAR.name:
                 rows.append({k: estimators[0][k] for k in ('name', 'effect', 'description',
-                                                             'holdout_rmse_mNm', 'cv_rmse_mNm')})
+                                                           'holdout_rmse_mNm', 'cv_rmse_mNm')})
                 continue
             row = evaluate(cand, runs, cache, kinds=() if quick else ('level',))
             rows.append({k: row[k] for k in ('name', 'effect', 'description', 'holdout_rmse_mNm',

@@ -557,4 +557,3 @@ class InstrumentSim:
             rest = self._spring_closed / self._spring_rate
             spring += 0.5 * self._spring_rate * (rest - self._phi) ** 2
         return kinetic + cable + spring
-
