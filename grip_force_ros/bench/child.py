@@ -93,7 +93,7 @@ class _Window:
             self.n_ticks += 1
 
     def record_answer(self, stamp_ns: int, round_trip_ns: int) -> None:
-        """An answer in the window: the stamp of the state it answers and its round trip (ns)."""
+        """Record an answer in the window: the stamp of the state it answers and its round trip (ns)."""
         self.received += 1
         if self.n_latencies < self.capacity:
             self.answered[self.n_latencies] = stamp_ns

@@ -35,7 +35,7 @@ def cache_dir() -> Path:
 
 
 def ensure_log(minutes: float, directory: Path | None = None) -> tuple[Path, float]:
-    """The cached ``minutes`` long 1 kHz CSV log, built if missing.
+    """Return the cached ``minutes`` long 1 kHz CSV log, built if missing.
 
     Returns
     -------
@@ -98,7 +98,7 @@ def warm_page_cache(path: Path) -> None:
 
 def run_diagnosis_speed(minutes: float = 60.0, directory: Path | None = None,
                         timeout: float = 1800.0) -> dict:
-    """The ``diagnosis`` section of the bench.
+    """Measure the ``diagnosis`` section of the bench.
 
     Parameters
     ----------

@@ -126,6 +126,8 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
         ROS_DOMAIN_ID of the two processes (nothing else may run in it).
     variant : Variant
         Executor and the other settings of both processes.
+    warmup : float
+        Time after discovery before the window opens (s).
     period : float
         Loop period (s).
 
@@ -153,7 +155,7 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
 
 def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
                 executor: str | None = None, rt_priority: int = 0) -> dict:
-    """sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
+    """Measure the sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
 
     Starts the ``controller`` and a ``master`` repeating the needle grasp (the
     shipped executables, ``--params-file config``), and the shipped sim node as
@@ -170,6 +172,8 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
         master; default :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
+    warmup : float
+        Time after discovery before the window opens (s).
     rt_priority : int
         0: normal scheduling; 1..99: sim and controller under SCHED_FIFO at this
         priority (the master stays normal).
@@ -207,7 +211,7 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
 
 
 def compare(floor: dict, product: dict) -> dict:
-    """The ``loop`` section: product/floor ratios beside both runs' figures."""
+    """Build the ``loop`` section: product/floor ratios beside both runs' figures."""
     fl, pl = floor['latency'], product['latency']
     return {
         'p99_ratio': ratio(pl['p99_ms'], fl['p99_ms']),

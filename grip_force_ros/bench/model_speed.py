@@ -50,6 +50,8 @@ def vectorised_ratios(params, size: int = 100_000, repeats: int = 5, inverse_siz
         Instrument parameters.
     size : int
         Samples per array.
+    repeats : int
+        Timing tries; the best one counts.
     inverse_size : int, optional
         Samples for the inverse when it solves per sample (tension-dependent friction
         with a wrist-dependent wrap: vectorised Newton, slow); the ratio is scaled to
@@ -151,7 +153,7 @@ def step_share(params, steps: int = 20_000, repeats: int = 3) -> dict:
 
 def run_model(config: str, size: int = 100_000, steps: int = 20_000, repeats: int = 5,
               other_configs: tuple = ()) -> dict:
-    """The ``model`` section of the bench for ``config`` (YAML path), plus others' ratios."""
+    """Measure the ``model`` section of the bench for ``config`` (YAML path), plus others' ratios."""
     params = load_params_file(config)
     out = vectorised_ratios(params, size, repeats, inverse_size=2_000)
     out.update(step_share(params, steps, max(1, repeats // 2)))

@@ -16,7 +16,7 @@ PARTS = ('loop', 'model', 'diagnosis')
 
 
 def machine() -> dict:
-    """What the figures were measured on."""
+    """Describe what the figures were measured on."""
     model = platform.processor() or ''
     try:
         with open('/proc/cpuinfo') as fh:
@@ -54,7 +54,7 @@ def parse_domains(text: str | None) -> list[int] | None:
 
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
              product_executor: str | None = None, rt_priority: int = 0, say=None) -> dict:
-    """The ``loop`` section: floor then product in one free domain, and their ratios."""
+    """Measure the ``loop`` section: floor then product in one free domain, and their ratios."""
     say = say or (lambda msg: None)
     variant = replace(variant, rt_priority=rt_priority)
     with DomainLock(domains) as domain:
@@ -71,7 +71,7 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
 
 
 def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> list[dict]:
-    """The floor measured with each variant in turn (same domain, one after the other)."""
+    """Measure the floor with each variant in turn (same domain, one after the other)."""
     say = say or (lambda msg: None)
     rows = []
     with DomainLock(domains) as domain:
@@ -109,10 +109,14 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
         Samples per array of the vectorised model figures.
     variants : bool
         Also measure the floor with every variant of :data:`VARIANTS`.
+    variant_seconds : float, optional
+        Window of each variant run (s); default ``seconds``.
     product_executor : str, optional
         Executor of the product's nodes ('events' or 'single'); default theirs.
     rt_priority : int
         0, or SCHED_FIFO priority of the 1 kHz processes of the floor and the product alike.
+    say : callable, optional
+        ``say(message)`` before each step.
 
     Returns
     -------

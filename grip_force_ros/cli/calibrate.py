@@ -1,6 +1,6 @@
-"""`grip-force calibrate`: fit an instrument's parameters from a load-cell grasp log.
+r"""`grip-force calibrate`: fit an instrument's parameters from a load-cell grasp log.
 
-    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv \\
+    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv \
         --out X_calibrated.yaml
 
 Keeps the steady plateaus of the log (a few force levels), fits the

@@ -67,7 +67,7 @@ def _fmt(value, spec='.3f', unit=' N') -> str:
 
 
 def print_report(result: dict, stream=sys.stdout) -> None:
-    """The human-readable end of a demo run."""
+    """Print the human-readable end of a demo run."""
     m = result['metrics'] or {}
     w = stream.write
     w(f"instrument        {result['instrument']} ({result['config']})\n")

@@ -34,6 +34,8 @@ def predict_log(log: dict, params, default_object: str = 'needle', losses: bool 
         Instrument parameters.
     default_object : str
         Object where the log has no ``object`` column.
+    losses : bool
+        False: the ideal model (no friction, no creep).
 
     Returns
     -------

@@ -24,6 +24,6 @@ from grip_force_ros.params.files import list_instruments
 
 
 def comparison_configs() -> list[Path]:
-    """The instruments of ``--compare-instruments``: every shipped YAML except maryland."""
+    """List the instruments of ``--compare-instruments``: every shipped YAML but maryland."""
     return [p for p in list_instruments() if 'maryland' not in p.name
             and not p.stem.endswith('_calibrated')]

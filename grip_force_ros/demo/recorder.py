@@ -31,7 +31,7 @@ _INFINITE = QosTime(2147483647, 4294967295)  # what rosbag2 writes for an infini
 
 
 def message_class(type_name: str):
-    """The rclpy message class of 'pkg/msg/Name'."""
+    """Return the rclpy message class of 'pkg/msg/Name'."""
     pkg, _, name = type_name.split('/')
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
@@ -51,7 +51,7 @@ def _enum(enum_cls, policy) -> Any:
 
 
 def to_bag_qos(profile: QoSProfile) -> Qos:
-    """An rclpy QoS profile as the rosbags metadata record."""
+    """Convert an rclpy QoS profile to the rosbags metadata record."""
     return Qos(history=_enum(QosHistory, profile.history), depth=int(profile.depth),
                reliability=_enum(QosReliability, profile.reliability),
                durability=_enum(QosDurability, profile.durability),

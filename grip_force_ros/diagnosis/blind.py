@@ -40,6 +40,7 @@ PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'for
 @dataclass(frozen=True)
 class BlindCase:
     """One blind log: its effects (name -> strength) and seed. Never given to the diagnosis."""
+
     effects: tuple
     seed: int
     #: extra sim parameters of the effects (e.g. a time constant), name -> value
@@ -51,7 +52,7 @@ class BlindCase:
 
 
 def cases(quick: bool = False, seed: int = 0, none_logs: int | None = None) -> list[BlindCase]:
-    """The blind set: every effect at several strengths, some pairs, effect-free logs."""
+    """Build the blind set: every effect at several strengths, some pairs, effect-free logs."""
     out = []
     k = seed * 1000
     levels = (1,) if quick else (0, 1, 2)
@@ -78,7 +79,7 @@ def _smooth_noise(rng, n, dt, time_constant):
 
 
 def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
-    """Current command (A), wrist (rad) and object per sample: seeded, varied segments."""
+    """Draw the current command (A), wrist (rad) and object per sample: seeded, varied segments."""
     n = int(round(duration / dt))
     # slow intensity envelope: busy and quiet periods (heats and cools the motor)
     period = rng.uniform(30.0, 60.0)

@@ -61,6 +61,7 @@ __all__ = ['EFFECT_NAMES', 'EFFECTS', 'NONE', 'Design', 'Effect', 'stroke_range'
 @dataclass
 class Design:
     """Regressors of one effect at one grid value, for one frame."""
+
     force_base: np.ndarray
     force_cols: list = field(default_factory=list)
     angle_cols: list = field(default_factory=list)
@@ -69,6 +70,7 @@ class Design:
 @dataclass(frozen=True)
 class Effect:
     """One effect: its grid, its regressors and the names of its coefficients."""
+
     name: str
     grid: tuple
     grid_name: str | None
@@ -185,7 +187,7 @@ STROKE_QUANTILE = 0.005
 
 
 def stroke_range(angles: np.ndarray) -> tuple[float, float]:
-    """The stroke an angle covers (rad): its STROKE_QUANTILE and 1 - STROKE_QUANTILE quantiles.
+    """Return the stroke an angle covers (rad): its STROKE_QUANTILE and 1 - STROKE_QUANTILE quantiles.
 
     A stroke narrower than 1 mrad is widened to 1 mrad about its middle (a jaw that never
     moves leaves the spring a constant, not a division by zero).

@@ -43,13 +43,17 @@ UNITS = {'grip_force': 'N', 'jaw_torque': 'N*m'}
 @dataclass
 class Diagnosis:
     """The JSON result, plus held-out series for the report's plots."""
+
     result: dict
     series: dict = field(default_factory=dict)
 
 
 def _lstsq(X: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """(Weighted) least squares of a tall, narrow X by its normal equations, columns scaled
-    to unit norm first (fast for n >> k; falls back to lstsq when singular)."""
+    """Solve (weighted) least squares of a tall, narrow X by its normal equations.
+
+    Columns are scaled to unit norm first (fast for n >> k; falls back to lstsq when
+    singular).
+    """
     Xw = X if weights is None else X * weights[:, None]
     norms = np.sqrt(np.einsum('ij,ij->j', Xw, Xw))
     norms[norms == 0] = 1.0
@@ -148,8 +152,11 @@ class _Data:
 
 
 def _huber_lstsq(X, y, scale: float, iterations: int = 2):
-    """Least squares with Huber weights (threshold HUBER_K * scale): episodes the nominal
-    model misses (impacts, stuck cables) do not steer an effect's coefficients."""
+    """Solve least squares with Huber weights (threshold HUBER_K * scale).
+
+    Episodes the nominal model misses (impacts, stuck cables) do not steer an
+    effect's coefficients.
+    """
     coef = _lstsq(X, y)
     if not scale > 0:
         return coef
@@ -169,8 +176,11 @@ def _huber_ms(r, scale: float) -> float:
 
 
 def _channel_fit(data: _Data, X, fold: int, force: bool):
-    """One channel on one fold: training loss and held-out residual. A design that is just
-    the channel's baseline (no column of the effect) is fitted once and cached."""
+    """Fit one channel on one fold: training loss and held-out residual.
+
+    A design that is just the channel's baseline (no column of the effect) is fitted
+    once and cached.
+    """
     base_width = 1 if force else data.angle_base.shape[1]
     key = (fold, force)
     is_base = X.shape[1] == base_width and (not force or np.array_equal(X[:, 0], data.nominal))
@@ -202,8 +212,10 @@ def _fold_fit(data: _Data, Xf, Xa, fold: int):
 
 
 def _evaluate(data: _Data, designs, grid):
-    """Fit every grid value on each fold's training part; keep each fold's best by its own
-    training objective; held-out residuals come from the fold that did not see them.
+    """Fit every grid value on each fold's training part; keep each fold's best.
+
+    Each fold's best is chosen by its own training objective; held-out residuals come
+    from the fold that did not see them.
 
     Returns held-out residual arrays (force, angle; zero outside the held-out part), the
     pooled held-out MSEs, and the grid value chosen by most folds.
@@ -246,8 +258,11 @@ FORCE_FLOOR = 1e-3
 
 
 def _combine(data, first, other, first_name, other_name, fits, other_value):
-    """Design of two effects together: both sets of columns; with a sensor delay the
-    other effect's columns are delayed too (the sensor sees the whole force late)."""
+    """Build the design of two effects together: both sets of columns.
+
+    With a sensor delay the other effect's columns are delayed too (the sensor sees
+    the whole force late).
+    """
     (f1, a1), (f2, a2) = first, other
     if other_name == 'sensor_delay':
         Xf = data.shift(f1, float(other_value))
@@ -317,8 +332,11 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
 
 def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, gain: float,
               unit: str) -> dict:
-    """The fitted parameters of one effect with their physical meaning: its coefficients (force
-    columns, then angle columns) and stds, any derived figures, and its grid value."""
+    """Describe the fitted parameters of one effect with their physical meaning.
+
+    Its coefficients (force columns, then angle columns) and stds, any derived
+    figures, and its grid value.
+    """
     out = {}
     for (pname, punit, transform), coef, std in zip(
             effect.describe, list(force_coefs) + list(angle_coefs), list(force_stds) + list(angle_stds)):
@@ -343,9 +361,11 @@ def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, g
 
 
 def _set_strokes(train_frames, frames) -> None:
-    """Give every frame the stroke (rad) of each angle a position spring may follow, taken over
-    the loaded, steady samples of the training logs: one spring is one torque per angle in
-    every log (an input range, no measured value enters it)."""
+    """Give every frame the stroke (rad) of each angle a position spring may follow.
+
+    Taken over the loaded, steady samples of the training logs: one spring is one
+    torque per angle in every log (an input range, no measured value enters it).
+    """
     strokes = {}
     for key in set(SPRING_ANGLES.values()):
         parts = [f[key][(f['contact'] > 0) & (f['steady'] > 0)] for f in train_frames]
@@ -370,7 +390,7 @@ def _fold_tests(frames, n_train_logs, have_test_logs, blocks, folds):
 
 
 def _default_model(params):
-    """The nominal model of ``params`` (the schema defaults when None)."""
+    """Build the nominal model of ``params`` (the schema defaults when None)."""
     from grip_force_ros.model import GripForceModel
     if params is None:
         from grip_force_ros.params import make_params
@@ -432,8 +452,11 @@ def _split(data: _Data, frames, n_train: int, n_test: int, blocks: int, folds: i
 
 
 def _robust_force_scale(data: _Data) -> float:
-    """Robust scale (unit of y) of the residual of the gain-calibrated nominal: the MAD of the
-    training samples, times 1.4826 (a standard deviation for Gaussian noise)."""
+    """Return the robust scale (unit of y) of the residual of the gain-calibrated nominal.
+
+    The MAD of the training samples, times 1.4826 (a standard deviation for Gaussian
+    noise).
+    """
     tr = data.train
     g0 = _lstsq(data.nominal[tr, None], data.y[tr])[0]
     r0 = data.y[tr] - g0 * data.nominal[tr]

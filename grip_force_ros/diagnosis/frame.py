@@ -98,7 +98,7 @@ def lowpass(x: np.ndarray, dt: float, time_constant: float, initial: float | Non
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Direction with memory in [-1, 1]: a play (backlash) operator of full width ``width``.
+    """Direction with memory in [-1, 1]: a backlash (play) operator of full width ``width``.
 
     The state follows ``x`` with a lag of at most width/2; the output is
     (x - state)/(width/2): +1 after ``x`` has risen by at least ``width``, -1
@@ -118,7 +118,7 @@ def play(x: np.ndarray, width: float) -> np.ndarray:
 
 
 def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """The :func:`play` output and where its state moves (the input slides beyond the band).
+    """Return the :func:`play` output and where its state moves (the input slides beyond the band).
 
     Returns
     -------
@@ -136,8 +136,10 @@ def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hold_where_stuck(values: np.ndarray, sliding: np.ndarray) -> np.ndarray:
-    """``values`` where ``sliding``; elsewhere the last value seen while sliding (the first
-    value before any sliding)."""
+    """Hold ``values`` where not ``sliding``: the last value seen while sliding.
+
+    Where ``sliding``, ``values`` itself; before any sliding, the first value.
+    """
     idx = np.maximum.accumulate(np.where(sliding, np.arange(values.size), 0))
     return values[idx]
 
@@ -331,7 +333,7 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
 
 
 def measured_of(logs: Iterable[Mapping[str, np.ndarray]]) -> str:
-    """The one measured column shared by all ``logs``."""
+    """Return the one measured column shared by all ``logs``."""
     names = {measured_column(log) for log in logs}
     if len(names) != 1:
         raise DiagnosisError(f'logs mix measured columns {sorted(names)}; diagnose them separately')

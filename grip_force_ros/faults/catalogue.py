@@ -419,7 +419,7 @@ def select(cases: list[FaultCase], patterns: list[str] | None) -> list[FaultCase
 
 
 def bad_params_text(base: dict[str, Any], edits: dict[str, Any]) -> str:
-    """A ROS parameter file: ``base`` values with ``edits`` (None deletes a key).
+    """Compose the text of a ROS parameter file: ``base`` values with ``edits`` (None deletes a key).
 
     ``edits['__text__']`` replaces the whole file.
     """

@@ -28,7 +28,7 @@ _TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
 
 
 def to_time_msg(seconds: float):
-    """float seconds -> builtin_interfaces/Time (clamped to its representable range)."""
+    """Convert float seconds to builtin_interfaces/Time (clamped to its representable range)."""
     from builtin_interfaces.msg import Time
     seconds = min(max(seconds, 0.0), 2.0 ** 31 - 1.0)
     sec = int(math.floor(seconds))
@@ -145,8 +145,11 @@ class FaultProbe(Node):
             return self.fault_done
 
     def restart_sim(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
-        """Destroy the instrument publishers, stay silent ``ticks`` ticks, reset the plant,
-        publish again from new publishers (stamps shifted by ``stamp_offset`` s from then on)."""
+        """Restart the simulated instrument as a process restart would look on DDS.
+
+        Destroy the instrument publishers, stay silent ``ticks`` ticks, reset the plant,
+        publish again from new publishers (stamps shifted by ``stamp_offset`` s from then on).
+        """
         with self.lock:
             self.restart_pending = True
             self.restart_offset = stamp_offset
@@ -158,7 +161,7 @@ class FaultProbe(Node):
 
     # ------------------------------------------------------------------ tick
     def samples(self, now: float) -> dict:
-        """The good samples of this tick (plain dicts) from the plant."""
+        """Return the good samples of this tick (plain dicts) from the plant."""
         m = self.plant.measure()
         return {
             'master': {'stamp': now, 'name': [topics.MASTER_JOINT],

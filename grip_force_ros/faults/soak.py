@@ -88,7 +88,7 @@ class _Recorder:
             self.max_abs_command = max(self.max_abs_command, abs(value))
 
     def on_step(self, msg) -> None:
-        """A target force: one per control step, stamped with the controller's clock at it."""
+        """Record a target force: one per control step, stamped with the controller's clock at it."""
         now = time.monotonic()
         if now < self.start:
             return

@@ -152,9 +152,9 @@ class ArrayPath:
         return torques[:end] / self._torque_per_amp_at_rest, currents[:end]
 
     def _starting_currents(self, linear_current):
-        """Newton's starting currents (A) from ``torque / per_amp`` (A), the current without
-        tension-dependent friction.
+        """Return Newton's starting currents (A) from ``torque / per_amp`` (A).
 
+        ``torque / per_amp`` is the current without tension-dependent friction.
         The table of :meth:`_current_table` maps one to the other by linear
         interpolation: exact at the nodes, ~1e-4 relative between them. With the wrist
         mattering it is only a good guess; past the table it is clamped (Newton then

@@ -51,7 +51,7 @@ class FittedPath:
     CURRENT_FIT_INTERVALS, CURRENT_FIT_DEGREE = 2048, 3     # cubics: the gather costs a pass per row
 
     def _rising_current(self) -> float:
-        """A current (A) safely below the peak of M(I) at zero wrist (or 2 max_current).
+        """Return a current (A) safely below the peak of M(I) at zero wrist (or 2 max_current).
 
         Two nodes short of the last rising node of a 2049-node grid over [0, 2 max_current],
         refined on a second grid up to the first falling node when the peak comes early
@@ -123,7 +123,9 @@ class FittedPath:
         return out
 
     def _current_fit_built(self):
-        """PiecewisePolynomial of I(M) / (M / step) (A) over [0, M(I_rising)); None if none.
+        """Build (once) the PiecewisePolynomial of I(M) / (M / step) (A) over [0, M(I_rising)).
+
+        None if there is none.
 
         ``I_rising`` from :meth:`_rising_current`; the table may end earlier (the first
         interval that misses :attr:`CURRENT_FIT_TOLERANCE`).

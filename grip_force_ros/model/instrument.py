@@ -63,8 +63,11 @@ class ForwardResult:
 
 
 def _broadcast_shape(*arrays: np.ndarray) -> tuple:
-    """Broadcast shape of ``arrays``; the usual cases (one shape, or one shape and
-    scalars) without ``numpy.broadcast_shapes`` (~2 us a call, a share of a 10 000-sample forward)."""
+    """Return the broadcast shape of ``arrays``.
+
+    The usual cases (one shape, or one shape and scalars) without
+    ``numpy.broadcast_shapes`` (~2 us a call, a share of a 10 000-sample forward).
+    """
     shapes = {a.shape for a in arrays}
     if len(shapes) > 1:
         shapes.discard(())
@@ -74,7 +77,7 @@ def _broadcast_shape(*arrays: np.ndarray) -> tuple:
 
 
 def _moving(motor_velocity, jaw_velocity, motor_array: np.ndarray, jaw_array: np.ndarray) -> bool:
-    """True if any velocity (rad/s) is nonzero (or NaN); the float defaults without an array pass."""
+    """Tell whether any velocity (rad/s) is nonzero (or NaN); float defaults need no array."""
     if type(motor_velocity) is float and type(jaw_velocity) is float:
         return motor_velocity != 0.0 or jaw_velocity != 0.0
     return bool(motor_array.any() or jaw_array.any())
@@ -250,7 +253,7 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
 
     def inverse(self, grip_force, wrist_angle, jaw_angle, obj: str = 'needle', motor_velocity=0.0,
                 jaw_velocity=0.0):
-        """Current (A) that gives ``grip_force`` (N) (arrays broadcast).
+        """Return the current (A) that gives ``grip_force`` (N) (arrays broadcast).
 
         A zero force returns the current at which the jaw just starts to squeeze.
 

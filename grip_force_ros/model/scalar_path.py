@@ -79,7 +79,7 @@ class ScalarPath:
 
     def current_for_force_scalar(self, grip_force: float, wrist_angle: float, jaw_angle: float,
                                  obj: str = 'needle') -> float:
-        """Current (A) for a target grip force (N), zero velocities (control-loop fast path).
+        """Return the current (A) for a target grip force (N), zero velocities (control-loop fast path).
 
         Raises
         ------
@@ -114,7 +114,7 @@ class ScalarPath:
         return self._solve_current(torque, wrist_angle, 0.0)
 
     def _solve_current(self, torque: float, wrist_angle: float, inertial: float) -> float:
-        """Current with M(I) + inertial = torque, tension-dependent friction (brentq)."""
+        """Solve for the current with M(I) + inertial = torque, tension-dependent friction (brentq)."""
         need = torque - inertial
         if need <= 0.0:
             return need / self._slope_at_zero(wrist_angle)

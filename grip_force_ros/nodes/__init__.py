@@ -1,1 +1,1 @@
-"""nodes"""
+"""The rclpy nodes: controller, sim_instrument, master (the only ROS code)."""

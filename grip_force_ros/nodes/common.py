@@ -49,7 +49,7 @@ RECORD_QOS = state_qos(1000)
 
 
 def matching_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
-    """A recording QoS (KEEP_LAST 1000) that matches every offered profile.
+    """Build a recording QoS (KEEP_LAST 1000) that matches every offered profile.
 
     RELIABLE only if every publisher offers it (else BEST_EFFORT), TRANSIENT_LOCAL
     only if every publisher offers it (else VOLATILE).
@@ -93,6 +93,7 @@ def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -
     Parameters
     ----------
     msg : JointState
+        The received message.
     joints : sequence of str
         Joint names that must all be present (other names are an error too:
         a message for another device on the wrong topic must not be used).
@@ -147,7 +148,7 @@ def stamp_nanoseconds(stamp) -> int:
 
 
 def make_executor(context=None, kind: str | None = None):
-    """An executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
+    """Make an executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
 
     ``kind`` defaults to the GRIP_FORCE_EXECUTOR environment variable, else 'events'.
     """
@@ -163,7 +164,7 @@ def make_executor(context=None, kind: str | None = None):
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
              args: list[str] | None = None) -> int:
-    """The main loop of an executable node (ros2/demos Jazzy style).
+    """Run the main loop of an executable node (ros2/demos Jazzy style).
 
     Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
     parameters are refused (the reason goes to stderr).

@@ -192,7 +192,7 @@ class SimInstrumentNode(Node):
 
 
 def main(args=None) -> int:
-    """Executable ``sim_instrument``."""
+    """Run the executable ``sim_instrument``."""
     return run_node(SimInstrumentNode, 'sim_instrument', args)
 
 

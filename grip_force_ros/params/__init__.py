@@ -34,7 +34,7 @@ __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_p
 
 
 def specs_in(*groups: str) -> list[ParamSpec]:
-    """The specs of the given groups (all groups if none given)."""
+    """Return the specs of the given groups (all groups if none given)."""
     return [s for s in SCHEMA if not groups or s.group in groups]
 
 

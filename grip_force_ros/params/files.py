@@ -35,7 +35,7 @@ _SOURCE_CONFIG = Path(__file__).resolve().parents[2] / 'config'
 
 
 def config_dir() -> Path:
-    """The directory of the instrument YAMLs.
+    """Return the directory of the instrument YAMLs.
 
     Returns
     -------
@@ -57,7 +57,7 @@ def config_dir() -> Path:
 
 
 def instrument_path(name_or_path: str | os.PathLike | None = None) -> Path:
-    """An instrument YAML by path, or by name in :func:`config_dir`.
+    """Find an instrument YAML by path, or by name in :func:`config_dir`.
 
     Parameters
     ----------

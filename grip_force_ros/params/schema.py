@@ -161,6 +161,7 @@ def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
     Parameters
     ----------
     specs : iterable of ParamSpec
+        The declarations to check against.
     values : mapping
         Parameter name to value; missing names take their default.
     allow_unknown : bool
@@ -186,7 +187,7 @@ def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
 
 
 def markdown_table(specs: Iterable[ParamSpec]) -> str:
-    """The parameter table of the docs: one Markdown row per spec.
+    """Render the parameter table of the docs: one Markdown row per spec.
 
     Columns: name, group, type, unit, default, range (inclusive), read-only,
     description (with the allowed values of a 'string' parameter). The one
@@ -196,6 +197,7 @@ def markdown_table(specs: Iterable[ParamSpec]) -> str:
     Parameters
     ----------
     specs : iterable of ParamSpec
+        One row each, in this order.
 
     Returns
     -------

@@ -117,8 +117,10 @@ SIM = [
 
 
 def _effect_specs() -> list:
-    """The 'effects' group from the effect registry: each simulated effect's strength
-    (default 0 = off), then its further parameters."""
+    """Declare the 'effects' group from the effect registry.
+
+    Each simulated effect's strength (default 0 = off), then its further parameters.
+    """
     out = []
     for name in SIMULATED:
         e = REGISTRY[name]

@@ -37,7 +37,7 @@ FIGURE_CAPTIONS = {
 
 
 def rows_json(rows) -> dict:
-    """The ``--json`` document ``{"rows": [...]}``."""
+    """Build the ``--json`` document ``{"rows": [...]}``."""
     def clean(value):
         return None if isinstance(value, float) and not math.isfinite(value) else value
     return {'rows': [{k: clean(v) for k, v in row.as_dict().items()} for row in rows]}

@@ -182,7 +182,7 @@ def _parameters(est) -> dict:
 
 # -- where ------------------------------------------------------------------------------
 def _region_table(groups: list[tuple[str, str, np.ndarray]]) -> list[dict]:
-    """groups: (family, label, errors in N*m). Shares of the squared error are within a family."""
+    """Tabulate groups: (family, label, errors in N*m). Shares of the squared error are within a family."""
     out = []
     families = {}
     for family, label, err in groups:
@@ -267,6 +267,7 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
     Parameters
     ----------
     runs : sequence of RigRun
+        Imported rig runs (all of them: the splits are made here).
     quick : bool
         Estimators on the holdout split and leave-one-level-out, effects on the
         holdout split only, no sensitivity sweep (for tests and CI).

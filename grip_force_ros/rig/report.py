@@ -41,7 +41,7 @@ def plot_timeseries(runs: Sequence, path: Path, cache: dict | None = None) -> Pa
 
 
 def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
-    """Current against jaw torque while sliding: two friction branches and the fitted lines."""
+    """Plot current against jaw torque while sliding: two friction branches and the fitted lines."""
     plt = pyplot()
     settings = ObserverSettings()
     fig, ax = plt.subplots(figsize=(8, 6))
