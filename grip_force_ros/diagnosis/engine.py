@@ -20,6 +20,8 @@ from typing import Sequence
 import numpy as np
 
 from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE, SPRING_ANGLES, stroke_range
+from grip_force_ros.diagnosis.fitting import (FORCE_FLOOR, PooledData, combine_designs, evaluate, full_fit,
+                                              held_out_score, lstsq, rms)
 from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, DiagnosisError, build_frame,
                                             load_decimated, measured_of)
 from grip_force_ros.objects import OBJECTS
@@ -27,10 +29,6 @@ from grip_force_ros.objects import OBJECTS
 #: Held-out score margin for naming an effect: the mean-square error (both channels
 #: summed in log) must fall by at least this fraction, beyond the parameter penalty.
 MIN_IMPROVEMENT = 0.15
-#: Training rows used per fit at most (an even subsample beyond; 10 min at 200 Hz).
-MAX_FIT_ROWS = 120_000
-#: Huber threshold in robust standard deviations of the calibrated residual.
-HUBER_K = 2.0
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
 PARAM_PENALTY = 0.01
 #: Default split of a log into time blocks when no test logs are given.
@@ -48,238 +46,7 @@ class Diagnosis:
     series: dict = field(default_factory=dict)
 
 
-def _lstsq(X: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """Solve (weighted) least squares of a tall, narrow X by its normal equations.
-
-    Columns are scaled to unit norm first (fast for n >> k; falls back to lstsq when
-    singular).
-    """
-    Xw = X if weights is None else X * weights[:, None]
-    norms = np.sqrt(np.einsum('ij,ij->j', Xw, Xw))
-    norms[norms == 0] = 1.0
-    A = (Xw.T @ X) / np.outer(norms, norms)
-    b = (Xw.T @ y) / norms
-    try:
-        if np.linalg.cond(A) > 1e10:
-            raise np.linalg.LinAlgError
-        return np.linalg.solve(A, b) / norms
-    except np.linalg.LinAlgError:
-        sw = np.ones(len(y)) if weights is None else np.sqrt(weights)
-        coef, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
-        return coef
-
-
-def _block_bootstrap_std(X, y, rng, blocks: int = 20, draws: int = 200) -> np.ndarray:
-    """Std of least-squares coefficients over a moving-block bootstrap (keeps autocorrelation)."""
-    n, k = X.shape
-    if n < 2 * blocks:
-        return np.full(k, np.nan)
-    edges = np.linspace(0, n, blocks + 1).astype(int)
-    xtx = np.stack([X[a:b].T @ X[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    xty = np.stack([X[a:b].T @ y[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    picks = rng.integers(0, blocks, size=(draws, blocks))
-    coefs = []
-    for p in picks:
-        try:
-            coefs.append(np.linalg.solve(xtx[p].sum(0), xty[p].sum(0)))
-        except np.linalg.LinAlgError:
-            continue
-    return np.std(coefs, axis=0) if len(coefs) > 2 else np.full(k, np.nan)
-
-
-def _rms(x) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if len(x) else float('nan')
-
-
-def _concat(frames, key):
-    return np.concatenate([f[key] for f in frames])
-
-
-class _Data:
-    """Frames of all logs, concatenated, with the train/test masks."""
-
-    def __init__(self, frames, fold_tests):
-        self.frames = frames
-        steady = _concat(frames, 'steady') > 0
-        #: (train, test) masks of each fold; the test parts are disjoint
-        self.folds = [(~test & steady, test & steady) for test in fold_tests]
-        self.test = np.zeros(steady.size, dtype=bool)
-        for _, test in self.folds:
-            self.test |= test
-        #: what the reported parameters are fitted on: every steady sample the fits may see
-        self.train = steady & ~self.test if len(self.folds) == 1 else steady.copy()
-        self.transient_share = float(1.0 - steady.mean())
-        #: robust scale (N or N*m) of the calibrated nominal residual, for the Huber loss
-        self.force_scale = 0.0
-        #: (train, test) row indices of each fold, and the baseline fits per (fold, channel)
-        # long logs: the fits use an even subsample of at most MAX_FIT_ROWS training rows (the
-        # held-out residuals still cover every held-out row), so the cost stops growing
-        self.fold_index = []
-        for tr, te in self.folds:
-            rows = np.flatnonzero(tr)
-            stride = max(1, int(np.ceil(rows.size / MAX_FIT_ROWS)))
-            self.fold_index.append((rows[::stride], np.flatnonzero(te)))
-        self.base_cache: dict = {}
-        for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
-                    'jaw_velocity', 'load_time', 'object', 't'):
-            setattr(self, key, _concat(frames, key))
-        # angle calibration: zero, scale, the cable's elastic stretch under both tensions and
-        # the lag of the jaw behind the drum in motion
-        # (the scale r0/r_n is geometry: kept, so the target is jaw - jaw_model)
-        self.angle_target = self.jaw - self.jaw_model
-        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'drum_tension'),
-                                           _concat(frames, 'jaw_tension'), self.jaw_velocity])
-        self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
-
-    def shift(self, X, delay: float):
-        """Columns of X delayed by ``delay`` (s), log by log: what a delayed sensor would see."""
-        out = np.empty_like(X)
-        for i in np.unique(self.log_index):
-            sel = self.log_index == i
-            t = self.t[sel]
-            for j in range(X.shape[1]):
-                out[sel, j] = np.interp(t - delay, t, X[sel, j])
-        return out
-
-    def designs(self, effect, grid_value):
-        parts = [effect.build(f, grid_value) for f in self.frames]
-        base = np.concatenate([d.force_base for d in parts])
-        fcols = [np.concatenate([d.force_cols[j] for d in parts]) for j in range(len(parts[0].force_cols))]
-        acols = [np.concatenate([d.angle_cols[j] for d in parts]) for j in range(len(parts[0].angle_cols))]
-        Xf = np.column_stack([base] + fcols)
-        Xa = np.column_stack([self.angle_base] + acols)
-        return Xf, Xa
-
-
-def _huber_lstsq(X, y, scale: float, iterations: int = 2):
-    """Solve least squares with Huber weights (threshold HUBER_K * scale).
-
-    Episodes the nominal model misses (impacts, stuck cables) do not steer an
-    effect's coefficients.
-    """
-    coef = _lstsq(X, y)
-    if not scale > 0:
-        return coef
-    for _ in range(iterations):
-        r = np.abs(y - X @ coef)
-        coef = _lstsq(X, y, np.minimum(1.0, HUBER_K * scale / np.maximum(r, 1e-300)))
-    return coef
-
-
-def _huber_ms(r, scale: float) -> float:
-    """Mean Huber loss (as a mean square: quadratic within HUBER_K * scale, linear beyond)."""
-    if not scale > 0:
-        return float(np.mean(r ** 2))
-    c = HUBER_K * scale
-    a = np.abs(r)
-    return float(np.mean(np.where(a <= c, a * a, 2.0 * c * a - c * c)))
-
-
-def _channel_fit(data: _Data, X, fold: int, force: bool):
-    """Fit one channel on one fold: training loss and held-out residual.
-
-    A design that is just the channel's baseline (no column of the effect) is fitted
-    once and cached.
-    """
-    base_width = 1 if force else data.angle_base.shape[1]
-    key = (fold, force)
-    is_base = X.shape[1] == base_width and (not force or np.array_equal(X[:, 0], data.nominal))
-    if is_base and key in data.base_cache:
-        return data.base_cache[key]
-    tr, te = data.fold_index[fold]
-    Xtr = X[tr]
-    if force:
-        ytr = data.y[tr]
-        coef = _huber_lstsq(Xtr, ytr, data.force_scale)
-        loss = _huber_ms(ytr - Xtr @ coef, data.force_scale)
-        resid = data.y[te] - X[te] @ coef
-    else:
-        ytr = data.angle_target[tr]
-        coef = _lstsq(Xtr, ytr)
-        loss = float(np.mean((ytr - Xtr @ coef) ** 2))
-        resid = data.angle_target[te] - X[te] @ coef
-    out = (loss, resid)
-    if is_base:
-        data.base_cache[key] = out
-    return out
-
-
-def _fold_fit(data: _Data, Xf, Xa, fold: int):
-    mse_f, rf = _channel_fit(data, Xf, fold, True)
-    mse_a, ra = _channel_fit(data, Xa, fold, False)
-    objective = math.log(max(mse_f, 1e-300)) + math.log(max(mse_a, 1e-300))
-    return objective, rf, ra
-
-
-def _evaluate(data: _Data, designs, grid):
-    """Fit every grid value on each fold's training part; keep each fold's best.
-
-    Each fold's best is chosen by its own training objective; held-out residuals come
-    from the fold that did not see them.
-
-    Returns held-out residual arrays (force, angle; zero outside the held-out part), the
-    pooled held-out MSEs, and the grid value chosen by most folds.
-    """
-    best = [None] * len(data.folds)
-    for value in grid:
-        Xf, Xa = designs(value)
-        for k in range(len(data.folds)):
-            objective, rf, ra = _fold_fit(data, Xf, Xa, k)
-            if best[k] is None or objective < best[k][0]:
-                best[k] = (objective, value, rf, ra)
-    resid_f = np.zeros(data.y.size)
-    resid_a = np.zeros(data.y.size)
-    for (_, te), (_, _, rf, ra) in zip(data.folds, best):
-        resid_f[te] = rf
-        resid_a[te] = ra
-    te = data.test
-    values = [b[1] for b in best]
-    chosen = max(values, key=lambda v: (values.count(v), -values.index(v)))
-    return {'resid_f': resid_f, 'resid_a': resid_a, 'value': chosen,
-            'test_mse_f': float(np.mean(resid_f[te] ** 2)), 'test_mse_a': float(np.mean(resid_a[te] ** 2)),
-            'test_loss_f': _huber_ms(resid_f[te], data.force_scale)}
-
-
-def _full_fit(data: _Data, Xf, Xa, rng):
-    """Coefficients on every sample the fits may see, with block-bootstrap std."""
-    tr = np.flatnonzero(data.train)
-    tr = tr[::max(1, int(np.ceil(tr.size / MAX_FIT_ROWS)))]
-    cf = _huber_lstsq(Xf[tr], data.y[tr], data.force_scale)
-    ca = _lstsq(Xa[tr], data.angle_target[tr])
-    return (cf, ca, _block_bootstrap_std(Xf[tr], data.y[tr], rng),
-            _block_bootstrap_std(Xa[tr], data.angle_target[tr], rng),
-            float(np.mean((data.y[tr] - Xf[tr] @ cf) ** 2)))
-
-
-#: Resolution floors (mean square) below which a channel's error counts as zero: 0.1 mrad of
-#: jaw angle; for the measured column, FORCE_FLOOR times its RMS.
-ANGLE_FLOOR_MS = 1e-8
-FORCE_FLOOR = 1e-3
-
-
-def _combine(data, first, other, first_name, other_name, fits, other_value):
-    """Build the design of two effects together: both sets of columns.
-
-    With a sensor delay the other effect's columns are delayed too (the sensor sees
-    the whole force late).
-    """
-    (f1, a1), (f2, a2) = first, other
-    if other_name == 'sensor_delay':
-        Xf = data.shift(f1, float(other_value))
-    elif first_name == 'sensor_delay':
-        Xf = np.column_stack([f1, data.shift(f2[:, 1:], float(fits[first_name]['value']))])
-    else:
-        Xf = np.column_stack([f1, f2[:, 1:]])
-    Xa = np.column_stack([a1, a2[:, 4:]])
-    return Xf, Xa
-
-
-def _score(fit, base, force_floor_ms: float) -> float:
-    return (math.log((fit['test_loss_f'] + force_floor_ms) / (base['test_loss_f'] + force_floor_ms))
-            + math.log((fit['test_mse_a'] + ANGLE_FLOOR_MS) / (base['test_mse_a'] + ANGLE_FLOOR_MS)))
-
-
-def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
+def _regions(data: PooledData, resid: np.ndarray, unit: str) -> list[dict]:
     """Held-out residual binned over operating regions, ranked by share of the gap."""
     te = data.test
     r2 = resid[te] ** 2
@@ -293,7 +60,7 @@ def _regions(data: _Data, resid: np.ndarray, unit: str) -> list[dict]:
             return
         out.append({'where': f'{dimension}: {label}', 'dimension': dimension,
                     'share_of_gap': float(r2[sel].sum() / total), 'share_of_samples': k / n,
-                    'rms': _rms(resid[te][sel]), 'mean': float(np.mean(resid[te][sel])), 'unit': unit})
+                    'rms': rms(resid[te][sel]), 'mean': float(np.mean(resid[te][sel])), 'unit': unit})
 
     def tertiles(dimension, values, fmt, value_unit):
         v = values[te]
@@ -400,11 +167,11 @@ def _default_model(params):
 
 def _prepare(train_logs, test_logs, model, analysis_rate, default_object, blocks, folds,
              jaw_side_cable_length, say):
-    """Step 0: logs -> frames (training logs first) -> the pooled :class:`_Data` with its folds.
+    """Step 0: logs -> frames (training logs first) -> the pooled :class:`PooledData` with its folds.
 
     Returns
     -------
-    data : _Data
+    data : PooledData
     frames : list of dict
         One analysis frame per log.
     measured : str
@@ -416,11 +183,11 @@ def _prepare(train_logs, test_logs, model, analysis_rate, default_object, blocks
     frames = [build_frame(log, model, measured=measured, default_object=default_object,
                           jaw_side_cable_length=jaw_side_cable_length) for log in logs]
     _set_strokes(frames[:len(train_logs)], frames)
-    data = _Data(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
+    data = PooledData(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
     return data, frames, measured
 
 
-def _split(data: _Data, frames, n_train: int, n_test: int, blocks: int, folds: int,
+def _split(data: PooledData, frames, n_train: int, n_test: int, blocks: int, folds: int,
            analysis_rate: float) -> dict:
     """How the logs were split into training and held-out parts (the result's ``split``).
 
@@ -451,25 +218,25 @@ def _split(data: _Data, frames, n_train: int, n_test: int, blocks: int, folds: i
     return split
 
 
-def _robust_force_scale(data: _Data) -> float:
+def _robust_force_scale(data: PooledData) -> float:
     """Return the robust scale (unit of y) of the residual of the gain-calibrated nominal.
 
     The MAD of the training samples, times 1.4826 (a standard deviation for Gaussian
     noise).
     """
     tr = data.train
-    g0 = _lstsq(data.nominal[tr, None], data.y[tr])[0]
+    g0 = lstsq(data.nominal[tr, None], data.y[tr])[0]
     r0 = data.y[tr] - g0 * data.nominal[tr]
     return float(1.4826 * np.median(np.abs(r0 - np.median(r0))))
 
 
-def _calibrate(data: _Data, rng, measured: str, jaw_side_cable_length: float):
+def _calibrate(data: PooledData, rng, measured: str, jaw_side_cable_length: float):
     """Step 1: the nominal model and what a lab calibrates anyway (force gain, jaw zero, ...).
 
     Returns
     -------
     base : dict
-        Held-out fit of the calibrated nominal (:func:`_evaluate`).
+        Held-out fit of the calibrated nominal (:func:`evaluate`).
     gain : float
         Force gain, measured / model (-).
     calibration : dict
@@ -477,10 +244,10 @@ def _calibrate(data: _Data, rng, measured: str, jaw_side_cable_length: float):
     """
     Xf0 = data.nominal[:, None]
     Xa0 = data.angle_base
-    base = _evaluate(data, lambda _: (Xf0, Xa0), (None,))
-    cf0, ca0, sf0, a_std, _ = _full_fit(data, Xf0, Xa0, rng)
+    base = evaluate(data, lambda _: (Xf0, Xa0), (None,))
+    cf0, ca0, sf0, a_std, _ = full_fit(data, Xf0, Xa0, rng)
     gain, gain_std = float(cf0[0]), float(sf0[0])
-    raw_gap = _rms(data.y[data.test] - data.nominal[data.test])
+    raw_gap = rms(data.y[data.test] - data.nominal[data.test])
     calibration = {
         'force_gain': {'value': gain, 'std': gain_std, 'unit': '-',
                        'meaning': f'measured {measured} / model {measured} (efficiency scale)'},
@@ -502,7 +269,7 @@ def _calibrate(data: _Data, rng, measured: str, jaw_side_cable_length: float):
     return base, gain, calibration
 
 
-def _rank_effects(data: _Data, base: dict, gain: float, rng, force_floor_ms: float,
+def _rank_effects(data: PooledData, base: dict, gain: float, rng, force_floor_ms: float,
                   param_penalty: float, min_improvement: float, unit: str, say):
     """Step 3: every effect fitted as an augmentation, ranked by held-out score (lower is better).
 
@@ -520,11 +287,11 @@ def _rank_effects(data: _Data, base: dict, gain: float, rng, force_floor_ms: flo
     for name in EFFECT_NAMES:
         effect = EFFECTS[name]
         say(f'fitting {name}')
-        fit = _evaluate(data, lambda v, e=effect: data.designs(e, v), effect.grid)
+        fit = evaluate(data, lambda v, e=effect: data.designs(e, v), effect.grid)
         value = fit['value']
         Xf, Xa = data.designs(effect, value)
-        cf, ca, sf, sa, train_mse = _full_fit(data, Xf, Xa, rng)
-        score = _score(fit, base, force_floor_ms) + param_penalty * effect.n_params
+        cf, ca, sf, sa, train_mse = full_fit(data, Xf, Xa, rng)
+        score = held_out_score(fit, base, force_floor_ms) + param_penalty * effect.n_params
         # held-out residual arrays are kept only for the best effect so far (memory)
         if score < best_score:
             best_score = score
@@ -548,7 +315,7 @@ def _rank_effects(data: _Data, base: dict, gain: float, rng, force_floor_ms: flo
     return ranking, fits
 
 
-def _second_effect(data: _Data, winner: str, fits: dict, rng, force_floor_ms: float,
+def _second_effect(data: PooledData, winner: str, fits: dict, rng, force_floor_ms: float,
                    param_penalty: float, min_improvement: float, unit: str, say):
     """Step 4a: a second effect on top of the first (pairs of effects).
 
@@ -565,14 +332,14 @@ def _second_effect(data: _Data, winner: str, fits: dict, rng, force_floor_ms: fl
 
     def pair(value, name):
         other = data.designs(EFFECTS[name], value)
-        return _combine(data, first_design, other, winner, name, fits, value)
+        return combine_designs(data, first_design, other, winner, name, fits, value)
 
     best2 = None
     for name in EFFECT_NAMES:
         if name == winner:
             continue
-        fit2 = _evaluate(data, lambda value, name=name: pair(value, name), EFFECTS[name].grid)
-        score2 = _score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
+        fit2 = evaluate(data, lambda value, name=name: pair(value, name), EFFECTS[name].grid)
+        score2 = held_out_score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
         say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
         if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
             best2 = (score2, name, fit2)
@@ -581,7 +348,7 @@ def _second_effect(data: _Data, winner: str, fits: dict, rng, force_floor_ms: fl
     _, name, final = best2
     second = EFFECTS[name]
     Xf, Xa = pair(final['value'], name)
-    cf, ca, sf, sa, _ = _full_fit(data, Xf, Xa, rng)
+    cf, ca, sf, sa, _ = full_fit(data, Xf, Xa, rng)
     nf, na = len(second.force_params), len(second.angle_params)
     described = _describe(second, final['value'], cf[len(cf) - nf:], sf[len(sf) - nf:],
                           ca[len(ca) - na:], sa[len(sa) - na:], float(cf[0]), unit)
@@ -624,7 +391,7 @@ def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured:
     return verdict, final
 
 
-def _held_out_series(data: _Data, base: dict, resid_after: np.ndarray) -> dict:
+def _held_out_series(data: PooledData, base: dict, resid_after: np.ndarray) -> dict:
     """Held-out signals for the report's plots: measured, calibrated nominal, with the effects."""
     te = data.test
     return {'t': data.t[te], 'log_index': data.log_index[te], 'y': data.y[te],
@@ -659,7 +426,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     rng = np.random.default_rng(seed)
     data.force_scale = _robust_force_scale(data)
     base, gain, calibration = _calibrate(data, rng, measured, jaw_side_cable_length)      # 1.
-    force_floor_ms = (FORCE_FLOOR * _rms(data.y[data.test])) ** 2
+    force_floor_ms = (FORCE_FLOOR * rms(data.y[data.test])) ** 2
     ranking, fits = _rank_effects(data, base, gain, rng, force_floor_ms, param_penalty,     # 3.
                                   min_improvement, unit, say)
     winner = ranking[0]['effect']
