@@ -12,7 +12,7 @@ CRTK-style names, as used by the dVRK. All remappable with ``--ros-args -r``.
 | grip/target_force | geometry_msgs/WrenchStamped | controller -> any | force.z = target grip force (N) |
 | grip/measured_force | geometry_msgs/WrenchStamped | sim load cell -> any | force.z = measured grip force (N) |
 | /diagnostics | diagnostic_msgs/DiagnosticArray | controller, sim | state, limits hit, watchdog, rejected inputs |
-"""
+"""  # noqa: E501 - Markdown table rows are kept whole
 
 MASTER_JS = 'master/gripper/measured_js'
 INSTRUMENT_JS = 'instrument/measured_js'

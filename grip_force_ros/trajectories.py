@@ -164,7 +164,7 @@ class Trajectory:
 
 
 def from_segments(segments: Sequence[Segment]) -> Trajectory:
-    """A smooth trajectory from consecutive segments (each ends where the next starts)."""
+    """Build a smooth trajectory from consecutive segments (each ends where the next starts)."""
     times, angles, phases = [0.0], [segments[0].start], []
     for seg in segments:
         if seg.duration <= 0:
@@ -184,7 +184,7 @@ def from_segments(segments: Sequence[Segment]) -> Trajectory:
 def needle_grasp(open_angle: float = 0.8, closed_angle: float = 0.0, time_scale: float = 1.0,
                  approach: float = 0.5, close: float = 0.8, hold: float = 1.5, pull: float = 1.5,
                  release: float = 0.7) -> Trajectory:
-    """The needle grasp task.
+    """Build the needle grasp task.
 
     Parameters
     ----------
@@ -210,7 +210,7 @@ def needle_grasp(open_angle: float = 0.8, closed_angle: float = 0.0, time_scale:
 def sine_sweep(open_angle: float = 0.8, closed_angle: float = 0.0, time_scale: float = 1.0,
                f_start: float = 0.2, f_end: float = 3.0, duration: float = 10.0,
                rate: float = 1000.0) -> Trajectory:
-    """A linear chirp between ``open_angle`` and ``closed_angle`` (rad).
+    """Build a linear chirp between ``open_angle`` and ``closed_angle`` (rad).
 
     Frequency rises from ``f_start`` to ``f_end`` (Hz) over ``duration`` (s,
     times ``time_scale``); sampled at ``rate`` (Hz) and interpolated linearly.
@@ -227,7 +227,7 @@ def sine_sweep(open_angle: float = 0.8, closed_angle: float = 0.0, time_scale: f
 def steps(open_angle: float = 0.8, closed_angle: float = 0.0, time_scale: float = 1.0,
           levels: Sequence[float] = (1.0, 0.5, 0.25, 0.0, 0.25, 0.0, 1.0),
           step_duration: float = 1.0) -> Trajectory:
-    """A staircase; ``levels`` are fractions of the opening (1 = open, 0 = closed)."""
+    """Build a staircase; ``levels`` are fractions of the opening (1 = open, 0 = closed)."""
     angles = [closed_angle + lv * (open_angle - closed_angle) for lv in levels]
     hold = step_duration * time_scale
     times, values, phases = [], [], []

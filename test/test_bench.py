@@ -74,8 +74,8 @@ def test_floor_and_product_count_unanswered_periods_alike():
 
 def test_model_speed_structure():
     from grip_force_ros.bench.model_speed import run_model
-    from grip_force_ros.demo import find_config
-    r = run_model(str(find_config('paper_needle_driver')), size=2000, steps=300, repeats=1)
+    from grip_force_ros.params.files import instrument_path
+    r = run_model(str(instrument_path('paper_needle_driver')), size=2000, steps=300, repeats=1)
     assert r['mode'] == 'grip' and r['feedforward']
     for key in ('forward_ratio', 'inverse_ratio', 'step_share', 'step_and_inputs_share'):
         assert math.isfinite(r[key]) and r[key] > 0, key
@@ -103,8 +103,8 @@ def test_bench_all_parts_tiny(tmp_path):
     """Floor, product (real node processes), model and diagnosis in one short run."""
     from grip_force_ros.bench.run import run_bench
     from grip_force_ros.cli.bench import render
-    from grip_force_ros.demo import find_config
-    r = run_bench(1.0, config=str(find_config('paper_needle_driver')), log_minutes=1.0,
+    from grip_force_ros.params.files import instrument_path
+    r = run_bench(1.0, config=str(instrument_path('paper_needle_driver')), log_minutes=1.0,
                   model_size=2000)
     json.dumps(r)                                             # serialisable as --json prints it
     loop, model, diag = r['loop'], r['model'], r['diagnosis']

@@ -39,7 +39,8 @@ def test_the_sets_cover_every_effect_pairs_and_effect_free_logs():
         assert {(name,) for name in BLIND_EFFECTS} <= truths
         assert ('none',) in truths
         assert any(len(t) == 2 for t in truths)
-    assert len({c.effects for c in full if len(c.truth) == 1 and c.truth != ('none',)}) == 3 * len(BLIND_EFFECTS)
+    assert len({c.effects for c in full if len(c.truth) == 1 and c.truth != ('none',)}) \
+        == 3 * len(BLIND_EFFECTS)
 
 
 @pytest.mark.slow

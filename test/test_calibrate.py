@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from grip_force_ros.cli import main as cli_main
-from grip_force_ros.demo import find_config
+from grip_force_ros.params.files import instrument_path
 from grip_force_ros.identify.calibration import (CalibrationError, calibrated_yaml, fit_instrument,
                                                  steady_plateaus)
 from grip_force_ros.logs import write_csv
@@ -24,7 +24,7 @@ def staircase(levels=(0.1, 0.2, 0.3, 0.4), ramp=300, hold=500, rest=300):
 
 
 def sim_log(config, friction_scale, stiffness_scale, seed=3):
-    shipped = load_params_file(find_config(config))
+    shipped = load_params_file(instrument_path(config))
     plant = shipped.replace(friction_scale=friction_scale, stiffness_scale=stiffness_scale)
     return shipped, simulate(plant, staircase(), 1e-3, obj='needle', seed=seed)
 
@@ -58,7 +58,7 @@ def test_plateaus_are_the_loading_branch_only():
 
 
 def test_one_force_level_or_no_contact_is_refused():
-    shipped = load_params_file(find_config('paper_needle_driver'))
+    shipped = load_params_file(instrument_path('paper_needle_driver'))
     log = simulate(shipped, np.concatenate([np.zeros(200), np.full(800, 0.2)]), 1e-3, seed=1)
     with pytest.raises(CalibrationError, match='one force level'):
         fit_instrument(shipped, log)
@@ -75,7 +75,7 @@ def test_cli_writes_a_valid_calibrated_yaml(tmp_path, capsys):
     shipped, log = sim_log('paper_needle_driver', 1.2, 0.8)
     csv = write_csv(tmp_path / 'calib.csv', log)
     out = tmp_path / 'paper_calibrated.yaml'
-    config = find_config('paper_needle_driver')
+    config = instrument_path('paper_needle_driver')
     assert cli_main(['calibrate', '--config', str(config), '--log', str(csv),
                      '--out', str(out)]) == 0
     printed = capsys.readouterr().out
@@ -105,7 +105,7 @@ def test_cli_reports_a_bad_log(tmp_path, capsys):
 def test_header_names_source_and_uncertainty():
     shipped, log = sim_log('long_jaw_grasper', 0.8, 1.2)
     result = fit_instrument(shipped, log)
-    text = calibrated_yaml(find_config('long_jaw_grasper'), result, 'runs/calib.mcap')
+    text = calibrated_yaml(instrument_path('long_jaw_grasper'), result, 'runs/calib.mcap')
     assert text.startswith('# Calibrated from long_jaw_grasper.yaml')
     assert '# Source log: runs/calib.mcap' in text and '+/-' in text
 

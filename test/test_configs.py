@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from grip_force_ros.cli import main as cli_main
-from grip_force_ros.model import GripForceModel, ModelError
+from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import ParameterError, load_params_file, specs_in
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,3 +83,30 @@ def test_inconsistent_file_is_refused_at_load(tmp_path):
     bad = _bad_copy(tmp_path, 'cable_radius', '0.0035')
     with pytest.raises(ParameterError, match="bad.*'cable_radius' 0.0035 m"):
         load_params_file(bad)
+
+
+def test_instrument_files_are_found_by_name_or_path_from_anywhere(tmp_path, monkeypatch):
+    from grip_force_ros.params import files
+    shipped = ROOT / 'config' / 'long_jaw_grasper.yaml'
+    monkeypatch.chdir(tmp_path)                                    # not the source tree
+    assert files.instrument_path('long_jaw_grasper') == shipped
+    assert files.instrument_path('long_jaw_grasper.yaml') == shipped
+    assert files.instrument_path('config/long_jaw_grasper.yaml') == shipped
+    assert files.instrument_path() == ROOT / 'config' / f'{files.DEFAULT_INSTRUMENT}.yaml'
+    own = tmp_path / 'mine.yaml'
+    own.write_text(shipped.read_text())
+    assert files.instrument_path(own) == own                       # an existing file as given
+    assert files.list_instruments() == sorted((ROOT / 'config').glob('*.yaml'))
+    with pytest.raises(FileNotFoundError, match='no_such_instrument.*looked in'):
+        files.instrument_path('no_such_instrument')
+
+
+def test_config_directory_can_be_overridden(tmp_path, monkeypatch):
+    from grip_force_ros.params import files
+    (tmp_path / 'bench_rig.yaml').write_text((ROOT / 'config' / 'long_jaw_grasper.yaml').read_text())
+    monkeypatch.setenv(files.CONFIG_DIR_ENV, str(tmp_path))
+    assert files.config_dir() == tmp_path
+    assert files.list_instruments() == [tmp_path / 'bench_rig.yaml']
+    assert files.instrument_path('bench_rig') == tmp_path / 'bench_rig.yaml'
+    with pytest.raises(FileNotFoundError, match=str(tmp_path)):
+        files.instrument_path('long_jaw_grasper')                  # the override replaces config/

@@ -228,7 +228,8 @@ def test_position_spring_over_the_stroke_is_named_with_its_shape():
     x = np.linspace(0.0, 1.0, 101)
     assert params['spring_peak_to_peak']['value'] == pytest.approx(np.ptp(_spring(x)), rel=0.05)
     assert v['gap_after'] < 0.2 * v['gap_before']
-    plain = diagnose([_stroke_log(s) for s in (21, 22, 23, 24)], [_stroke_log(s) for s in (25, 26)], params=PARAMS)
+    plain = diagnose([_stroke_log(s) for s in (21, 22, 23, 24)], [_stroke_log(s) for s in (25, 26)],
+                     params=PARAMS)
     assert plain['verdict']['effects'] == ['none']
 
 
@@ -255,7 +256,8 @@ def test_position_spring_columns_are_legendre_over_the_training_stroke():
     x = stroke_coordinate(motor, (0.2, 1.2))
     assert x[0] == pytest.approx(-1.0) and x[-1] == pytest.approx(1.0)
     n = motor.size
-    frame = {'motor': motor, 'jaw': 0.9 * motor, 'nominal': np.ones(n), 'contact': np.r_[np.zeros(1), np.ones(n - 1)],
+    frame = {'motor': motor, 'jaw': 0.9 * motor, 'nominal': np.ones(n),
+             'contact': np.r_[np.zeros(1), np.ones(n - 1)],
              'gain': np.full(n, 3.0), 'stroke': {'motor': (0.2, 1.2), 'jaw': (0.18, 1.08)}}
     design = EFFECTS['position_spring'].build(frame, 'motor_angle')
     assert len(design.force_cols) == 3 and not design.angle_cols

@@ -17,7 +17,6 @@ SAMPLE = {'stamp': 100.0, 'name': ['wrist_pitch', 'jaw'], 'position': [0.1, 0.2]
           'velocity': [0.0, 0.3], 'effort': []}
 
 
-
 # ---------------------------------------------------------------------------- catalogue
 def test_catalogue_has_25_kinds_with_defined_outcomes():
     cases = catalogue()

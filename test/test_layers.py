@@ -8,25 +8,27 @@ PACKAGE = Path(__file__).resolve().parents[1] / 'grip_force_ros'
 
 #: Part of the package -> the parts it may import (docs/ARCHITECTURE.md, same table).
 MAY_IMPORT = {
-    'params': set(),
+    'objects': set(),
+    'effects': set(),
+    'params': {'objects', 'effects'},
     'topics': set(),
     'plotting': set(),
-    'model': {'params'},
-    'logs': {'topics'},
-    'trajectories': {'params', 'topics'},
-    'control': {'model', 'params'},
-    'sim': {'model', 'params'},
-    'identify': {'model', 'params'},
+    'model': {'objects', 'effects', 'params'},
+    'logs': {'objects', 'effects', 'topics'},
+    'trajectories': {'objects', 'effects', 'params', 'topics'},
+    'control': {'objects', 'effects', 'model', 'params'},
+    'sim': {'objects', 'effects', 'model', 'params'},
+    'identify': {'objects', 'effects', 'model', 'params'},
     'rig': {'plotting'},
-    'diagnosis': {'model', 'sim', 'logs', 'params', 'plotting'},
-    'reproduce': {'model', 'params', 'plotting'},
-    'figures': {'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
-    'nodes': {'control', 'sim', 'trajectories', 'params', 'topics'},
-    'demo': {'nodes', 'control', 'identify', 'model', 'logs', 'trajectories', 'params', 'topics',
-             'plotting'},
-    'faults': {'nodes', 'control', 'sim', 'params', 'topics'},
-    # demo: the shipped config lookup (demo.config_dir), until it has its own owner
-    'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics', 'demo'},
+    'diagnosis': {'objects', 'effects', 'model', 'sim', 'logs', 'params', 'plotting'},
+    'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
+    'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
+    'nodes': {'objects', 'effects', 'control', 'sim', 'trajectories', 'params', 'topics'},
+    'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
+             'params', 'topics', 'plotting'},
+    'faults': {'objects', 'effects', 'nodes', 'control', 'sim', 'params', 'topics'},
+    'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics',
+              'objects', 'effects'},
     'cli': None,                                       # the command: anything
 }
 #: The only parts that import rclpy or ROS message packages.

@@ -104,14 +104,16 @@ def test_bag_topics_at_different_rates_are_aligned_on_the_actuator_time(tmp_path
         f = w.add_connection(topics.MEASURED_FORCE, WS.__msgtype__, typestore=ts)
         for k in range(101):                      # actuator 1 kHz, others 500 Hz, all ramps
             ns = 10**9 + k * 10**6
-            w.write(a, ns, ts.serialize_cdr(JS(header=hdr(ns), name=['jaw_drum'], position=np.array([k * 1.0]),
-                                               velocity=np.array([0.0]), effort=np.array([0.1])), JS.__msgtype__))
+            w.write(a, ns, ts.serialize_cdr(JS(header=hdr(ns), name=['jaw_drum'],
+                                               position=np.array([k * 1.0]),
+                                               velocity=np.array([0.0]), effort=np.array([0.1])),
+                                            JS.__msgtype__))
             if k % 2 == 0:
                 w.write(i, ns, ts.serialize_cdr(JS(header=hdr(ns), name=['wrist_pitch', 'jaw'],
                                                    position=np.array([0.0, k * 0.01]), velocity=np.array([]),
                                                    effort=np.array([])), JS.__msgtype__))
                 w.write(f, ns, ts.serialize_cdr(WS(header=hdr(ns), wrench=W(force=V(x=0.0, y=0.0, z=k * 0.1),
-                                                                           torque=V(x=0.0, y=0.0, z=0.0))),
+                                                                            torque=V(x=0.0, y=0.0, z=0.0))),
                                                 WS.__msgtype__))
     back = read_log(path)
     assert len(back['t']) == 101

@@ -59,7 +59,8 @@ def test_eta_is_at_least_one_and_grows_with_wrap():
 
 def test_paper_lambda3_with_the_assumed_cable_radius():
     a, b = paper_exponents(0.15, 0.003, 0.0002)
-    eta = [(a * math.exp(b * t) - b * math.exp(a * t)) / (a - b) for t in (math.pi / 2, math.pi / 4, math.pi / 4)]
+    eta = [(a * math.exp(b * t) - b * math.exp(a * t)) / (a - b)
+           for t in (math.pi / 2, math.pi / 4, math.pi / 4)]
     by_hand = 1 / (eta[0] * eta[1] * eta[2])
     assert by_hand == pytest.approx(0.6472, abs=1e-4)
     lam = friction.chain_efficiency(0.15, (0.003,) * 3, 0.0002, (math.pi / 2, math.pi / 4, math.pi / 4))
@@ -70,7 +71,8 @@ def test_paper_lambda3_with_the_assumed_cable_radius():
 @given(theta=st.floats(0.0, 2 * math.pi), radius_ratio=st.floats(0.01, 0.5))
 def test_no_friction_no_loss(theta, radius_ratio):
     assert float(friction.pulley_ratio(0.0, 0.003, 0.003 * radius_ratio, theta)) == 1.0
-    assert float(friction.pulley_ratio(1e-12, 0.003, 0.003 * radius_ratio, theta)) == pytest.approx(1.0, abs=1e-11)
+    assert float(friction.pulley_ratio(1e-12, 0.003, 0.003 * radius_ratio, theta)) \
+        == pytest.approx(1.0, abs=1e-11)
     assert float(friction.wrap_excess_integral(0.0, 0.003, 0.003 * radius_ratio, theta)) == 0.0
 
 
@@ -96,7 +98,8 @@ def test_tension_dependent_friction_lowers_efficiency_with_tension():
     assert lam[0] > lam[1] > lam[2]
     # pulley 1 at 200 N sees mu = 0.15 * 1.2 = 0.18
     t = friction.chain_tensions(200.0, 0.15, radii, 0.0002, wraps, gain=1e-3)
-    assert float(t[1]) == pytest.approx(200.0 / float(friction.pulley_ratio(0.18, 0.003, 0.0002, math.pi / 2)))
+    assert float(t[1]) == pytest.approx(
+        200.0 / float(friction.pulley_ratio(0.18, 0.003, 0.0002, math.pi / 2)))
 
 
 # ----------------------------------------------------------------------------- transmission
@@ -219,8 +222,8 @@ def test_inverse_vectorised_over_a_grid():
         currents = np.linspace(0.01, 0.5, 7)[:, None]
         jaws = np.linspace(0, 1.4, 5)[None, :]
         force = m.forward(currents, 0.3, jaws, 'tissue').grip_force
-        np.testing.assert_allclose(m.inverse(force, 0.3, jaws, 'tissue'), np.broadcast_to(currents, force.shape),
-                                   rtol=1e-9)
+        np.testing.assert_allclose(m.inverse(force, 0.3, jaws, 'tissue'),
+                                   np.broadcast_to(currents, force.shape), rtol=1e-9)
 
 
 def test_inverse_errors():
@@ -286,5 +289,6 @@ def test_motor_angle_inverts_jaw_angle(motor, wrist, current):
 def test_creep_grows_with_current_and_is_odd():
     m = GripForceModel(PAPER)
     finger, wrist = m.creep_angles(np.array([-0.4, 0.0, 0.2, 0.4]))
-    assert finger[1] == 0.0 and finger[3] == pytest.approx(2 * finger[2]) and finger[0] == pytest.approx(-finger[3])
+    assert finger[1] == 0.0 and finger[3] == pytest.approx(2 * finger[2]) \
+        and finger[0] == pytest.approx(-finger[3])
     assert np.all(wrist[2:] > 0.0)

@@ -5,7 +5,7 @@ from hypothesis import given, settings, strategies as st
 
 from grip_force_ros.model import GripForceModel, ModelError
 from grip_force_ros.model.hysteresis import (BRANCHES, HystereticGripForce, hysteretic_grip_force,
-                                              play_operator)
+                                             play_operator)
 from grip_force_ros.params import load_params_file
 from grip_force_ros.sim import quasistatic
 

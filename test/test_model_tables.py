@@ -20,8 +20,8 @@ def test_horner_equals_polyval():
     rng = np.random.default_rng(3)
     coefficients = rng.normal(size=6)
     x = rng.uniform(-2.0, 2.0, 200)
-    np.testing.assert_allclose(tables.horner(coefficients, x), np.polynomial.polynomial.polyval(x, coefficients),
-                               rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(tables.horner(coefficients, x),
+                               np.polynomial.polynomial.polyval(x, coefficients), rtol=1e-13, atol=1e-13)
     out = np.empty_like(x)
     assert tables.horner(coefficients, x, out=out) is out
 
@@ -89,11 +89,12 @@ def test_paper_and_wrist_dependent_models_use_no_tables():
 def test_fitted_efficiency_equals_the_chain_inside_outside_and_at_the_edges():
     m = GripForceModel(FOUR)
     top_current = 2.0 * FOUR.max_current
-    current = np.concatenate([np.linspace(-0.3, 3.0, 4001), [0.0, -0.0, top_current, np.nextafter(top_current, 9.0),
-                                                               1e-300, np.nan]])
+    current = np.concatenate([np.linspace(-0.3, 3.0, 4001),
+                              [0.0, -0.0, top_current, np.nextafter(top_current, 9.0), 1e-300, np.nan]])
     got = m.forward(current, 0.4, 0.1, 'rigid').efficiency
     expect = exact_efficiency(m, current)
-    np.testing.assert_allclose(got, expect, rtol=2e-14)                  # NaN current: lambda at zero, as the chain
+    # NaN current: lambda at zero, as the chain
+    np.testing.assert_allclose(got, expect, rtol=2e-14)
     assert got[-1] == m._efficiency_at_rest
 
 
@@ -121,8 +122,8 @@ def test_fitted_inverse_equals_the_bracketed_scalar_solve():
     assert got[0] == 0.0
     with_velocity = m.inverse(torque * gain, 0.0, 0.0, 'needle', motor_velocity=0.0, jaw_velocity=-3.0)
     inertial = 0.5 * m._rn * FOUR.jaw_mass * 3.0                          # added to M (N*m)
-    expect = [m._solve_current(float(t), 0.0, inertial) if t > inertial else (t - inertial) / m._torque_per_amp_at_rest
-              for t in torque]
+    expect = [m._solve_current(float(t), 0.0, inertial) if t > inertial
+              else (t - inertial) / m._torque_per_amp_at_rest for t in torque]
     np.testing.assert_allclose(with_velocity, expect, rtol=1e-13, atol=1e-18)
 
 
@@ -139,7 +140,8 @@ def test_scalar_inverse_uses_the_table_and_equals_the_bracketed_solve():
     assert m._current_rows is not None and len(m._current_rows) == m._current_fit_built().intervals
     top = m._current_fit_built().top
     rng = np.random.default_rng(5)
-    for torque in np.concatenate([rng.uniform(0.0, top, 300), [1e-12, np.nextafter(top, 0.0), top, 1.03 * top]]):
+    for torque in np.concatenate([rng.uniform(0.0, top, 300),
+                                  [1e-12, np.nextafter(top, 0.0), top, 1.03 * top]]):
         for obj, jaw in (('needle', 0.0), ('rigid', 0.4), ('tissue', 0.9)):
             gain = float(m._contact_gain(obj, np.asarray(jaw)))
             got = m.current_for_force_scalar(torque * gain, 0.3, jaw, obj)
@@ -158,7 +160,8 @@ def test_samples_outside_the_tables_raise_no_numpy_warnings():
         np.testing.assert_allclose(got, expect, rtol=2e-14)
         with pytest.raises(Exception, match='beyond the largest'):
             m.inverse(np.array([1e20, 1.0]), 0.0, 0.0, 'needle')
-        moving = m.inverse(np.array([0.0, 1.0, 6.2]), 0.0, 0.0, 'needle', jaw_velocity=-1e3)  # torque < 0 first
+        # torque < 0 first
+        moving = m.inverse(np.array([0.0, 1.0, 6.2]), 0.0, 0.0, 'needle', jaw_velocity=-1e3)
         assert moving[0] < 0.0 < moving[1] < moving[2]
 
 
@@ -168,8 +171,8 @@ def test_samples_outside_the_tables_raise_no_numpy_warnings():
 @example(mu=0.2397755385726311, gain=-3.0, max_current=0.5, seed=0)
 def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max_current, seed):
     """Random friction, tension gain (1e-5..0.05 1/N) and current range: tables or not, the same answers."""
-    m = GripForceModel(make_params().replace(pulley_friction_coefficient=mu, tension_friction_gain=10.0 ** gain,
-                                             max_current=max_current))
+    m = GripForceModel(make_params().replace(pulley_friction_coefficient=mu,
+                                             tension_friction_gain=10.0 ** gain, max_current=max_current))
     assert m._one_dimensional
     current = np.random.default_rng(seed).uniform(0.0, 2.0 * max_current, 40)      # A
     got = m.forward(current, 0.1, 0.0, 'needle')
@@ -184,7 +187,8 @@ def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max
     expect = np.array([m._solve_current(float(t), 0.1, 0.0) for t in force * m._tip])
     # near the peak of M(I) the inverse is ill-conditioned: a relative change of M moves I by
     # M / (I dM/dI) times as much, for the exact solvers as for the table
-    slope = np.array([(m._torque_scalar(i * (1 + 1e-7), 0.1) - m._torque_scalar(i, 0.1)) / (i * 1e-7) for i in expect])
+    slope = np.array([(m._torque_scalar(i * (1 + 1e-7), 0.1) - m._torque_scalar(i, 0.1)) / (i * 1e-7)
+                      for i in expect])
     condition = force * m._tip / (expect * slope)
     # plus a floor of 1e-14 of the current range: the cubics are fitted over the whole range,
     # so near 0 A their error is a few ulps of max_current, not of the sample (found by
@@ -196,7 +200,7 @@ def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max
 
 
 def test_scalar_solve_reaches_torques_just_below_the_peak():
-    """Regression: the 1.5x bracket step could jump the peak of M(I) and call a reachable torque unreachable."""
+    """Regression: the 1.5x bracket step could jump the peak of M(I): a reachable torque refused."""
     m = GripForceModel(make_params().replace(pulley_friction_coefficient=0.19615398009993856,
                                              tension_friction_gain=0.00026278885991678537,
                                              max_current=4.986189182156594))
@@ -204,7 +208,7 @@ def test_scalar_solve_reaches_torques_just_below_the_peak():
     top = minimize_scalar(lambda i: -m._torque_scalar(i, 0.0), bounds=(1.0, 1.3), method='bounded',
                           options={'xatol': 1e-12})
     peak, at_peak = -top.fun, top.x                                         # N*m, A (~1.16 A)
-    for fraction in (1 - 1e-3, 1 - 6e-6, 1 - 1e-7, 1 - 1e-9):               # the old code failed from ~1 - 6e-6
+    for fraction in (1 - 1e-3, 1 - 6e-6, 1 - 1e-7, 1 - 1e-9):     # the old code failed from ~1 - 6e-6
         current = m._solve_current(fraction * peak, 0.0, 0.0)
         assert m._torque_scalar(current, 0.0) == pytest.approx(fraction * peak, rel=1e-13)
         assert current <= at_peak + 1e-9                                    # the rising side
@@ -220,6 +224,7 @@ def test_table_errors_and_their_figure(tmp_path):
     assert errors['efficiency'].max() <= m.EFFICIENCY_FIT_TOLERANCE
     assert errors['inverse'].max() <= m.CURRENT_FIT_TOLERANCE
     assert FOUR.max_current < errors['table_end_current'] < 1.0
-    assert np.all((errors['condition'] >= 1.0) & (errors['condition'] < 10.0))    # M concave, far from the peak
+    # M concave, far from the peak
+    assert np.all((errors['condition'] >= 1.0) & (errors['condition'] < 10.0))
     path = plot_table_errors('config/four_pulley_needle_driver.yaml', tmp_path / 'e.png', samples=40)
     assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'

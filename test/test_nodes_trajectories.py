@@ -15,8 +15,8 @@ def test_needle_grasp_phases_in_order_with_their_angles():
     traj = needle_grasp(open_angle=0.7, closed_angle=0.05)
     spans = traj.phase_times()
     assert list(spans) == ['approach', 'close', 'hold', 'pull', 'release']
-    assert all(a[1] == pytest.approx(b[0], abs=2e-3) for a, b in zip(spans.values(),
-                                                                      list(spans.values())[1:]))
+    assert all(a[1] == pytest.approx(b[0], abs=2e-3)
+               for a, b in zip(spans.values(), list(spans.values())[1:]))
     mid = {name: traj.angle(0.5 * (t0 + t1)) for name, (t0, t1) in spans.items()}
     assert mid['approach'] == pytest.approx(0.7)
     assert mid['hold'] == pytest.approx(0.05) and mid['pull'] == pytest.approx(0.05)

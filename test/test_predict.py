@@ -39,7 +39,8 @@ def test_predict_round_trips_a_csv(tmp_path):
         want = model.forward(log['current'][k], log['wrist_angle'][k], log['jaw_angle'][k], obj)
         assert out['grip_force_model'][k] == pytest.approx(float(want.grip_force), rel=1e-9, abs=1e-12)
         if obj in ('needle', 'free'):
-            assert out['pull_out_force_model'][k] == pytest.approx(float(want.pull_out_force), rel=1e-9, abs=1e-12)
+            assert out['pull_out_force_model'][k] == pytest.approx(float(want.pull_out_force), rel=1e-9,
+                                                                   abs=1e-12)
         else:
             assert np.isnan(out['pull_out_force_model'][k])
     np.testing.assert_allclose(out['jaw_angle_model'],
@@ -71,7 +72,8 @@ def test_velocity_columns_are_used():
 def test_predict_reports_a_bad_log(tmp_path, capsys):
     bad = tmp_path / 'bad.csv'
     bad.write_text('t,current\n0,0.1\n')
-    assert cli_main(['predict', '--config', CONFIG, '--input', str(bad), '--output', str(tmp_path / 'o.csv')]) == 1
+    assert cli_main(['predict', '--config', CONFIG, '--input', str(bad),
+                     '--output', str(tmp_path / 'o.csv')]) == 1
     assert 'missing column' in capsys.readouterr().err
 
 

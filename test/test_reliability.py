@@ -16,7 +16,8 @@ import statistics
 import pytest
 
 from grip_force_ros.faults.catalogue import FaultCase, set_field, silence
-from grip_force_ros.faults.runner import Session, resolve_config, run_message_case
+from grip_force_ros.faults.runner import Session, run_message_case
+from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros
 
@@ -25,7 +26,7 @@ TRIALS = 4   # per silenced input
 
 @pytest.fixture(scope='module')
 def session():
-    s = Session(resolve_config('config/paper_needle_driver.yaml'))
+    s = Session(instrument_path('config/paper_needle_driver.yaml'))
     assert s.wait_gripping(), 'the controller did not start gripping'
     yield s
     s.close()

@@ -72,7 +72,8 @@ def test_rows_are_computed_by_the_model_not_constants():
     assert changed[key].model == pytest.approx(float(GripForceModel(thick).efficiency()), rel=1e-12)
     assert changed[key].model > base[key].model
     grip = 'needle grip force at 0.5 A, with losses [N]'
-    assert base[grip].model == pytest.approx(GripForceModel(make_params()).grip_force_scalar(0.5, 0, 0, 'needle'))
+    assert base[grip].model == pytest.approx(
+        GripForceModel(make_params()).grip_force_scalar(0.5, 0, 0, 'needle'))
     assert base[grip].paper == PAPER['needle_grip_losses']
     assert all(math.isfinite(r.model) for r in base.values())
 

@@ -134,7 +134,7 @@ def test_hold_observer_averages_while_sliding_and_holds_otherwise():
 def _slice(run, seconds):
     n = int(seconds / C.SAMPLE_PERIOD)
     return to_contract_log(type(run)(**{k: (v[:n] if isinstance(v, np.ndarray) else v)
-                                         for k, v in run.__dict__.items()}))
+                                        for k, v in run.__dict__.items()}))
 
 
 @needs_data
@@ -149,7 +149,7 @@ def test_estimator_never_reads_the_jaw_side(runs):
         if name in corrupted:
             corrupted[name] = rng.normal(0.0, 1e3, log['t'].size)
     assert set(FORBIDDEN_INPUTS) & set(corrupted) >= {'jaw_torque', 'jaw_angle', 'disk_torque',
-                                                       'load_command'}
+                                                      'load_command'}
     assert np.array_equal(est.predict(corrupted), reference)
     # ... and the same prediction with the jaw side removed altogether
     motor_only = {k: v for k, v in log.items() if k in ALLOWED_INPUTS}

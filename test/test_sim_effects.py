@@ -152,7 +152,8 @@ def test_tension_dependent_friction_is_the_models_tension_gain_unknown_to_the_ya
 def test_viscoelastic_creep_relaxes_held_force_with_its_time_constant_and_recovers():
     c, tau = 0.3, 0.2
     p = quiet()
-    sim = InstrumentSim(p, 'needle', effects={'viscoelastic_creep': c, 'viscoelastic_creep_time_constant': tau})
+    sim = InstrumentSim(p, 'needle',
+                        effects={'viscoelastic_creep': c, 'viscoelastic_creep_time_constant': tau})
     ref = InstrumentSim(p, 'needle')
     loading_ramp(sim, 0.3, seconds=0.05)
     loading_ramp(ref, 0.3, seconds=0.05)

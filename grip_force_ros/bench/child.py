@@ -31,22 +31,15 @@ import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import stamp_nanoseconds
+from grip_force_ros.nodes.common import stamp_nanoseconds, state_qos
 from grip_force_ros.bench.stats import latency_summary, missed_periods
 
 #: Longest wait for the first answer before giving up (s).
 DISCOVERY_TIMEOUT = 20.0
-
-
-def make_qos(depth: int) -> QoSProfile:
-    """RELIABLE, VOLATILE, KEEP_LAST ``depth`` (the product's state/command QoS)."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 def make_executor(kind: str):
@@ -100,7 +93,7 @@ class _Window:
             self.n_ticks += 1
 
     def record_answer(self, stamp_ns: int, round_trip_ns: int) -> None:
-        """An answer in the window: the stamp of the state it answers and its round trip (ns)."""
+        """Record an answer in the window: the stamp of the state it answers and its round trip (ns)."""
         self.received += 1
         if self.n_latencies < self.capacity:
             self.answered[self.n_latencies] = stamp_ns
@@ -159,9 +152,9 @@ class Ping(Node):
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
         group = _callback_group(opts.callback_groups)
         sub_group = _callback_group(opts.callback_groups)
-        self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, make_qos(opts.depth))
+        self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, state_qos(opts.depth))
         self.sub = self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_answer,
-                                            make_qos(opts.depth), callback_group=sub_group)
+                                            state_qos(opts.depth), callback_group=sub_group)
         self.msg = _actuator_state()
         self.timer = self.create_timer(opts.period, self.on_tick, callback_group=group)
 
@@ -205,9 +198,9 @@ class Echo(Node):
     def __init__(self, opts):
         super().__init__('bench_echo')
         self.prealloc = opts.prealloc
-        self.pub = self.create_publisher(JointState, topics.SERVO_CURRENT, make_qos(opts.depth))
+        self.pub = self.create_publisher(JointState, topics.SERVO_CURRENT, state_qos(opts.depth))
         self.sub = self.create_subscription(JointState, topics.ACTUATOR_JS, self.on_state,
-                                            make_qos(opts.depth),
+                                            state_qos(opts.depth),
                                             callback_group=_callback_group(opts.callback_groups))
         self.msg = _command()
         self.latest = None

@@ -81,7 +81,6 @@ def step_share(params, steps: int = 20_000, repeats: int = 3) -> dict:
             'target_force_N': out.target_force, 'reasons': list(out.reasons)}
 
 
-
 def _bench(ctrl, inputs, steps: int, master: float, jaw: float, with_setters: bool) -> float:
     """Mean wall time of one period over ``steps`` periods (us): ``step`` alone, or with the setters."""
     t0 = ctrl.last_now if ctrl.last_now > 0 else 0.0

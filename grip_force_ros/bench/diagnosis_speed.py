@@ -46,7 +46,7 @@ def cache_dir() -> Path:
 
 
 def ensure_log(minutes: float, directory: Path | None = None) -> tuple[Path, float]:
-    """The cached ``minutes`` long 1 kHz CSV log, built if missing.
+    """Return the cached ``minutes`` long 1 kHz CSV log, built if missing.
 
     Returns
     -------
@@ -107,7 +107,7 @@ def warm_page_cache(path: Path) -> None:
 
 def run_diagnosis_speed(minutes: float = 60.0, directory: Path | None = None,
                         timeout: float = 1800.0) -> dict:
-    """The ``diagnosis`` section of the bench.
+    """Measure the ``diagnosis`` section of the bench.
 
     Parameters
     ----------
@@ -217,7 +217,7 @@ def report(minutes: float = 60.0, directory: str | Path = '/tmp/gf_bench', bag: 
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The report (:func:`report`), or with ``--child TASK PATH`` one timed task as JSON."""
+    """Print the report (:func:`report`), or with ``--child TASK PATH`` one timed task as JSON."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--minutes', type=float, default=60.0)
     parser.add_argument('--dir', default='/tmp/gf_bench')

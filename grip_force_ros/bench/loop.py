@@ -17,17 +17,15 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 
 from grip_force_ros.bench.procs import BenchError, Child, stop_all
 from grip_force_ros.bench.stats import ratio
 from grip_force_ros.nodes.processes import node_command, python_module, ros_args, ros_environment
+from grip_force_ros.params.files import instrument_path
 
 CHILD = 'grip_force_ros.bench.child'
 #: Longest wait for discovery plus warm-up before a window opens (s).
 START_TIMEOUT = 60.0
-#: The bench's default instrument for the product run.
-DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
 
 
 @dataclass(frozen=True)
@@ -129,6 +127,8 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
         ROS_DOMAIN_ID of the two processes (nothing else may run in it).
     variant : Variant
         Executor and the other settings of both processes.
+    warmup : float
+        Time after discovery before the window opens (s).
     period : float
         Loop period (s).
 
@@ -154,9 +154,9 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
     return result
 
 
-def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, warmup: float = 2.0,
+def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
                 executor: str | None = None, rt_priority: int = 0) -> dict:
-    """sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
+    """Measure the sim -> controller -> sim round trip at 1 kHz, the shipped nodes.
 
     Starts the ``controller`` and a ``master`` repeating the needle grasp (the
     shipped executables, ``--params-file config``), and the shipped sim node as
@@ -168,10 +168,13 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
         Measurement window (s).
     domain_id : int
         ROS_DOMAIN_ID of the run.
-    config : str
-        Instrument YAML for the sim, the controller and the master.
+    config : str, optional
+        Instrument YAML (path or shipped name) for the sim, the controller and the
+        master; default :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     executor : str, optional
         'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
+    warmup : float
+        Time after discovery before the window opens (s).
     rt_priority : int
         0: normal scheduling; 1..99: sim and controller under SCHED_FIFO at this
         priority (the master stays normal).
@@ -186,7 +189,7 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
     """
     extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
     env = ros_environment(domain_id, extra)
-    config = str(Path(config).resolve())
+    config = str(instrument_path(config).resolve())
     children = []
     try:
         rt = rt_priority
@@ -211,7 +214,7 @@ def run_product(seconds: float, domain_id: int, config: str = DEFAULT_CONFIG, wa
 
 
 def compare(floor: dict, product: dict) -> dict:
-    """The ``loop`` section: product/floor ratios beside both runs' figures."""
+    """Build the ``loop`` section: product/floor ratios beside both runs' figures."""
     fl, pl = floor['latency'], product['latency']
     return {
         'p99_ratio': ratio(pl['p99_ms'], fl['p99_ms']),

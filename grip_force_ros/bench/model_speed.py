@@ -22,7 +22,7 @@ import numpy as np
 
 from grip_force_ros.bench.control_step import step_share
 from grip_force_ros.model import GripForceModel, HystereticGripForce, hysteretic_grip_force
-from grip_force_ros.params import load_params_file
+from grip_force_ros.params import instrument_path, load_params_file
 
 
 def best_time(fn, repeats: int = 5, number: int = 1) -> float:
@@ -55,6 +55,8 @@ def vectorised_ratios(params, size: int = 100_000, repeats: int = 5, inverse_siz
         Instrument parameters.
     size : int
         Samples per array.
+    repeats : int
+        Timing tries; the best one counts.
     inverse_size : int, optional
         Samples for the inverse when it solves per sample (tension-dependent friction
         with a wrist-dependent wrap: vectorised Newton, slow); the ratio is scaled to
@@ -97,7 +99,7 @@ def vectorised_ratios(params, size: int = 100_000, repeats: int = 5, inverse_siz
 
 def run_model(config: str, size: int = 100_000, steps: int = 20_000, repeats: int = 5,
               other_configs: tuple = ()) -> dict:
-    """The ``model`` section of the bench for ``config`` (YAML path), plus others' ratios."""
+    """Measure the ``model`` section of the bench for ``config`` (YAML path), plus others' ratios."""
     params = load_params_file(config)
     out = vectorised_ratios(params, size, repeats, inverse_size=2_000)
     out.update(step_share(params, steps, max(1, repeats // 2)))
@@ -135,7 +137,8 @@ def scalar_paths(path: str, number: int = 20000) -> dict:
         'grip_force_scalar_us': timeit.timeit(lambda: model.grip_force_scalar(0.3, 0.2, 0.1, 'rigid'),
                                               number=number) / number * 1e6,
         'current_for_force_scalar_us': timeit.timeit(
-            lambda: model.current_for_force_scalar(force, 0.2, 0.1, 'rigid'), number=number // 10) / (number // 10) * 1e6,
+            lambda: model.current_for_force_scalar(force, 0.2, 0.1, 'rigid'),
+            number=number // 10) / (number // 10) * 1e6,
     }
     stick = HystereticGripForce(model)
     swing = [0.3, 0.25, 0.1, 0.35] * (number // 4)          # loading, band, slip back, loading
@@ -159,7 +162,7 @@ def scalar_paths(path: str, number: int = 20000) -> dict:
 def main(argv: list[str] | None = None) -> int:
     """Print :func:`scalar_paths` for each config (default: the paper and the four-pulley one)."""
     paths = (argv if argv is not None else sys.argv[1:]) or [
-        'config/paper_needle_driver.yaml', 'config/four_pulley_needle_driver.yaml']
+        str(instrument_path()), str(instrument_path('four_pulley_needle_driver'))]
     for path in paths:
         figures = scalar_paths(path)
         print(path + ': ' + ', '.join(f'{k} = {v:.3g}' for k, v in figures.items()))

@@ -25,8 +25,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from grip_force_ros import topics
 from grip_force_ros.nodes.harness import RosRunner
 from grip_force_ros.nodes.processes import NodeProcess, ensure_local_discovery, ros_environment
+from grip_force_ros.params import instrument_path
 
-CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'paper_needle_driver.yaml'
+CONFIG = instrument_path()
 
 
 def run(seconds: float, executor: str, config: Path = CONFIG) -> dict:

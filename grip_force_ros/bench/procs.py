@@ -67,7 +67,7 @@ class DomainLock:
 
 
 def realtime(priority: int):
-    """A ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
+    """Return a ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
 
     Set before ``exec``, so every thread the process starts (the executor, the DDS
     receive threads) inherits it, as ``chrt -f <priority> <cmd>`` would. Needs
@@ -124,7 +124,7 @@ class Child(NodeProcess):
         self.lines.put(None)
 
     def wait_line(self, accept, timeout: float) -> str:
-        """The first stdout line for which ``accept(line)`` is true (BenchError on timeout/exit)."""
+        """Return the first stdout line for which ``accept(line)`` is true (BenchError on timeout/exit)."""
         end = time.monotonic() + timeout
         while True:
             left = end - time.monotonic()

@@ -1,4 +1,4 @@
-"""The product's measuring end: the shipped sim node, recording its loop for one window.
+r"""The product's measuring end: the shipped sim node, recording its loop for one window.
 
 ``grip-force bench`` measures the product as it measures the floor: the process
 that publishes the state measures the round trip on its own clock. Here that
@@ -11,7 +11,7 @@ and prints the bench protocol of :mod:`.child` (``START``, then one JSON line).
 
 Run by :func:`grip_force_ros.bench.loop.run_product`::
 
-    python -m grip_force_ros.bench.product_sim --seconds 20 --warmup 2 \\
+    python -m grip_force_ros.bench.product_sim --seconds 20 --warmup 2 \
         --ros-args --params-file config/paper_needle_driver.yaml
 """
 from __future__ import annotations

@@ -8,14 +8,15 @@ import sys
 import time
 from importlib import metadata
 
-from grip_force_ros.bench.loop import BEST, DEFAULT_CONFIG, VARIANTS, Variant, compare, run_floor, run_product
+from grip_force_ros.bench.loop import BEST, VARIANTS, Variant, compare, run_floor, run_product
 from grip_force_ros.bench.procs import DomainLock
+from grip_force_ros.params.files import config_dir, instrument_path
 
 PARTS = ('loop', 'model', 'diagnosis')
 
 
 def machine() -> dict:
-    """What the figures were measured on."""
+    """Describe what the figures were measured on."""
     model = platform.processor() or ''
     try:
         with open('/proc/cpuinfo') as fh:
@@ -51,9 +52,9 @@ def parse_domains(text: str | None) -> list[int] | None:
     return out
 
 
-def run_loop(seconds: float, domains=None, config: str = DEFAULT_CONFIG, variant: Variant = BEST,
+def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
              product_executor: str | None = None, rt_priority: int = 0, say=None) -> dict:
-    """The ``loop`` section: floor then product in one free domain, and their ratios."""
+    """Measure the ``loop`` section: floor then product in one free domain, and their ratios."""
     say = say or (lambda msg: None)
     variant = replace(variant, rt_priority=rt_priority)
     with DomainLock(domains) as domain:
@@ -70,7 +71,7 @@ def run_loop(seconds: float, domains=None, config: str = DEFAULT_CONFIG, variant
 
 
 def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> list[dict]:
-    """The floor measured with each variant in turn (same domain, one after the other)."""
+    """Measure the floor with each variant in turn (same domain, one after the other)."""
     say = say or (lambda msg: None)
     rows = []
     with DomainLock(domains) as domain:
@@ -85,7 +86,7 @@ def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> l
     return rows
 
 
-def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str = DEFAULT_CONFIG,
+def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str | None = None,
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
               variant_seconds: float | None = None, product_executor: str | None = None,
               rt_priority: int = 0, say=None) -> dict:
@@ -99,18 +100,23 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str =
         Any of :data:`PARTS`.
     domains : list of int, optional
         Candidate ROS domains (default: ROS_DOMAIN_ID if set, else 200..232).
-    config : str
-        Instrument YAML of the product run and the model figures.
+    config : str, optional
+        Instrument YAML (path or shipped name) of the product run and the model figures;
+        default :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     log_minutes : float
         Length of the diagnosis log at 1 kHz (min).
     model_size : int
         Samples per array of the vectorised model figures.
     variants : bool
         Also measure the floor with every variant of :data:`VARIANTS`.
+    variant_seconds : float, optional
+        Window of each variant run (s); default ``seconds``.
     product_executor : str, optional
         Executor of the product's nodes ('events' or 'single'); default theirs.
     rt_priority : int
         0, or SCHED_FIFO priority of the 1 kHz processes of the floor and the product alike.
+    say : callable, optional
+        ``say(message)`` before each step.
 
     Returns
     -------
@@ -120,12 +126,12 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str =
         (only the parts asked for).
     """
     say = say or (lambda msg: None)
+    config = str(instrument_path(config))
     out: dict = {'machine': machine()}
     started = time.perf_counter()
     if 'model' in parts:
         from grip_force_ros.bench.model_speed import run_model
         say('model: vectorised forward/inverse vs numpy.exp, control step')
-        from grip_force_ros.demo import config_dir
         nonlinear = config_dir() / 'four_pulley_needle_driver.yaml'
         out['model'] = run_model(config, size=model_size,
                                  other_configs=(str(nonlinear),) if nonlinear.is_file() else ())

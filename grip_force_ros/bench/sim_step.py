@@ -10,29 +10,14 @@ from __future__ import annotations
 import math
 import time
 
+from grip_force_ros.effects import strengths_at
 from grip_force_ros.params import make_params
-from grip_force_ros.sim.effects import EFFECT_NAMES
-from grip_force_ros.sim.plant import InstrumentSim
-
-#: Strength of each effect in the all-effects case (medium, in each effect's unit).
-STRENGTHS = {'pivot_coulomb_friction': 0.005, 'viscous_friction': 0.005, 'cable_hysteresis': 0.1,
-             'backlash': 0.03, 'tension_dependent_friction': 5e-4, 'viscoelastic_creep': 0.1,
-             'sensor_delay': 0.02, 'torque_constant_drift': 0.1, 'force_sensor_offset': 0.1,
-             'position_spring': 0.008}
+from grip_force_ros.sim.plant import OBJECTS, InstrumentSim
 
 
 def all_effects_on() -> dict[str, float]:
-    """Every effect the sim has, at its :data:`STRENGTHS` value.
-
-    Raises
-    ------
-    KeyError
-        An effect of the sim has no strength here (a new effect: give it one).
-    """
-    missing = [name for name in EFFECT_NAMES if name not in STRENGTHS]
-    if missing:
-        raise KeyError(f'no bench strength for the sim effect(s) {missing}; add them to STRENGTHS')
-    return {name: STRENGTHS[name] for name in EFFECT_NAMES}
+    """Every effect the sim has, at the effect registry's medium strength (each in its unit)."""
+    return strengths_at('medium')
 
 
 def time_steps(effects=None, obj='needle', steps=5000, dt=1e-3, repeats=3) -> float:
@@ -54,7 +39,7 @@ def main() -> int:
     all_on = all_effects_on()
     p = make_params()
     print(f'sim_rate {p.sim_rate:.0f} Hz -> {math.ceil(1e-3 * p.sim_rate)} sub-steps per 1 ms step')
-    for obj in ('free', 'needle', 'tissue', 'rigid'):
+    for obj in OBJECTS:
         print(f'{obj:7s} effects off : {time_steps(obj=obj) * 1e6:7.1f} us per 1 ms step (step + measure)')
     print(f'needle  all {len(all_on)} effects: {time_steps(all_on) * 1e6:7.1f} us per 1 ms step '
           '(step + measure)')

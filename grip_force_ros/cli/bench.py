@@ -18,8 +18,9 @@ def add_arguments(parser) -> None:
                         help='measurement window of the floor and of the product loop (s, default 20)')
     parser.add_argument('--parts', default='loop,model,diagnosis',
                         help='comma-separated subset of loop,model,diagnosis (default all)')
-    parser.add_argument('--config', default='paper_needle_driver',
-                        help='instrument YAML (path or shipped name) of the product and the model')
+    parser.add_argument('--config', default=None,
+                        help='instrument YAML (path or shipped name) of the product and the model '
+                             "(default: the paper's needle driver)")
     parser.add_argument('--log-minutes', type=float, default=60.0,
                         help='length of the diagnosis log at 1 kHz (min, default 60; built once, cached)')
     parser.add_argument('--model-size', type=int, default=100_000,
@@ -109,7 +110,7 @@ def render(result: dict) -> str:
 def run(args) -> int:
     from grip_force_ros.bench.procs import BenchError
     from grip_force_ros.bench.run import PARTS, parse_domains, run_bench
-    from grip_force_ros.demo import find_config
+    from grip_force_ros.params.files import instrument_path
 
     parts = tuple(p.strip() for p in args.parts.split(',') if p.strip())
     unknown = [p for p in parts if p not in PARTS]
@@ -129,7 +130,7 @@ def run(args) -> int:
                   'limit); run without --rt-priority', file=sys.stderr)
             return 2
     try:
-        config = str(find_config(args.config))
+        config = str(instrument_path(args.config))
     except FileNotFoundError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)
         return 2

@@ -1,6 +1,6 @@
-"""`grip-force calibrate`: fit an instrument's parameters from a load-cell grasp log.
+r"""`grip-force calibrate`: fit an instrument's parameters from a load-cell grasp log.
 
-    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv \\
+    grip-force calibrate --config X.yaml --log CALIB.mcap|CALIB_DIR|CALIB.csv \
         --out X_calibrated.yaml
 
 Keeps the steady plateaus of the log (a few force levels), fits the
@@ -31,13 +31,13 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from grip_force_ros.demo import find_config
     from grip_force_ros.identify import calibrated_yaml, fit_instrument
     from grip_force_ros.logs import LogError, read_log
     from grip_force_ros.params import ParameterError, load_params_file
+    from grip_force_ros.params.files import instrument_path
 
     try:
-        config = find_config(args.config)
+        config = instrument_path(args.config)
         params = load_params_file(config)
         log = read_log(args.log)
         obj = args.object

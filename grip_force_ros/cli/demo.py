@@ -23,8 +23,9 @@ HELP = 'run the closed-loop needle-grasp demo over ROS 2 (or --compare-instrumen
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument('--config', default='paper_needle_driver',
-                        help='instrument YAML (path, or name in config/); default %(default)s')
+    parser.add_argument('--config', default=None,
+                        help="instrument YAML (path, or name in config/); default: the paper's "
+                             'needle driver')
     parser.add_argument('--duration', type=float, default=None,
                         help='length of the needle-grasp task in s (default 10; 6 per run of '
                              '--compare-instruments)')
@@ -66,7 +67,7 @@ def _fmt(value, spec='.3f', unit=' N') -> str:
 
 
 def print_report(result: dict, stream=sys.stdout) -> None:
-    """The human-readable end of a demo run."""
+    """Print the human-readable end of a demo run."""
     m = result['metrics'] or {}
     w = stream.write
     w(f"instrument        {result['instrument']} ({result['config']})\n")
@@ -92,9 +93,9 @@ def print_report(result: dict, stream=sys.stdout) -> None:
 
 
 def run(args) -> int:
-    from grip_force_ros.demo import find_config
     from grip_force_ros.nodes.processes import ProcessError, pick_domain_ids
     from grip_force_ros.params import ParameterError, load_params_file
+    from grip_force_ros.params.files import instrument_path
 
     _sigterm_as_interrupt()
     if args.duration is not None and args.duration <= 0:
@@ -108,7 +109,7 @@ def run(args) -> int:
         if args.compare_instruments:
             from grip_force_ros.demo.compare import TASK_DURATION, compare_instruments
             out = Path(args.out) if args.out else _default_out('compare')
-            configs = [find_config(c) for c in args.configs] if args.configs else None
+            configs = [instrument_path(c) for c in args.configs] if args.configs else None
             report = compare_instruments(
                 out, configs=configs, plant_error=args.plant_error,
                 parallel=args.parallel, domain_id=args.domain_id,
@@ -122,7 +123,7 @@ def run(args) -> int:
             return 0
 
         from grip_force_ros.demo.run import Progress, RunSpec, run_task
-        config = find_config(args.config)
+        config = instrument_path(args.config)
         params = load_params_file(config)
         out = Path(args.out) if args.out else _default_out('demo')
         domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]

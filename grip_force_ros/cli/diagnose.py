@@ -5,6 +5,8 @@ import json
 import sys
 import time
 
+from grip_force_ros.objects import OBJECTS
+
 HELP = 'diagnose the sim-to-real gap of logs (CSV or rosbag2): where, which effect, how far'
 
 
@@ -18,7 +20,7 @@ def add_arguments(parser) -> None:
                         help='held-out logs (never fitted); needs LOG or --train')
     parser.add_argument('--json', action='store_true', help='print the result as one JSON object')
     parser.add_argument('--report', metavar='DIR', help='write report.md and PNG figures into DIR')
-    parser.add_argument('--object', default='needle', choices=('free', 'rigid', 'tissue', 'needle'),
+    parser.add_argument('--object', default='needle', choices=OBJECTS,
                         help='object assumed when a log has no object column (default: needle)')
     parser.add_argument('--rate', type=float, default=200.0,
                         help='analysis rate (Hz): logs are block-averaged to it (default 200)')

@@ -7,8 +7,9 @@ HELP = 'inject every catalogued fault into a real controller node and check its 
 def add_arguments(parser) -> None:
     parser.add_argument('--json', action='store_true',
                         help='print the report as JSON (with per-case details)')
-    parser.add_argument('--config', default='config/paper_needle_driver.yaml',
-                        help='instrument YAML of the controller under test')
+    parser.add_argument('--config', default=None,
+                        help='instrument YAML (path or shipped name) of the controller under test '
+                             "(default: the paper's needle driver)")
     parser.add_argument('--only', nargs='*', metavar='PATTERN',
                         help='run only cases whose name or category contains a pattern')
     parser.add_argument('--list', action='store_true', help='list the catalogue and exit')

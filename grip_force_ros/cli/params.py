@@ -14,7 +14,7 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from grip_force_ros.params import ParameterError, load_params_file, specs_in
+    from grip_force_ros.params import ParameterError, load_params_file, markdown_table, specs_in
     if args.check:
         try:
             p = load_params_file(args.check)
@@ -29,12 +29,7 @@ def run(args) -> int:
                            else s.default} for s in specs], indent=1))
         return 0
     if args.markdown:
-        print('| name | group | type | unit | default | range | read-only | description |')
-        print('|---|---|---|---|---|---|---|---|')
-        for s in specs:
-            rng = '' if s.min is None and s.max is None else f'[{s.min}, {s.max}]'
-            print(f'| `{s.name}` | {s.group} | {s.type} | {s.unit} | {s.default} | {rng} | '
-                  f'{"yes" if s.read_only else ""} | {s.description} |')
+        print(markdown_table(specs))
         return 0
     for s in specs:
         rng = '' if s.min is None and s.max is None else f' [{s.min}, {s.max}]'

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import sys
 
+from grip_force_ros.objects import OBJECTS
+
 HELP = ('run the forward model over a log (CSV contract or rosbag2) and write a CSV with '
         'grip_force_model, pull_out_force_model, jaw_angle_model')
 
@@ -15,7 +17,7 @@ def add_arguments(parser) -> None:
     parser.add_argument('--input', required=True, metavar='LOG',
                         help='log: CSV in the docs/design.md contract, or a rosbag2 bag')
     parser.add_argument('--output', required=True, metavar='CSV', help='CSV to write')
-    parser.add_argument('--object', default='needle', choices=('free', 'rigid', 'tissue', 'needle'),
+    parser.add_argument('--object', default='needle', choices=OBJECTS,
                         help="object for rows without an 'object' column (default: needle)")
     parser.add_argument('--ideal', action='store_true', help='model without losses')
 
@@ -32,6 +34,8 @@ def predict_log(log: dict, params, default_object: str = 'needle', losses: bool 
         Instrument parameters.
     default_object : str
         Object where the log has no ``object`` column.
+    losses : bool
+        False: the ideal model (no friction, no creep).
 
     Returns
     -------

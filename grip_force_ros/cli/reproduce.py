@@ -13,7 +13,7 @@ def add_arguments(parser) -> None:
     parser.add_argument('--out', default='out/reproduce', metavar='DIR',
                         help='directory for report.md and the PNG figures (default: out/reproduce)')
     parser.add_argument('--config', default=None, metavar='YAML',
-                        help='instrument YAML (default: config/paper_needle_driver.yaml)')
+                        help="instrument YAML (default: the paper's needle driver in config/)")
 
 
 def run(args) -> int:

@@ -7,8 +7,9 @@ HELP = 'run master, sim and controller for minutes: memory growth, period drift,
 def add_arguments(parser) -> None:
     parser.add_argument('--minutes', type=float, default=10.0,
                         help='measured duration in minutes (default 10; plus a 15 s warm-up)')
-    parser.add_argument('--config', default='config/paper_needle_driver.yaml',
-                        help='instrument YAML of the three processes')
+    parser.add_argument('--config', default=None,
+                        help='instrument YAML (path or shipped name) of the three processes '
+                             "(default: the paper's needle driver)")
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.add_argument('--out', help='also write the JSON report to this file')
 

@@ -59,8 +59,8 @@ def run(args) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     png = out_dir / f'tune_{params.instrument_name}.png'
-    plot_steps(tuned, png, title=f'{params.instrument_name}: unit step responses '
-                    '(nominal linear plant, 1 kHz PID)')
+    plot_steps(tuned, png, title=(f'{params.instrument_name}: unit step responses '
+                                  '(nominal linear plant, 1 kHz PID)'))
     steps = tune.step_responses(tuned)
     settling = {name: tune.settling_time(t, y) for name, (t, y) in steps.items()}
     ok = all(r.stable and r.gain_margin_db >= tune.CLAIM_GM_DB and r.phase_margin_deg >= tune.CLAIM_PM_DEG

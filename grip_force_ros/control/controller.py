@@ -6,7 +6,7 @@ import math
 from typing import NamedTuple
 
 from grip_force_ros.control.force_map import ForceMap
-from grip_force_ros.control.inputs import ControlInputs
+from grip_force_ros.control.inputs import SOURCES, ControlInputs
 from grip_force_ros.control.limits import CurrentLimiter
 from grip_force_ros.control.pid import PID
 
@@ -137,7 +137,7 @@ class GripController:
         self.hysteresis = hysteresis
         #: (source, fault attribute, receive-time attribute) of the inputs the loop needs
         self._required = tuple((src, src + '_fault', src + '_time')
-                               for src in ('master', 'instrument', 'actuator', 'force')
+                               for src in SOURCES
                                if src != 'force' or self.use_sensor)
         self.stick_filter = 1.0 - math.exp(-self.period / STICK_FILTER_TIME)   # per period
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
@@ -187,7 +187,7 @@ class GripController:
         return out
 
     def new_inputs(self) -> ControlInputs:
-        """An empty :class:`ControlInputs` with this instrument's plausibility ranges."""
+        """Return an empty :class:`ControlInputs` with this instrument's plausibility ranges."""
         return ControlInputs.from_params(self.params)
 
     # ------------------------------------------------------------------ checks

@@ -67,7 +67,7 @@ class ForceMap:
 
     @classmethod
     def from_params(cls, params) -> 'ForceMap':
-        """The map of an instrument ``ParamSet``; force_max = min(grip_force_max, max_grip_force)."""
+        """Build the map of an instrument ``ParamSet``; force_max = min(grip_force_max, max_grip_force)."""
         return cls(master_angle_min=params.master_angle_min,
                    master_contact_angle=params.master_contact_angle,
                    master_to_jaw_gain=params.master_to_jaw_gain,

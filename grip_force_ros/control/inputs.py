@@ -97,7 +97,7 @@ class ControlInputs:
 
     @classmethod
     def from_params(cls, params) -> 'ControlInputs':
-        """Inputs with the plausibility ranges of an instrument ``ParamSet``."""
+        """Build inputs with the plausibility ranges of an instrument ``ParamSet``."""
         return cls(master_angle_min=params.master_angle_min,
                    master_angle_max=params.master_angle_max,
                    master_angle_tolerance=params.master_angle_tolerance,

@@ -19,39 +19,10 @@ processes are started through :mod:`grip_force_ros.nodes.processes`.
 """
 from pathlib import Path
 
-#: Where the instrument YAMLs of a source checkout live.
-_SOURCE_CONFIG = Path(__file__).resolve().parents[2] / 'config'
-
-
-def config_dir() -> Path:
-    """The directory of the shipped instrument YAMLs (source tree, else the ament share)."""
-    if _SOURCE_CONFIG.is_dir():
-        return _SOURCE_CONFIG
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        return Path(get_package_share_directory('grip_force_ros')) / 'config'
-    except Exception:  # noqa: BLE001 - not installed with colcon
-        return _SOURCE_CONFIG
-
-
-def find_config(name_or_path: str | Path) -> Path:
-    """An instrument YAML by path, or by name in :func:`config_dir` ('paper_needle_driver').
-
-    Raises
-    ------
-    FileNotFoundError
-        Naming where it looked.
-    """
-    p = Path(name_or_path)
-    if p.is_file():
-        return p
-    for candidate in (config_dir() / p.name, config_dir() / f'{p.name}.yaml'):
-        if candidate.is_file():
-            return candidate
-    raise FileNotFoundError(f'no instrument YAML {name_or_path!r} (looked in {config_dir()})')
+from grip_force_ros.params.files import list_instruments
 
 
 def comparison_configs() -> list[Path]:
-    """The instruments of ``--compare-instruments``: every shipped YAML except maryland."""
-    return sorted(p for p in config_dir().glob('*.yaml') if 'maryland' not in p.name
-                  and not p.stem.endswith('_calibrated'))
+    """List the instruments of ``--compare-instruments``: every shipped YAML but maryland."""
+    return [p for p in list_instruments() if 'maryland' not in p.name
+            and not p.stem.endswith('_calibrated')]

@@ -61,7 +61,7 @@ def phase_windows(trajectory: Trajectory, start: float) -> dict[str, tuple[float
 
 def steady_window(windows: Mapping[str, tuple[float, float]],
                   share: float = STEADY_SHARE) -> tuple[float, float]:
-    """The last ``share`` of the hold phase (s): where the grip force is steady."""
+    """Return the last ``share`` of the hold phase (s): where the grip force is steady."""
     if 'hold' not in windows:
         raise AnalysisError('the trajectory has no hold phase')
     a, b = windows['hold']
@@ -162,7 +162,7 @@ def settling_time(t: np.ndarray, target: np.ndarray, force: np.ndarray,
 
 
 def spread(ratios: Sequence[float]) -> float:
-    """max - min of the steady hold force / target ratios (NaN if any is missing)."""
+    """Return max - min of the steady hold force / target ratios (NaN if any is missing)."""
     r = np.asarray(list(ratios), dtype=float)
     if r.size == 0 or not np.all(np.isfinite(r)):
         return float('nan')
@@ -182,6 +182,8 @@ def safe_state_entries(diagnostics, window: tuple[float, float], offset: float =
         Time window on the analysis axis (s).
     offset : float
         Subtracted from the diagnostic times to put them on that axis (s).
+    name_part : str
+        Only statuses whose name contains it (the controller's).
 
     Returns
     -------

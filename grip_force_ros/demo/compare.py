@@ -78,16 +78,21 @@ def calibration_csv(params, path: Path) -> Path:
 
 
 def calibration_current(params) -> float:
-    """Current (A) of the top calibration level: grip_force_max per the shipped model,
-    at most max_current."""
+    """Return the current (A) of the top calibration level.
+
+    That is grip_force_max per the shipped model, at most max_current.
+    """
     from grip_force_ros.model import GripForceModel
     current = float(GripForceModel(params).inverse(params.grip_force_max, 0.0, 0.0, 'needle'))
     return min(current, params.max_current)
 
 
 def naive_gain(reference_config: Path) -> float:
-    """The naive map's one gain: the current (A) that gives grip_force_max on the reference
-    instrument per its shipped model, on the needle (the gain a lab would tune on one tool)."""
+    """Return the naive map's one gain (A).
+
+    The current that gives grip_force_max on the reference instrument per its shipped
+    model, on the needle (the gain a lab would tune on one tool).
+    """
     from grip_force_ros.model import GripForceModel
     from grip_force_ros.params import load_params_file
     p = load_params_file(reference_config)
@@ -173,6 +178,10 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         ROS domain each). Needs spare cores: each run is three 1 kHz nodes.
     domain_id : int, optional
         First ROS domain id to use (default: free ones).
+    task_duration : float
+        Length of each run's needle-grasp task (s).
+    log : text stream, optional
+        Progress lines go here (default: none).
 
     Returns
     -------
@@ -308,7 +317,7 @@ def _json_safe(obj: Any) -> Any:
 
 
 def format_report(report: dict[str, Any]) -> str:
-    """A table: steady hold force / target per instrument and condition, then the spreads."""
+    """Format a table: steady hold force / target per instrument and condition, then the spreads."""
     lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in CONDITIONS)]
     for inst in report['instruments']:
         cells = []

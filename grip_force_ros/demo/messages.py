@@ -36,7 +36,7 @@ FIELDS: dict[str, tuple[str, ...]] = {
 
 
 def absolute(topic: str) -> str:
-    """The topic name in the root namespace ('/grip/target_force')."""
+    """Return the topic name in the root namespace ('/grip/target_force')."""
     return topic if topic.startswith('/') else '/' + topic
 
 
@@ -62,7 +62,7 @@ def _joint(msg: Any, name: str, field: str, index: int | None = None) -> float:
 
 
 def values_of(topic: str, msg: Any) -> dict[str, float]:
-    """The plain values (SI) a message of ``topic`` carries, named as in :data:`FIELDS`."""
+    """Return the plain values (SI) a message of ``topic`` carries, named as in :data:`FIELDS`."""
     if topic == topics.MASTER_JS:
         names = list(msg.name)
         i = names.index(topics.MASTER_JOINT) if topics.MASTER_JOINT in names else 0

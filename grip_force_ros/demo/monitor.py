@@ -31,7 +31,7 @@ class Snapshot:
 
 
 def controller_mode(diagnostics: list[dict[str, Any]]) -> str:
-    """The controller's state/mode from /diagnostics ('?' if none seen)."""
+    """Return the controller's state/mode from /diagnostics ('?' if none seen)."""
     for status in diagnostics:
         if 'controller' in status['name'].lower():
             values = status['values']
@@ -57,7 +57,7 @@ def _rate(snapshot: Snapshot, topic: str) -> str:
 
 
 def render(snapshot: Snapshot, header: str = '') -> list[str]:
-    """The block of lines the terminal view shows."""
+    """Render the block of lines the terminal view shows."""
     s = snapshot
     lines = [f'grip-force monitor  {header}  t = {s.elapsed:6.1f} s',
              f'  master angle     {_v(s, "master_angle")} rad        {_rate(s, topics.MASTER_JS)}',

@@ -54,7 +54,7 @@ class NaiveNode(Node):
         self.diag_timer = self.create_timer(0.2, self._diagnostics)
 
     def _diagnostics(self) -> None:
-        """mode 'safe' until the master arrives, then 'free' or 'grip' (as the controller)."""
+        """Report mode 'safe' until the master arrives, then 'free' or 'grip' (as the controller)."""
         share = 0.0 if self.master_angle is None else closing_share(
             self.master_angle, self.values['master_contact_angle'], self.values['master_angle_min'])
         mode = Mode.SAFE if self.master_angle is None else (Mode.GRIP if share > 0 else Mode.FREE)

@@ -91,8 +91,11 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
 
 
 def compare_plot(report: Mapping, path: str | Path) -> Path:
-    """Bar chart of ``--compare-instruments``: steady hold force / target per instrument and
-    condition, with each condition's spread in its label. Returns the PNG written."""
+    """Bar chart of ``--compare-instruments``; returns the PNG written.
+
+    Steady hold force / target per instrument and condition, with each condition's
+    spread in its label.
+    """
     plt = pyplot()
 
     conditions = ('controlled', 'uncalibrated', 'sensor', 'naive')

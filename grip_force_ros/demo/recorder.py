@@ -12,12 +12,12 @@ import importlib
 import threading
 import time
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Mapping
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
                                 QosReliability, QosTime)
@@ -25,12 +25,13 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from grip_force_ros.demo.messages import TOPIC_TYPES, absolute
+from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, matching_qos
 
 _INFINITE = QosTime(2147483647, 4294967295)  # what rosbag2 writes for an infinite duration
 
 
 def message_class(type_name: str):
-    """The rclpy message class of 'pkg/msg/Name'."""
+    """Return the rclpy message class of 'pkg/msg/Name'."""
     pkg, _, name = type_name.split('/')
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
@@ -50,7 +51,7 @@ def _enum(enum_cls, policy) -> Any:
 
 
 def to_bag_qos(profile: QoSProfile) -> Qos:
-    """An rclpy QoS profile as the rosbags metadata record."""
+    """Convert an rclpy QoS profile to the rosbags metadata record."""
     return Qos(history=_enum(QosHistory, profile.history), depth=int(profile.depth),
                reliability=_enum(QosReliability, profile.reliability),
                durability=_enum(QosDurability, profile.durability),
@@ -58,19 +59,6 @@ def to_bag_qos(profile: QoSProfile) -> Qos:
                liveliness=_enum(QosLiveliness, profile.liveliness),
                liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
                avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
-
-
-def subscription_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
-    """A QoS that matches every offered profile (reliable only if all offer it)."""
-    offered = list(offered)
-    reliable = bool(offered) and all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
-    transient = bool(offered) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                                      for q in offered)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                      reliability=ReliabilityPolicy.RELIABLE if reliable
-                      else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient
-                      else DurabilityPolicy.VOLATILE)
 
 
 class RecorderNode(Node):
@@ -112,9 +100,7 @@ class RecorderNode(Node):
         RELIABLE, VOLATILE, as the package's nodes publish). The offered QoS
         written into the bag is still the publisher's, read at the first message.
         """
-        qos = qos or QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                                reliability=ReliabilityPolicy.RELIABLE,
-                                durability=DurabilityPolicy.VOLATILE)
+        qos = qos or RECORD_QOS
         for topic, type_name in self.topic_types.items():
             if topic not in self._subs:
                 self._subscribe(topic, type_name, qos)
@@ -128,13 +114,13 @@ class RecorderNode(Node):
                      if i.topic_type == type_name]
             if not infos:
                 continue
-            self._subscribe(topic, type_name, subscription_qos([i.qos_profile for i in infos]))
+            self._subscribe(topic, type_name, matching_qos([i.qos_profile for i in infos]))
         if len(self._subs) == len(self.topic_types):
             self._discovery_timer.cancel()
 
     def _offered_qos(self, topic: str, type_name: str) -> list[Qos]:
         infos = [i for i in self.get_publishers_info_by_topic(topic) if i.topic_type == type_name]
-        return [to_bag_qos(i.qos_profile) for i in infos] or [to_bag_qos(QoSProfile(depth=10))]
+        return [to_bag_qos(i.qos_profile) for i in infos] or [to_bag_qos(STATE_PUB_QOS)]
 
     def _subscribe(self, topic: str, type_name: str, qos: QoSProfile) -> None:
         def callback(data: bytes, topic=topic) -> None:

@@ -79,7 +79,7 @@ class RunSpec:
     label: str = 'demo'
 
     def master_values(self) -> dict[str, Any]:
-        """The master parameters: schema defaults, then the YAML, then overrides."""
+        """Return the master parameters: schema defaults, then the YAML, then overrides."""
         values = {s.name: s.default for s in MASTER_SPECS}
         try:
             yaml_values = read_params_yaml(self.config)
@@ -159,7 +159,7 @@ def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float
 
 
 def controller_ready(recorder) -> bool:
-    """True once the controller's /diagnostics report a mode in :data:`READY_MODES`."""
+    """Tell whether the controller's /diagnostics report a mode in :data:`READY_MODES`."""
     from grip_force_ros.demo.messages import diagnostic_summary
     from grip_force_ros.demo.monitor import controller_mode
     item = recorder.latest(topics.DIAGNOSTICS)
@@ -224,7 +224,7 @@ class TaskClock:
 
 
 def live_status(recorder, trajectory: Trajectory, elapsed: float) -> dict[str, Any]:
-    """The newest values of the force and state topics, and the task phase."""
+    """Return the newest values of the force and state topics, and the task phase."""
     phase = trajectory.phase(elapsed) if elapsed >= 0 else 'lead-in'
     status: dict[str, Any] = {'t': elapsed, 'phase': phase,
                               'duration': trajectory.duration}
@@ -291,6 +291,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     Parameters
     ----------
     spec : RunSpec
+        Instrument file, task length, label and the nodes' parameter overrides.
     out_dir : path
         New directory for the bag (``bag/``), the node logs (``logs/``) and
         the plot (``summary.png``).
@@ -300,6 +301,8 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
         Called about every 0.1 s with :func:`live_status`.
     analyse, plot : bool
         Read the bag back and compute the figures / write the summary plot.
+    startup_timeout : float
+        Longest wait for the three nodes to publish (s).
 
     Raises
     ------

@@ -18,33 +18,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE
-from grip_force_ros.sim.effects import EFFECT_NAMES as SIM_EFFECT_NAMES
+from grip_force_ros.effects import REGISTRY, SIMULATED
 
 #: Effects the blind set holds: those of the diagnosis vocabulary the sim can generate. The
 #: diagnosis still considers every effect of its vocabulary on every log (a verdict naming an
-#: effect outside this set is a false positive like any other).
-BLIND_EFFECTS = tuple(name for name in EFFECT_NAMES if name in SIM_EFFECT_NAMES)
+#: effect outside this set is a false positive like any other). Each is set at its registry
+#: strengths (weak, medium, strong) with its registry ``blind_extras``.
+BLIND_EFFECTS = tuple(name for name in EFFECT_NAMES if name in SIMULATED)
 
 #: Effects seen only in the jaw-angle channel: their shrink is that of the angle gap.
 ANGLE_ONLY = tuple(name for name, e in EFFECTS.items() if not e.force_params and e.angle_params)
 
-#: Strengths of each effect in the full check (weak, medium, strong), in the sim's units.
-STRENGTHS = {
-    'pivot_coulomb_friction': (0.005, 0.01, 0.02),        # N*m
-    'viscous_friction': (0.01, 0.02, 0.04),               # N*m*s/rad
-    'cable_hysteresis': (0.1, 0.2, 0.3),                  # -
-    'backlash': (0.03, 0.06, 0.12),                       # rad
-    'tension_dependent_friction': (0.002, 0.004, 0.008),  # 1/N
-    'viscoelastic_creep': (0.15, 0.3, 0.5),               # -
-    'sensor_delay': (0.03, 0.06, 0.1),                    # s
-    'torque_constant_drift': (0.5, 0.8, 0.9),             # -
-    'force_sensor_offset': (0.3, -0.5, 0.8),              # N
-    # N*m opening at the closed jaw (rest angle 1 rad): 8-30 % of the jaw torque at 0.3 A
-    # (49 mN*m), 0.3-1.2 N of grip force at the tip; the da Vinci rig's fitted spring: 13 mN*m
-    'position_spring': (0.004, 0.008, 0.015),             # N*m
-}
-#: Extra sim parameters per effect: a small motor's winding heats within seconds.
-EXTRAS = {'torque_constant_drift': (('torque_constant_drift_time_constant', 10.0),)}
+#: Object of a loaded segment -> its probability (the excitation's mix of contacts).
+OBJECT_MIX = {'needle': 0.45, 'tissue': 0.3, 'rigid': 0.25}
+
 #: Pairs of effects in the full check (medium strengths).
 PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'force_sensor_offset'),
          ('cable_hysteresis', 'torque_constant_drift'), ('backlash', 'tension_dependent_friction'))
@@ -53,6 +40,7 @@ PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'for
 @dataclass(frozen=True)
 class BlindCase:
     """One blind log: its effects (name -> strength) and seed. Never given to the diagnosis."""
+
     effects: tuple
     seed: int
     #: extra sim parameters of the effects (e.g. a time constant), name -> value
@@ -64,17 +52,17 @@ class BlindCase:
 
 
 def cases(quick: bool = False, seed: int = 0, none_logs: int | None = None) -> list[BlindCase]:
-    """The blind set: every effect at several strengths, some pairs, effect-free logs."""
+    """Build the blind set: every effect at several strengths, some pairs, effect-free logs."""
     out = []
     k = seed * 1000
     levels = (1,) if quick else (0, 1, 2)
     for name in BLIND_EFFECTS:
         for lv in levels:
-            out.append(BlindCase(((name, STRENGTHS[name][lv]),), k, EXTRAS.get(name, ())))
+            out.append(BlindCase(((name, REGISTRY[name].strengths[lv]),), k, REGISTRY[name].blind_extras))
             k += 1
     for a, b in (PAIRS[:1] if quick else PAIRS):
-        out.append(BlindCase(((a, STRENGTHS[a][1]), (b, STRENGTHS[b][1])), k,
-                             EXTRAS.get(a, ()) + EXTRAS.get(b, ())))
+        out.append(BlindCase(((a, REGISTRY[a].strengths[1]), (b, REGISTRY[b].strengths[1])), k,
+                             REGISTRY[a].blind_extras + REGISTRY[b].blind_extras))
         k += 1
     for _ in range(none_logs if none_logs is not None else (3 if quick else 10)):
         out.append(BlindCase((), k))
@@ -91,7 +79,7 @@ def _smooth_noise(rng, n, dt, time_constant):
 
 
 def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
-    """Current command (A), wrist (rad) and object per sample: seeded, varied segments."""
+    """Draw the current command (A), wrist (rad) and object per sample: seeded, varied segments."""
     n = int(round(duration / dt))
     # slow intensity envelope: busy and quiet periods (heats and cools the motor)
     period = rng.uniform(30.0, 60.0)
@@ -101,7 +89,7 @@ def excitation(rng, duration: float, dt: float, max_current: float = 0.5):
     i = 0
     while i < n:
         seg = int(rng.uniform(3.0, 8.0) / dt)
-        obj = str(rng.choice(['needle', 'tissue', 'rigid'], p=[0.45, 0.3, 0.25]))
+        obj = str(rng.choice(list(OBJECT_MIX), p=list(OBJECT_MIX.values())))
         open_n = int(rng.uniform(0.4, 0.9) / dt)
         t = np.arange(seg) * dt
         load_t = t[open_n:] - t[open_n]
@@ -203,7 +191,8 @@ def run_blindcheck(quick: bool = False, seed: int = 0, *, duration: float | None
         angle_only = v['effect'] in ANGLE_ONLY
         shrink = (1.0 - v['angle_gap_after'] / v['angle_gap_before']) if angle_only else v['shrink']
         per_log.append({'truth': list(truth), 'strengths': [s for _, s in case.effects],
-                        'verdict': v['effect'], 'named': v.get('effects', [v['effect']]), 'right': right, 'gap_before': v['gap_before'],
+                        'verdict': v['effect'], 'named': v.get('effects', [v['effect']]), 'right': right,
+                        'gap_before': v['gap_before'],
                         'gap_after': v['gap_after'], 'force_shrink': v['shrink'], 'shrink': shrink,
                         'angle_gap_before': v['angle_gap_before'], 'angle_gap_after': v['angle_gap_after'],
                         'runner_up': v['runner_up']})

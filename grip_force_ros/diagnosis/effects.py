@@ -1,4 +1,8 @@
-"""The unmodelled effects of the DESIGN.md vocabulary, each a small augmentation of the model.
+"""How the diagnosis fits each unmodelled effect: a small augmentation of the model.
+
+The names, units and which effects the diagnosis fits are the effect registry's
+(:mod:`grip_force_ros.effects`, :data:`~grip_force_ros.effects.DIAGNOSED`); this module
+holds one regressor builder per diagnosed effect (:data:`EFFECTS`).
 
 Every effect adds a few regressors to one or both of two channels:
 
@@ -36,7 +40,7 @@ moves: cable pretension and the jaw's own return spring. ``P_k`` are Legendre
 polynomials of ``x`` in [-1, 1], the motor (drum) or jaw angle mapped over the stroke the
 training logs cover (:func:`stroke_range`, set on each frame by the engine); ``P_0`` is the
 spring's torque at mid-stroke, so on a log loaded everywhere it also holds a constant.
-"""
+"""  # noqa: E501 - Markdown table rows are kept whole
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -45,17 +49,19 @@ from typing import Callable
 import numpy as np
 
 from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
+from grip_force_ros.effects import DIAGNOSED, NONE
 
-#: The DESIGN.md vocabulary (``none`` is the verdict when no effect is needed).
-EFFECT_NAMES = ('pivot_coulomb_friction', 'viscous_friction', 'cable_hysteresis', 'backlash',
-                'tension_dependent_friction', 'viscoelastic_creep', 'sensor_delay',
-                'torque_constant_drift', 'force_sensor_offset', 'position_spring')
-NONE = 'none'
+#: The effects the diagnosis fits, in the registry's order (``none`` is the verdict when
+#: no effect is needed).
+EFFECT_NAMES: tuple[str, ...] = DIAGNOSED
+__all__ = ['EFFECT_NAMES', 'EFFECTS', 'NONE', 'Design', 'Effect', 'stroke_range', 'stroke_coordinate',
+           'spring_summary', 'SPRING_ANGLES']
 
 
 @dataclass
 class Design:
     """Regressors of one effect at one grid value, for one frame."""
+
     force_base: np.ndarray
     force_cols: list = field(default_factory=list)
     angle_cols: list = field(default_factory=list)
@@ -64,6 +70,7 @@ class Design:
 @dataclass(frozen=True)
 class Effect:
     """One effect: its grid, its regressors and the names of its coefficients."""
+
     name: str
     grid: tuple
     grid_name: str | None
@@ -112,7 +119,8 @@ def _coulomb(f, grid_value):
         # motion, its direction follows the drive's angle through stick; while the drive sticks
         # (inside the play's band: standing, or reversing) the friction takes up any change of the
         # current, so the transmitted load is the one of the last sliding sample
-        force_dir, sliding = _cached(f, ('play_sliding_motor', width), lambda: play_sliding(f['motor'], width))
+        force_dir, sliding = _cached(f, ('play_sliding_motor', width),
+                                     lambda: play_sliding(f['motor'], width))
         base = _cached(f, ('held_nominal', width), lambda: hold_where_stuck(f['nominal'], sliding))
         angle_dir = _cached(f, ('play_jaw_model', width),
                             lambda: play(f['jaw_model'], width))
@@ -179,7 +187,7 @@ STROKE_QUANTILE = 0.005
 
 
 def stroke_range(angles: np.ndarray) -> tuple[float, float]:
-    """The stroke an angle covers (rad): its STROKE_QUANTILE and 1 - STROKE_QUANTILE quantiles.
+    """Return the stroke an angle covers (rad): its STROKE_QUANTILE and 1 - STROKE_QUANTILE quantiles.
 
     A stroke narrower than 1 mrad is widened to 1 mrad about its middle (a jaw that never
     moves leaves the spring a constant, not a division by zero).
@@ -256,6 +264,10 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ('offset',), (), (('offset', 'unit of y', lambda c, g: c),)),
     Effect('position_spring', tuple(SPRING_ANGLES), 'spring_angle', '- (which angle the spring follows)',
            _spring, tuple(f'spring_legendre_{k}' for k in range(SPRING_ORDER + 1)), (),
-           tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c) for k in range(SPRING_ORDER + 1)),
+           tuple((f'spring_legendre_{k}', 'N*m (jaw torque)', lambda c, g: c)
+                 for k in range(SPRING_ORDER + 1)),
            spring_summary),
 )}
+if set(EFFECTS) != set(EFFECT_NAMES):  # pragma: no cover - a programming error
+    raise RuntimeError(f'diagnosis builders {sorted(EFFECTS)} do not match the registry\'s diagnosed '
+                       f'effects {sorted(EFFECT_NAMES)}')

@@ -15,10 +15,7 @@ from scipy.signal import lfilter
 from grip_force_ros.logs import LogError, iter_log, measured_column, normalise_log
 from grip_force_ros.logs.columns import OBJECT_COLUMN
 from grip_force_ros.model.contact import contact_gain
-
-#: Object codes used inside frames (index into this tuple).
-OBJECT_CODES = ('free', 'rigid', 'tissue', 'needle')
-
+from grip_force_ros.objects import OBJECTS
 
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
 SETTLE_TIME = 0.2
@@ -101,7 +98,7 @@ def lowpass(x: np.ndarray, dt: float, time_constant: float, initial: float | Non
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Direction with memory in [-1, 1]: a play (backlash) operator of full width ``width``.
+    """Direction with memory in [-1, 1]: a backlash (play) operator of full width ``width``.
 
     The state follows ``x`` with a lag of at most width/2; the output is
     (x - state)/(width/2): +1 after ``x`` has risen by at least ``width``, -1
@@ -121,7 +118,7 @@ def play(x: np.ndarray, width: float) -> np.ndarray:
 
 
 def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """The :func:`play` output and where its state moves (the input slides beyond the band).
+    """Return the :func:`play` output and where its state moves (the input slides beyond the band).
 
     Returns
     -------
@@ -139,8 +136,10 @@ def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hold_where_stuck(values: np.ndarray, sliding: np.ndarray) -> np.ndarray:
-    """``values`` where ``sliding``; elsewhere the last value seen while sliding (the first
-    value before any sliding)."""
+    """Hold ``values`` where not ``sliding``: the last value seen while sliding.
+
+    Where ``sliding``, ``values`` itself; before any sliding, the first value.
+    """
     idx = np.maximum.accumulate(np.where(sliding, np.arange(values.size), 0))
     return values[idx]
 
@@ -248,7 +247,8 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     if t.size < 20:
         raise DiagnosisError(f'log too short for a diagnosis ({t.size} samples after averaging)')
     dt = float(np.median(np.diff(t)))
-    raw = {k: np.asarray(log[k], float) for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
+    raw = {k: np.asarray(log[k], float)
+           for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
     # samples with a missing (non-finite) value are carried as 0 and left out of every fit
     finite = np.logical_and.reduce([np.isfinite(v) for v in raw.values()])
     if finite.sum() < 20:
@@ -265,7 +265,7 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
     gain = np.zeros(t.size)              # contact gain G (1/m): grip force per drive torque
     for name in np.unique(objects):
         sel = objects == name
-        codes[sel] = OBJECT_CODES.index(str(name))
+        codes[sel] = OBJECTS.index(str(name))
         r = model.forward(current[sel], wrist[sel], jaw[sel], obj=str(name),
                           motor_velocity=motor_vel[sel], jaw_velocity=jaw_vel[sel])
         torque[sel] = r.jaw_torque
@@ -333,7 +333,7 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
 
 
 def measured_of(logs: Iterable[Mapping[str, np.ndarray]]) -> str:
-    """The one measured column shared by all ``logs``."""
+    """Return the one measured column shared by all ``logs``."""
     names = {measured_column(log) for log in logs}
     if len(names) != 1:
         raise DiagnosisError(f'logs mix measured columns {sorted(names)}; diagnose them separately')

@@ -110,6 +110,17 @@ def _fmt(x, digits=4):
     return f'{x:.{digits}g}'
 
 
+def _param_text(name: str, p: dict, play: bool) -> str:
+    """One fitted parameter as 'name = value ± std unit', with the play's signal when ``play``."""
+    text = f"{name} = {_fmt(p['value'])}"
+    if p.get('std') is not None:
+        text += f" ± {_fmt(p['std'], 2)}"
+    text += f" {p['unit']}"
+    if play and 'direction_state_of' in p:
+        text += f" (play on {p['direction_state_of']})"
+    return text
+
+
 def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnosis',
                  sources=()) -> Path:
     """Write ``report.md`` and its PNG figures into ``out_dir``; return the Markdown path."""
@@ -140,7 +151,8 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
               '| quantity | value | std | unit | meaning |', '|---|---|---|---|---|']
     for name, c in r['calibration'].items():
         if isinstance(c, dict):
-            lines.append(f"| {name} | {_fmt(c['value'])} | {_fmt(c['std'], 2)} | {c['unit']} | {c['meaning']} |")
+            lines.append(f"| {name} | {_fmt(c['value'])} | {_fmt(c['std'], 2)} | {c['unit']} | "
+                         f"{c['meaning']} |")
     lines += ['', f"Uncalibrated held-out RMS gap: {_fmt(r['calibration']['gap_uncalibrated'])} {unit}.", '',
               '## 2. Where', '', f"![regions]({figs['regions'].name})", '',
               '| region | share of gap | share of samples | rms | mean |', '|---|---|---|---|---|']
@@ -152,9 +164,7 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
               f'| effect | held-out rmse ({unit}) | held-out angle rmse (rad) | score | parameters |',
               '|---|---|---|---|---|']
     for e in r['ranking']:
-        ps = '; '.join(f"{k} = {_fmt(p['value'])}" + (f" ± {_fmt(p['std'], 2)}" if p.get('std') is not None else '')
-                       + f" {p['unit']}" + (f" (play on {p['direction_state_of']})" if 'direction_state_of' in p else '')
-                       for k, p in e['params'].items())
+        ps = '; '.join(_param_text(k, p, play=True) for k, p in e['params'].items())
         lines.append(f"| {e['effect']} | {_fmt(e['holdout_rmse'])} | {_fmt(e['holdout_angle_rmse'])} | "
                      f"{e['score']:.3f} | {ps} |")
     lines += ['', f"Rule: {v['rule']}.", '', '## 4. How far', '',
@@ -162,8 +172,7 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
               f"Held-out RMS gap {_fmt(v['gap_before'])} -> {_fmt(v['gap_after'])} {unit}.", '']
     second = v.get('second_effect_params')
     if second is not None and len(v.get('effects', [])) > 1:
-        ps = '; '.join(f"{k} = {_fmt(p['value'])}" + (f" ± {_fmt(p['std'], 2)}" if p.get('std') is not None else '')
-                       + f" {p['unit']}" for k, p in second.items())
+        ps = '; '.join(_param_text(k, p, play=False) for k, p in second.items())
         lines += [f"Second effect `{v['effects'][1]}`, fitted beside `{v['effect']}` on the training "
                   f"samples: {ps}.", '']
     path = out / 'report.md'

@@ -37,6 +37,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+#: Input sources, as the controller core names them.
+from grip_force_ros.control.inputs import SOURCES  # noqa: F401 - re-exported for the cases' sources
+
 NAN = math.nan
 INF = math.inf
 
@@ -54,8 +57,6 @@ OUTCOMES = {
     'refuse_start': 'node exits non-zero with the offending key on stderr',
 }
 
-#: Input sources, as the controller core names them.
-SOURCES = ('master', 'instrument', 'actuator', 'force')
 
 Mutator = Callable[[dict, int], list]
 
@@ -418,7 +419,7 @@ def select(cases: list[FaultCase], patterns: list[str] | None) -> list[FaultCase
 
 
 def bad_params_text(base: dict[str, Any], edits: dict[str, Any]) -> str:
-    """A ROS parameter file: ``base`` values with ``edits`` (None deletes a key).
+    """Compose the text of a ROS parameter file: ``base`` values with ``edits`` (None deletes a key).
 
     ``edits['__text__']`` replaces the whole file.
     """

@@ -16,24 +16,19 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
+from grip_force_ros.control.inputs import SOURCES
+from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS
 from grip_force_ros.sim import InstrumentSim
-
-#: Publishers as the real master/sim publish; subscriptions deep enough to miss nothing.
-PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-RECORD_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                        reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 _TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
            'actuator': topics.ACTUATOR_JS, 'force': topics.MEASURED_FORCE}
 
 
 def to_time_msg(seconds: float):
-    """float seconds -> builtin_interfaces/Time (clamped to its representable range)."""
+    """Convert float seconds to builtin_interfaces/Time (clamped to its representable range)."""
     from builtin_interfaces.msg import Time
     seconds = min(max(seconds, 0.0), 2.0 ** 31 - 1.0)
     sec = int(math.floor(seconds))
@@ -110,7 +105,7 @@ class FaultProbe(Node):
         self.stamp_offset = {s: 0.0 for s in _TOPICS}   # s, permanent offset (sim clock reset)
         self.last_good_publish = {s: math.nan for s in _TOPICS}  # probe clock of the last good sample
         self._pubs = {}
-        for source in ('master', 'instrument', 'actuator', 'force'):
+        for source in SOURCES:
             self._make_pub(source)
         step = params.max_current_slew / params.control_rate
         self.limits = LimitMonitor(params.max_current, step)
@@ -150,8 +145,11 @@ class FaultProbe(Node):
             return self.fault_done
 
     def restart_sim(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
-        """Destroy the instrument publishers, stay silent ``ticks`` ticks, reset the plant,
-        publish again from new publishers (stamps shifted by ``stamp_offset`` s from then on)."""
+        """Restart the simulated instrument as a process restart would look on DDS.
+
+        Destroy the instrument publishers, stay silent ``ticks`` ticks, reset the plant,
+        publish again from new publishers (stamps shifted by ``stamp_offset`` s from then on).
+        """
         with self.lock:
             self.restart_pending = True
             self.restart_offset = stamp_offset
@@ -159,11 +157,11 @@ class FaultProbe(Node):
 
     def _make_pub(self, source: str) -> None:
         msg_type = WrenchStamped if source == 'force' else JointState
-        self._pubs[source] = self.create_publisher(msg_type, _TOPICS[source], PUB_QOS)
+        self._pubs[source] = self.create_publisher(msg_type, _TOPICS[source], STATE_PUB_QOS)
 
     # ------------------------------------------------------------------ tick
     def samples(self, now: float) -> dict:
-        """The good samples of this tick (plain dicts) from the plant."""
+        """Return the good samples of this tick (plain dicts) from the plant."""
         m = self.plant.measure()
         return {
             'master': {'stamp': now, 'name': [topics.MASTER_JOINT],

@@ -25,10 +25,10 @@ from pathlib import Path
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
-from grip_force_ros.faults.catalogue import FaultCase, bad_params_text, catalogue
+from grip_force_ros.faults.catalogue import SOURCES, FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
+from grip_force_ros.params.files import instrument_path
 
-DEFAULT_CONFIG = 'config/paper_needle_driver.yaml'
 #: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
 GRIP_MASTER_ANGLE = 0.1
 #: How long a case may take to recover after its fault window (s).
@@ -42,24 +42,6 @@ RESUME_JUMP_SHARE = 0.5
 ISOLATION_NS = '/faultcheck_param_file'
 #: Extra allowance on the watchdog latency for DDS delivery and timer jitter (s).
 WATCHDOG_SLACK = 0.002
-
-
-def resolve_config(path: str | os.PathLike) -> Path:
-    """An instrument YAML by path, or from the package's config/ directory."""
-    p = Path(path)
-    if p.exists():
-        return p
-    here = Path(__file__).resolve().parents[2] / path
-    if here.exists():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        shared = Path(get_package_share_directory('grip_force_ros')) / 'config' / p.name
-        if shared.exists():
-            return shared
-    except Exception:  # noqa: BLE001 - not in an ament workspace
-        pass
-    raise FileNotFoundError(f'instrument config {path} not found')
 
 
 # ---------------------------------------------------------------------------- session
@@ -139,7 +121,7 @@ class Session:
 
     # ------------------------------------------------------------------ state
     def gripping(self, since: float, samples: int = 20) -> bool:
-        """The last ``samples`` targets received after ``since`` are all > 0 (grip)."""
+        """Tell whether the last ``samples`` targets received after ``since`` are all > 0 (grip)."""
         targets = self.probe.targets[-samples:]
         return len(targets) == samples and targets[0][0] >= since and all(t[2] > 0 for t in targets)
 
@@ -169,7 +151,7 @@ class Session:
         return [(r.successful, r.reason) for r in results]
 
     def held_inputs(self) -> dict:
-        """The input values the controller node holds now (its ControlInputs)."""
+        """Return the input values the controller node holds now (its ControlInputs)."""
         inputs = getattr(self.controller, 'inputs', None)
         names = ('master_angle', 'wrist_angle', 'jaw_angle', 'jaw_velocity', 'measured_current',
                  'motor_angle', 'motor_velocity', 'measured_force')
@@ -183,10 +165,10 @@ class Session:
         """Source -> the controller's receive time (s) of its last accepted sample."""
         inputs = getattr(self.controller, 'inputs', None)
         return {s: float(getattr(inputs, f'{s}_time', math.nan))
-                for s in ('master', 'instrument', 'actuator', 'force')}
+                for s in SOURCES}
 
     def rejected_count(self) -> int:
-        """Samples the controller node has rejected so far (its ControlInputs counters)."""
+        """Count the samples the controller node has rejected so far (its ControlInputs counters)."""
         inputs = getattr(self.controller, 'inputs', None)
         return sum(getattr(inputs, 'rejected', {}).values()) if inputs is not None else 0
 
@@ -234,7 +216,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             offset = case.mutate({'stamp': 0.0}, 0)[0]['stamp']
         done = probe.restart_sim(case.ticks, offset)
     else:
-        sources = ('master', 'instrument', 'actuator', 'force') if case.source == 'all' else (case.source,)
+        sources = SOURCES if case.source == 'all' else (case.source,)
         done = probe.inject(sources, case.mutate, case.ticks)
     last_good = dict(probe.last_good_publish)
     # the controller's receive time of the last good sample, read inside the window
@@ -329,7 +311,7 @@ def _implausible(held: dict, params) -> list:
 
 
 def _diag_mode(values: dict) -> Mode | None:
-    """The controller :class:`~grip_force_ros.control.Mode` in a /diagnostics key-value list, or None."""
+    """Find the controller :class:`~grip_force_ros.control.Mode` in a /diagnostics list, or None."""
     for key in ('mode', 'state'):
         try:
             return Mode(values.get(key))
@@ -379,7 +361,7 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
 
 
 def run_param_set_case(session: Session, case: FaultCase) -> dict:
-    """A runtime parameter set: refused with a reason (old value kept), or bounded."""
+    """Run a runtime parameter set: refused with a reason (old value kept), or bounded."""
     from grip_force_ros.nodes.harness import wait_until
     probe, params = session.probe, session.params
     detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
@@ -421,7 +403,8 @@ def run_param_set_case(session: Session, case: FaultCase) -> dict:
         session.set_parameters({k: v for k, v in before.items()})
         probe.master_angle = GRIP_MASTER_ANGLE
         wait_until(lambda: session.gripping(probe.now()), RECOVERY_TIMEOUT)
-    detail['limit_violations'] = len(probe.limits.violations) + len(probe.force_violations) - violations_before
+    detail['limit_violations'] = (len(probe.limits.violations) + len(probe.force_violations)
+                                  - violations_before)
     if detail['limit_violations']:
         problems.append('limit violation')
     detail['passed'] = not problems
@@ -477,15 +460,17 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
 
 
 # ---------------------------------------------------------------------------- all of it
-def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike = DEFAULT_CONFIG,
+def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike | None = None,
                    progress=None) -> dict:
     """Run ``cases`` (default: the whole catalogue) and return the report.
 
     Parameters
     ----------
     cases : list of FaultCase, optional
-    config : path
-        Instrument YAML of the controller under test.
+        The cases to run; default the whole catalogue.
+    config : path or str, optional
+        Instrument YAML (path or shipped name) of the controller under test; default
+        :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
         ``progress(detail)`` after each case.
 
@@ -496,7 +481,7 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         why), ``details`` (one dict per case) and ``seconds``.
     """
     start = time.monotonic()
-    config = resolve_config(config)
+    config = instrument_path(config)
     cases = catalogue() if cases is None else list(cases)
     file_cases = [c for c in cases if c.kind == 'param_file']
     file_thread_result: list = []

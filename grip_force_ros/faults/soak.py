@@ -90,7 +90,7 @@ class _Recorder:
             self.max_abs_command = max(self.max_abs_command, abs(value))
 
     def on_step(self, msg) -> None:
-        """A target force: one per control step, stamped with the controller's clock at it."""
+        """Record a target force: one per control step, stamped with the controller's clock at it."""
         now = time.monotonic()
         if now < self.start:
             return
@@ -132,7 +132,7 @@ class _Recorder:
             self._close_minute()
 
 
-def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_needle_driver.yaml',
+def run_soak(minutes: float = 10.0, config: str | os.PathLike | None = None,
              progress=None) -> dict:
     """Run the closed loop for ``minutes`` (after a warm-up) and return the figures.
 
@@ -140,29 +140,29 @@ def run_soak(minutes: float = 10.0, config: str | os.PathLike = 'config/paper_ne
     ----------
     minutes : float
         Measured duration (min), after :data:`WARMUP` s.
-    config : path
-        Instrument YAML for the three processes.
+    config : path or str, optional
+        Instrument YAML (path or shipped name) for the three processes; default
+        :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
         ``progress(text)`` once a minute.
     """
     import psutil
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from geometry_msgs.msg import WrenchStamped
     from sensor_msgs.msg import JointState
 
     from grip_force_ros import topics
-    from grip_force_ros.faults.runner import resolve_config
+    from grip_force_ros.nodes.common import RECORD_QOS
     from grip_force_ros.nodes.harness import RosRunner
     from grip_force_ros.nodes.processes import NodeProcess
     from grip_force_ros.params import load_params_file
+    from grip_force_ros.params.files import instrument_path
 
-    config = resolve_config(config)
+    config = instrument_path(config)
     params = load_params_file(config)
     period = 1.0 / params.control_rate
     logdir = Path(tempfile.mkdtemp(prefix='grip_force_soak_'))
-    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                     reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    qos = RECORD_QOS
     t_start = time.monotonic()
     rec = _Recorder(period, t_start + WARMUP)
     rss: dict[str, list[tuple[float, float]]] = {}

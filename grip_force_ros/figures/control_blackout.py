@@ -38,7 +38,7 @@ class _LoadingBranchOnly:
 
 
 def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
-    """Closed loop with the blackout, as it is (``stick_band``) or as it was.
+    """Run the closed loop with the blackout, as it is (``stick_band``) or as it was.
 
     As it was: the model's loading branch only and no force ramp on resume.
 
@@ -73,9 +73,10 @@ def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     """Run both loops, print their hold forces and write the figure (argument: output PNG)."""
     plt = pyplot()
+    from grip_force_ros.params import instrument_path
     argv = sys.argv[1:] if argv is None else argv
     out = argv[0] if argv else 'docs/figures/control_blackout_stick_band.png'
-    params = load_params_file('config/paper_needle_driver.yaml')
+    params = load_params_file(instrument_path())
     before = blackout_run(params, stick_band=False)
     after = blackout_run(params, stick_band=True)
     fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)

@@ -33,7 +33,8 @@ def plot_table_errors(config: str, path: Path, samples: int = 4000) -> Path:
                 label='inverse: table (+ Newton past its end) vs bracketed scalar solve')
     ax.semilogy(currents, eps * errors['condition'], '-', color='0.4', lw=1,
                 label='machine epsilon x condition M/(I dM/dI)')
-    ax.axhline(model.CURRENT_FIT_TOLERANCE, color='C3', ls=':', lw=1, label='table tolerance (checked when built)')
+    ax.axhline(model.CURRENT_FIT_TOLERANCE, color='C3', ls=':', lw=1,
+               label='table tolerance (checked when built)')
     if errors['table_end_current'] is not None:
         ax.axvline(errors['table_end_current'], color='C1', ls='--', lw=1)
         ax.text(errors['table_end_current'], 3e-12, ' inverse table ends\n (Newton past it)', color='C1',

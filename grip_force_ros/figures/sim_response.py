@@ -90,7 +90,8 @@ def effects_figure(out: Path) -> None:
     for ax, (name, strength) in zip(axes.flat, [('none', None), *SHOWN.items()]):
         log = simulate(p, current, 1e-3, obj='needle', effects=None if strength is None else {name: strength})
         ax.plot(log['current'][keep], log['grip_force'][keep], lw=0.8, label='sim (load cell)')
-        ax.plot(log['current'][keep], model.forward(log['current'][keep], 0.0, log['jaw_angle'][keep]).grip_force,
+        ax.plot(log['current'][keep],
+                model.forward(log['current'][keep], 0.0, log['jaw_angle'][keep]).grip_force,
                 'k--', lw=0.8, label='model forward')
         ax.set_title(name if strength is None else f'{name} = {strength:g}', fontsize=9)
         ax.grid(alpha=0.3)

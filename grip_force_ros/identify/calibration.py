@@ -82,8 +82,8 @@ def steady_plateaus(log: Mapping[str, np.ndarray], window: float = 0.1, min_forc
     slot = np.floor((t - t[0]) / window).astype(int)
     edges = np.flatnonzero(np.diff(slot)) + 1
     bounds = np.concatenate([[0], edges, [t.size]])
-    cols = {c: np.asarray(log[c], float) for c in ('current', 'wrist_angle', 'jaw_angle',
-                                                    'grip_force')}
+    cols = {c: np.asarray(log[c], float)
+            for c in ('current', 'wrist_angle', 'jaw_angle', 'grip_force')}
     rows = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         if b - a < 5:
@@ -219,7 +219,7 @@ def fit_instrument(params: ParamSet, log: Mapping[str, np.ndarray],
 
 
 def calibrated_yaml(config: str | Path, result: CalibrationResult, log_path: str | Path) -> str:
-    """The instrument YAML with the fitted values, and a header saying where they come from.
+    """Return the instrument YAML with the fitted values, and a header saying where they come from.
 
     Every key of ``config`` is kept (in order); only the fitted ones change.
     """

@@ -13,7 +13,7 @@ Reading aligns every topic on the time stamps (``header.stamp``; the bag's
 receive time when a stamp is zero) of the actuator topic, by linear interpolation
 (``object``: the last value published). Messages of one topic usually share one
 byte layout; those are decoded together with numpy instead of one by one.
-"""
+"""  # noqa: E501 - Markdown table rows are kept whole
 from __future__ import annotations
 
 import shutil
@@ -37,7 +37,7 @@ def _typestore():
 
 
 def is_bag(path) -> bool:
-    """True when ``path`` is a rosbag2 directory or an ``.mcap``/``.db3`` storage file."""
+    """Tell whether ``path`` is a rosbag2 directory or an ``.mcap``/``.db3`` storage file."""
     path = Path(path)
     if path.is_dir():
         return True
@@ -139,6 +139,8 @@ def write_bag(path, log: Mapping[str, np.ndarray], *, storage: str = 'mcap',
         rosbag2 storage plugin.
     overwrite : bool
         Replace an existing bag directory.
+    chunk_rows : int
+        Rows serialised per chunk (bounds the memory of a long log).
 
     Returns
     -------
@@ -234,8 +236,11 @@ FLUSH_MESSAGES = 50_000
 
 
 class _TopicBuffer:
-    """Raw messages of one topic, grouped by byte length and decoded into arrays every
-    FLUSH_MESSAGES messages (vectorised per group), so raw bytes never pile up."""
+    """Raw messages of one topic, decoded into arrays as they come.
+
+    Grouped by byte length and decoded every FLUSH_MESSAGES messages (vectorised per
+    group), so raw bytes never pile up.
+    """
 
     def __init__(self, decode):
         self.decode = decode            # (groups) -> dict of arrays

@@ -5,13 +5,14 @@ from typing import Mapping
 
 import numpy as np
 
+from grip_force_ros.objects import OBJECTS
+
 #: Columns every log has (SI units: s, A, rad, rad, rad).
 CORE_COLUMNS = ('t', 'current', 'motor_angle', 'wrist_angle', 'jaw_angle')
 #: The measured column: grip force (N) from a load cell, or jaw torque (N*m) from a rig.
 MEASURED_COLUMNS = ('grip_force', 'jaw_torque')
 #: Optional text column naming what the jaw holds.
 OBJECT_COLUMN = 'object'
-OBJECT_NAMES = ('free', 'rigid', 'tissue', 'needle')
 
 
 class LogError(ValueError):
@@ -54,10 +55,10 @@ def normalise_log(log: Mapping[str, object], *, where: str = 'log') -> dict[str,
     for name, values in log.items():
         if name == OBJECT_COLUMN:
             arr = np.char.lower(np.char.strip(np.asarray(values, dtype=str)))
-            bad = np.setdiff1d(np.unique(arr), OBJECT_NAMES)
+            bad = np.setdiff1d(np.unique(arr), OBJECTS)
             if bad.size:
                 raise LogError(f'{where}: unknown object name(s) {", ".join(map(str, bad))} '
-                               f'(allowed: {", ".join(OBJECT_NAMES)})')
+                               f'(allowed: {", ".join(OBJECTS)})')
         else:
             try:
                 arr = np.ascontiguousarray(values, dtype=np.float64)

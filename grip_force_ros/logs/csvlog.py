@@ -112,6 +112,8 @@ def write_csv(path, log: Mapping[str, np.ndarray], *, chunk_rows: int = 200_000)
         Destination file (parent directories are created).
     log : mapping of str to array
         Columns of the contract (see :mod:`grip_force_ros.logs`); checked first.
+    chunk_rows : int
+        Rows formatted per chunk (bounds the memory of a long log).
 
     Returns
     -------

@@ -21,11 +21,11 @@ import math
 
 import numpy as np
 
+from grip_force_ros.objects import OBJECTS
+
 __all__ = ['OBJECTS', 'ModelError', 'contact_gain', 'contact_gain_scalar', 'needle_normal_forces',
            'needle_pull_out', 'PULL_OUT_PER_MU']
 
-#: Objects the jaw can hold. 'free' = nothing between the jaws (grip force 0).
-OBJECTS = ('free', 'rigid', 'tissue', 'needle')
 
 #: F_L / (mu' F_N1) for the three-point needle contact (-).
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
@@ -82,7 +82,7 @@ def contact_gain_scalar(obj: str, jaw_angle: float, tip_arm: float, inner_arm: f
 
 
 def needle_normal_forces(grip_force):
-    """Normal forces (F_N1, F_N2, F_N3) on a needle held in three points (N).
+    """Return the normal forces (F_N1, F_N2, F_N3) on a needle held in three points (N).
 
     F_N1 = grip force (one jaw face); F_N2 = F_N3 = F_N1/sqrt2 (45 deg contacts on
     the other jaw, force balance ``F_N1 = (F_N2 + F_N3) cos 45``).

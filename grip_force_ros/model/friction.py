@@ -46,7 +46,8 @@ def exponents(mu, pulley_radius, cable_radius):
         ``2 mu rho / ((1 + rho) + sqrt(...))`` so it stays exact as mu -> 0.
     """
     mu = np.asarray(mu, dtype=float)
-    rho = (np.asarray(pulley_radius, float) - np.asarray(cable_radius, float)) / np.asarray(cable_radius, float)
+    cable = np.asarray(cable_radius, float)
+    rho = (np.asarray(pulley_radius, float) - cable) / cable
     root = np.sqrt((1.0 + rho) ** 2 + 4.0 * mu ** 2 * rho)
     a = 2.0 * mu * rho / ((1.0 + rho) + root)            # paper: a = (-1 - rho + sqrt(.))/(2 mu)
     with np.errstate(divide='ignore'):

@@ -193,7 +193,7 @@ class HystereticGripForce:
         return torque * _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
 
     def force(self, jaw_angle: float, obj: str = 'needle') -> float:
-        """Grip force (N) of the present state (lambda of the last update), without moving it."""
+        """Grip force of the present state, N (lambda of the last update), without moving it."""
         tension = self.jaw_tension
         if tension <= 0.0:
             return 0.0
@@ -205,7 +205,7 @@ class HystereticGripForce:
 
     def current_for_force(self, grip_force: float, wrist_angle: float, jaw_angle: float,
                           obj: str = 'needle', branch: str | None = None) -> float:
-        """Current (A) for the grip force ``grip_force`` (N) on one branch of the stick band.
+        """Return the current (A) for the grip force ``grip_force`` (N) on one branch of the stick band.
 
         ``'loading'``: the paper's inverse (``model.current_for_force_scalar``), drum
         tension ``Tn*/lambda``: the force is reached from below. ``'unloading'``: drum

@@ -78,6 +78,8 @@ def fit_polynomial(exact: ArrayMap, low: float, high: float, tolerance: float,
         Largest relative error accepted (-).
     degrees : iterable of int
         Degrees tried, in order.
+    checks : int
+        Equispaced points (ends included) on which the fit is checked.
 
     Returns
     -------
@@ -118,13 +120,15 @@ class PiecewisePolynomial:
 
     @property
     def intervals(self) -> int:
-        """Number of intervals (-)."""
+        """Number of intervals of the table (-)."""
         return self.coefficients.shape[1]
 
     @property
     def last_position(self) -> float:
-        """The largest position inside the table (-), just below ``intervals``: clipping
-        to it leaves every position inside unchanged."""
+        """Largest position inside the table (-), just below ``intervals``.
+
+        Clipping to it leaves every position inside unchanged.
+        """
         return float(np.nextafter(float(self.intervals), 0.0))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:

@@ -47,7 +47,7 @@ def drum_tension(current, torque_constant, gear_ratio, drum_radius):
 
 
 def static_resistance(drum_tension_n, drive_pulley_radius, fraction):
-    """Static part of the resistance moment M' (N*m): ``fraction * r_n * F0``.
+    """Return the static part of the resistance moment M' (N*m): ``fraction * r_n * F0``.
 
     Paper: ``r_n M0 / r0`` with ``M0 = F0 r0`` (fraction 1 as printed; 0.5 if the
     numerator's 2 is a typo).

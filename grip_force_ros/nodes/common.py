@@ -1,20 +1,27 @@
 """What the three nodes share: QoS, message packing and checking, the main loop.
 
-QoS (documented in docs/ros_interface.md):
+QoS (documented in docs/ros_interface.md). Every profile of the package is named
+here; nothing else constructs a ``QoSProfile``:
 
 * state and command topics (1 kHz and the master stream): publishers
   RELIABLE, VOLATILE, KEEP_LAST 10 (a recorder that lags a little still gets
-  every sample on loopback); the controller and the sim subscribe with
-  KEEP_LAST 1, because only the newest sample of a state matters to a loop.
+  every sample on loopback), :data:`STATE_PUB_QOS`; the controller and the sim
+  subscribe with KEEP_LAST 1 (:data:`STATE_SUB_QOS`), because only the newest
+  sample of a state matters to a loop.
 * force topics (estimated, target, measured): as state topics.
-* ``/diagnostics``: RELIABLE, KEEP_LAST 10, as diagnostic_aggregator expects.
+* ``/diagnostics``: RELIABLE, KEEP_LAST 10, as diagnostic_aggregator expects
+  (:data:`DIAGNOSTICS_QOS`).
+* recorders and monitors (the demo's bag recorder, the fault probe, the soak
+  monitor): KEEP_LAST 1000, deep enough to miss nothing (:data:`RECORD_QOS`), or
+  :func:`matching_qos` for whatever the publishers offer.
+* the benchmark's ping-pong floor: :func:`state_qos` at the depth under test.
 """
 from __future__ import annotations
 
 import math
 import os
 import sys
-from typing import Callable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -24,15 +31,39 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 
 
-STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                           reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.VOLATILE)
-STATE_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                           reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.VOLATILE)
-DIAGNOSTICS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.VOLATILE)
+def state_qos(depth: int) -> QoSProfile:
+    """RELIABLE, VOLATILE, KEEP_LAST ``depth`` (messages): the package's state/command QoS."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+#: Publishers of state, command and force topics (the master, the sim, the controller, the probe).
+STATE_PUB_QOS = state_qos(10)
+#: Subscriptions of a loop: only the newest sample matters.
+STATE_SUB_QOS = state_qos(1)
+#: ``/diagnostics`` publishers.
+DIAGNOSTICS_QOS = state_qos(10)
+#: Subscriptions that record or check every message (recorder, fault probe, soak monitor).
+RECORD_QOS = state_qos(1000)
+
+
+def matching_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
+    """Build a recording QoS (KEEP_LAST 1000) that matches every offered profile.
+
+    RELIABLE only if every publisher offers it (else BEST_EFFORT), TRANSIENT_LOCAL
+    only if every publisher offers it (else VOLATILE).
+    """
+    offered = list(offered)
+    reliable = bool(offered) and all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    transient = bool(offered) and all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                      for q in offered)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=RECORD_QOS.depth,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable
+                      else ReliabilityPolicy.BEST_EFFORT,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient
+                      else DurabilityPolicy.VOLATILE)
+
 
 _RCLError = _rclpy_impl.RCLError
 
@@ -62,6 +93,7 @@ def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -
     Parameters
     ----------
     msg : JointState
+        The received message.
     joints : sequence of str
         Joint names that must all be present (other names are an error too:
         a message for another device on the wrong topic must not be used).
@@ -116,7 +148,7 @@ def stamp_nanoseconds(stamp) -> int:
 
 
 def make_executor(context=None, kind: str | None = None):
-    """An executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
+    """Make an executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
 
     ``kind`` defaults to the GRIP_FORCE_EXECUTOR environment variable, else 'events'.
     """
@@ -132,7 +164,7 @@ def make_executor(context=None, kind: str | None = None):
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
              args: list[str] | None = None) -> int:
-    """The main loop of an executable node (ros2/demos Jazzy style).
+    """Run the main loop of an executable node (ros2/demos Jazzy style).
 
     Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
     parameters are refused (the reason goes to stderr).

@@ -60,7 +60,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.control import ControlInputs, GripController, Mode
+from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
 from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
                                          InputRejected, read_joints, run_node, stamp_seconds)
 from grip_force_ros.nodes.ros_params import declare_node_parameters
@@ -143,7 +143,7 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ time
     def _now(self) -> float:
-        """Controller clock (s), the clock of receive times and of the watchdog."""
+        """Return the controller clock (s), the clock of receive times and of the watchdog."""
         return self._now_ns().nanoseconds * 1e-9
 
     # ------------------------------------------------------------------ inputs
@@ -222,7 +222,7 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, params, changed) -> None:
-        """Accepted runtime change: retune bumplessly, keep the latest inputs."""
+        """Apply an accepted runtime change: retune bumplessly, keep the latest inputs."""
         self.controller.update_params(params)
         fresh = self.controller.new_inputs()
         for name in _INPUT_RANGES:
@@ -232,7 +232,7 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ loop
     def _tick(self) -> None:
-        """The ``control_rate`` timer: watchdog and fallback of the event-driven loop.
+        """Run the ``control_rate`` timer: watchdog and fallback of the event-driven loop.
 
         Steps when no actuator state came for :data:`FALLBACK_AFTER_PERIODS`
         periods (a lost state; when they stop, every period, so the watchdog acts
@@ -307,7 +307,7 @@ class ControllerNode(Node):
             self._diag_key, self._diag_time = key, now
 
     def diagnostic_status(self, out) -> DiagnosticStatus:
-        """The controller's DiagnosticStatus for the last output ``out``."""
+        """Build the controller's DiagnosticStatus for the last output ``out``."""
         params = self._param.params
         if out is None or out.mode is Mode.SAFE:
             level = DiagnosticStatus.ERROR
@@ -323,8 +323,7 @@ class ControllerNode(Node):
             'stale' in r or 'input yet' in r for r in out.reasons)
         values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
-        faults = [getattr(self.inputs, f'{s}_fault') for s in ('master', 'instrument', 'actuator',
-                                                               'force')]
+        faults = [getattr(self.inputs, f'{s}_fault') for s in SOURCES]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
         values['new_rejections'] = '; '.join(self._new_rejections) or 'none'
         timing = self.timing
@@ -354,7 +353,7 @@ class ControllerNode(Node):
 
 
 def main(args=None) -> int:
-    """Executable ``controller``."""
+    """Run the executable ``controller``."""
     return run_node(ControllerNode, 'controller', args)
 
 

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from grip_force_ros.params import ParamSpec, specs_in
+from grip_force_ros.params import markdown_table, specs_in
 from grip_force_ros.trajectories import MASTER_SPECS
 
 DOC = Path(__file__).resolve().parents[2] / 'docs' / 'ros_interface.md'
@@ -20,26 +20,13 @@ MARKER = '<!-- generated below by `python -m grip_force_ros.nodes.docs`: do not 
 GROUPS = ('instrument', 'limits', 'controller', 'sim', 'effects')
 
 
-def table(specs: list[ParamSpec]) -> str:
-    """A Markdown table of parameter specs (the columns of `grip-force params --markdown`)."""
-    lines = ['| name | group | type | unit | default | range | read-only | description |',
-             '|---|---|---|---|---|---|---|---|']
-    for s in specs:
-        rng = '' if s.min is None and s.max is None else f'[{s.min}, {s.max}]'
-        choices = f' One of: {", ".join(s.choices)}.' if s.choices else ''
-        default = list(s.default) if isinstance(s.default, tuple) else s.default
-        lines.append(f'| `{s.name}` | {s.group} | {s.type} | {s.unit} | {default!r} | {rng} | '
-                     f'{"yes" if s.read_only else ""} | {s.description}{choices} |')
-    return '\n'.join(lines)
-
-
 def generated() -> str:
     parts = [MARKER, '']
     for group in GROUPS:
-        parts += [f'### Group `{group}`', '', table(specs_in(group)), '']
+        parts += [f'### Group `{group}`', '', markdown_table(specs_in(group)), '']
     parts += ['### Group `master` (node `master` only)', '',
               'Declared in `grip_force_ros/trajectories.py` (`MASTER_SPECS`), next to the '
-              'trajectories they configure.', '', table(MASTER_SPECS), '']
+              'trajectories they configure.', '', markdown_table(MASTER_SPECS), '']
     return '\n'.join(parts)
 
 

@@ -65,7 +65,7 @@ class RosRunner:
         return node
 
     def plain_node(self, name: str) -> Node:
-        """A bare node (for probes, publishers, parameter clients) on this context."""
+        """Create a bare node (for probes, publishers, parameter clients) on this context."""
         node = Node(name, context=self.context)
         self.nodes.append(node)
         self.executor.add_node(node)

@@ -103,7 +103,7 @@ class MasterNode(Node):
 
 
 def main(args=None) -> int:
-    """Executable ``master``."""
+    """Run the executable ``master``."""
     return run_node(MasterNode, 'master', args)
 
 

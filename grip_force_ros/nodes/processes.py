@@ -100,7 +100,7 @@ def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | Non
 
 # ---------------------------------------------------------------- command line
 def ros_arg_value(value: Any) -> str:
-    """A Python value as the YAML literal of ``-p name:=value`` on a ROS command line.
+    """Format a Python value as the YAML literal of ``-p name:=value`` on a ROS command line.
 
     Strings are quoted (``''`` and ``'true'`` or ``'1.0'`` stay strings), floats keep
     their full precision (``repr``), booleans are ``true``/``false``, sequences lists.
@@ -154,7 +154,7 @@ def python_module(module: str, *args: str) -> list[str]:
 
 
 def node_executable(name: str) -> list[str]:
-    """The command that runs node ``name`` (without its arguments).
+    """Return the command that runs node ``name`` (without its arguments).
 
     ``GRIP_FORCE_NODE_<NAME>`` in this process's environment (e.g.
     ``GRIP_FORCE_NODE_SIM_INSTRUMENT``) replaces it, e.g. to run against another
@@ -239,7 +239,8 @@ class NodeProcess:
         else:
             stdout = subprocess.DEVNULL
         try:
-            self.popen = subprocess.Popen(self.command, env=dict(env) if env is not None else ros_environment(),
+            child_env = dict(env) if env is not None else ros_environment()
+            self.popen = subprocess.Popen(self.command, env=child_env,
                                           stdout=stdout, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, start_new_session=own_session,
                                           preexec_fn=preexec_fn, **text)
@@ -257,7 +258,7 @@ class NodeProcess:
         return self.popen.poll() is None
 
     def log_tail(self, lines: int = 15) -> str:
-        """The last ``lines`` lines of the log file ('' without one)."""
+        """Return the last ``lines`` lines of the log file ('' without one)."""
         if self.log_path is None or not self.log_path.exists():
             return ''
         return '\n'.join(self.log_path.read_text(errors='replace').splitlines()[-lines:])
@@ -383,7 +384,7 @@ def _udp_ports_in_use() -> set[int]:
 
 
 def domain_in_use(domain_id: int, ports: set[int] | None = None) -> bool:
-    """True if some process has bound a DDS port of ``domain_id`` on this machine."""
+    """Tell whether some process has bound a DDS port of ``domain_id`` on this machine."""
     ports = _udp_ports_in_use() if ports is None else ports
     low = _PORT_BASE + _DOMAIN_GAIN * domain_id
     return any(low <= p < low + _DOMAIN_GAIN for p in ports)

@@ -48,7 +48,7 @@ _BIG_INT = 2 ** 62
 
 
 def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
-    """The ROS parameter descriptor of one schema entry."""
+    """Build the ROS parameter descriptor of one schema entry."""
     unit = f' [{spec.unit}]' if spec.unit else ''
     constraints = []
     if spec.min is not None or spec.max is not None:
@@ -79,7 +79,7 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
 
 
 def plain(value: Any) -> Any:
-    """A ROS parameter value as a plain Python value (arrays become tuples)."""
+    """Convert a ROS parameter value to a plain Python value (arrays become tuples)."""
     if isinstance(value, (array.array, list, tuple)):
         return tuple(value)
     return value
@@ -173,7 +173,7 @@ class NodeParameters:
         return self._params
 
     def value(self, name: str) -> Any:
-        """Current value of any declared parameter (schema or extra)."""
+        """Return the current value of any declared parameter (schema or extra)."""
         return self._values[name]
 
     @property

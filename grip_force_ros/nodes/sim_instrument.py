@@ -167,7 +167,7 @@ class SimInstrumentNode(Node):
             level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
             name='grip_force_ros: sim_instrument',
             message=f'simulating {self.sim.obj}' + (f'; rejected {self.rejected} commands'
-                                                      if self.rejected else ''),
+                                                    if self.rejected else ''),
             hardware_id=params.instrument_name,
             values=[KeyValue(key=k, value=v) for k, v in {
                 'object': self.sim.obj,
@@ -192,7 +192,7 @@ class SimInstrumentNode(Node):
 
 
 def main(args=None) -> int:
-    """Executable ``sim_instrument``."""
+    """Run the executable ``sim_instrument``."""
     return run_node(SimInstrumentNode, 'sim_instrument', args)
 
 

@@ -7,7 +7,8 @@
 
 Groups: 'instrument' (model geometry and materials), 'limits' (hardware
 limits, read-only), 'controller', 'sim', 'effects' (optional unmodelled effects
-of the simulated instrument, all off by default).
+of the simulated instrument, all off by default). Where the instrument files
+are: :mod:`grip_force_ros.params.files` (``instrument_path``, ``list_instruments``).
 """
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ from typing import Any, Iterable, Mapping
 import yaml
 
 from grip_force_ros.params.controller import CONTROLLER, check_controller
+from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path, list_instruments
 from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
-from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, validate
+from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, markdown_table, validate
 from grip_force_ros.params.sim import EFFECTS, SIM
 
 SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + SIM + EFFECTS)
@@ -27,11 +29,12 @@ if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
     raise RuntimeError('duplicate parameter name in the schema')
 
 __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
-           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency']
+           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency',
+           'DEFAULT_INSTRUMENT', 'instrument_path', 'list_instruments', 'markdown_table']
 
 
 def specs_in(*groups: str) -> list[ParamSpec]:
-    """The specs of the given groups (all groups if none given)."""
+    """Return the specs of the given groups (all groups if none given)."""
     return [s for s in SCHEMA if not groups or s.group in groups]
 
 

@@ -4,14 +4,11 @@ Gains are per instrument: ``grip-force tune --config X.yaml`` designs them on a
 linear plant model and the instrument YAMLs carry the result. The defaults here
 are the design for the paper's needle driver (``config/paper_needle_driver.yaml``).
 """
+from grip_force_ros.objects import OBJECTS
 from grip_force_ros.params.schema import ParamSpec
 
 _P = ParamSpec
 _G = 'controller'
-
-#: Object kinds the model knows (same tuple as grip_force_ros.model.OBJECTS; repeated
-#: here so that the schema does not import the model).
-OBJECT_KINDS = ('free', 'rigid', 'tissue', 'needle')
 
 CONTROLLER = [
     # --- loop timing and watchdog -------------------------------------------------------
@@ -28,7 +25,7 @@ CONTROLLER = [
     # --- what is held and how it is measured ------------------------------------------
     _P('object_kind', 'string', 'needle', '',
        'Object the jaw grips, for the contact model of the feedforward and the force estimate.',
-       choices=OBJECT_KINDS, group=_G),
+       choices=OBJECTS, group=_G),
     _P('force_sensor_enabled', 'bool', False, '',
        'Use the grip force sensor topic as force feedback; otherwise the model estimate from '
        'the measured current.', group=_G),

@@ -50,7 +50,8 @@ INSTRUMENT = [
        'Distance l from the jaw pivot to the contact point (Table 1: l1 = 12 mm); needle and rigid contact.',
        min=1e-4, max=0.1, read_only=True),
     _P('jaw_moment_arm_inner', 'double', 0.0095, 'm',
-       'Inner end l\' of a distributed tissue contact (Table 1: l2 = 9.5 mm); tissue force acts at (l+l\')/2.',
+       'Inner end l\' of a distributed tissue contact (Table 1: l2 = 9.5 mm); tissue force acts at '
+       '(l+l\')/2.',
        min=1e-4, max=0.1, read_only=True),
     _P('cable_modulus', 'double', 1.25e11, 'Pa',
        'Elastic modulus E of the cable (Table 1: 1.25e5 MPa).', min=1e8, max=5e11, read_only=True),

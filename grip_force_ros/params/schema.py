@@ -161,6 +161,7 @@ def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
     Parameters
     ----------
     specs : iterable of ParamSpec
+        The declarations to check against.
     values : mapping
         Parameter name to value; missing names take their default.
     allow_unknown : bool
@@ -183,3 +184,32 @@ def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
         if unknown:
             raise ParameterError(f'unknown parameter(s) {unknown}; known: see `grip-force params`')
     return {name: spec.check(values.get(name, spec.default)) for name, spec in by_name.items()}
+
+
+def markdown_table(specs: Iterable[ParamSpec]) -> str:
+    """Render the parameter table of the docs: one Markdown row per spec.
+
+    Columns: name, group, type, unit, default, range (inclusive), read-only,
+    description (with the allowed values of a 'string' parameter). The one
+    generator: ``docs/ros_interface.md`` (``python -m grip_force_ros.nodes.docs``) and
+    ``grip-force params --markdown`` both print it.
+
+    Parameters
+    ----------
+    specs : iterable of ParamSpec
+        One row each, in this order.
+
+    Returns
+    -------
+    str
+        The table, lines joined by newlines (no trailing newline).
+    """
+    lines = ['| name | group | type | unit | default | range | read-only | description |',
+             '|---|---|---|---|---|---|---|---|']
+    for s in specs:
+        rng = '' if s.min is None and s.max is None else f'[{s.min}, {s.max}]'
+        choices = f' One of: {", ".join(s.choices)}.' if s.choices else ''
+        default = list(s.default) if isinstance(s.default, tuple) else s.default
+        lines.append(f'| `{s.name}` | {s.group} | {s.type} | {s.unit} | {default!r} | {rng} | '
+                     f'{"yes" if s.read_only else ""} | {s.description}{choices} |')
+    return '\n'.join(lines)

@@ -6,11 +6,14 @@ stiffness, sensor noise) is our stated assumption. ``friction_scale`` and
 ``stiffness_scale`` make the plant differ from the instrument YAML on purpose
 (the controller is not told).
 
-The 'effects' group holds one strength per unmodelled effect, named as in
-DESIGN.md; every strength defaults to 0 (= off).
+The 'effects' group holds one strength per unmodelled effect the sim can generate,
+named as in docs/design.md (every strength defaults to 0 = off), and the effects' further
+parameters: all declared in the effect registry, :mod:`grip_force_ros.effects`.
 """
 import math
 
+from grip_force_ros.effects import REGISTRY, SIMULATED
+from grip_force_ros.objects import OBJECTS
 from grip_force_ros.params.schema import ParamSpec
 
 
@@ -93,7 +96,7 @@ SIM = [
          min=-math.pi / 2, max=math.pi / 2),
     _sim('sim_object', 'string', 'needle', '',
          'Object between the jaws: free, rigid, tissue or needle.',
-         choices=('free', 'rigid', 'tissue', 'needle')),
+         choices=OBJECTS),
     _sim('current_noise_std', 'double', 0.002, 'A',
          'Std of white noise on the measured motor current.', min=0.0, max=1.0),
     _sim('motor_angle_noise_std', 'double', 1.0e-4, 'rad',
@@ -112,45 +115,19 @@ SIM = [
          'Seed of the sensor-noise generator of the simulated instrument.', min=0, max=2**31 - 1),
 ]
 
-EFFECTS = [
-    _fx('pivot_coulomb_friction', 'double', 0.0, 'N*m',
-        'Coulomb (stick-slip) friction torque at the jaw pivot, opposing jaw motion. 0 = off.',
-        min=0.0, max=0.5),
-    _fx('viscous_friction', 'double', 0.0, 'N*m*s/rad',
-        'Extra viscous friction at the jaw pivot (torque = -c * jaw velocity). 0 = off.',
-        min=0.0, max=1.0),
-    _fx('cable_hysteresis', 'double', 0.0, '',
-        'Hysteresis of the cable bending over the drive pulley (Dahl model): a moment opposing '
-        'changes of the cable tension, loop half-width as a fraction of the jaw drive moment. 0 = off.', min=0.0, max=0.5),
-    _fx('backlash', 'double', 0.0, 'rad',
-        'Dead band (full width, at the jaw) in the cable-jaw transmission. 0 = off.',
-        min=0.0, max=0.5),
-    _fx('tension_dependent_friction', 'double', 0.0, '1/N',
-        'Cable-pulley friction that grows with tension: mu(T) = mu*(1 + g*|T|), g unknown to the '
-        'model. 0 = off.', min=0.0, max=0.01),
-    _fx('viscoelastic_creep', 'double', 0.0, '',
-        'Slow relaxation of the jaw drive moment under load: this fraction of it relaxes '
-        'with time constant viscoelastic_creep_time_constant and recovers when unloaded. 0 = off.',
-        min=0.0, max=0.9),
-    _fx('viscoelastic_creep_time_constant', 'double', 2.0, 's',
-        'Time constant of viscoelastic_creep.', min=1e-3, max=1e4),
-    _fx('sensor_delay', 'double', 0.0, 's',
-        'Transport delay of the load cell (grip force) relative to the other sensors. 0 = off.',
-        min=0.0, max=1.0),
-    _fx('torque_constant_drift', 'double', 0.0, '',
-        'Motor heating lowers the torque constant: K = K0*(1 - s*h), h = normalised heat (first '
-        'order in I^2, 1 at a sustained max_current). 0 = off.', min=0.0, max=0.9),
-    _fx('torque_constant_drift_time_constant', 'double', 20.0, 's',
-        'Thermal time constant of torque_constant_drift.', min=1e-3, max=1e5),
-    _fx('force_sensor_offset', 'double', 0.0, 'N',
-        'Constant offset added to the load-cell grip force. 0 = off.', min=-50.0, max=50.0),
-    _fx('position_spring', 'double', 0.0, 'N*m',
-        'Return spring / cable pretension at the jaw: a torque opening the jaw that depends on '
-        'where the jaw is, this much at the closed jaw (0 rad), falling linearly to 0 at '
-        'position_spring_rest_angle (a preloaded torsion spring). It acts on the jaw dynamics '
-        'like any jaw torque, so in contact it takes its share of the drive moment from the '
-        'grip force. 0 = off.', min=0.0, max=0.1),
-    _fx('position_spring_rest_angle', 'double', 1.0, 'rad',
-        'Jaw angle at which the position_spring torque is zero (beyond it the spring closes '
-        'the jaw): spring rate = position_spring / this.', min=0.05, max=100.0),
-]
+
+def _effect_specs() -> list:
+    """Declare the 'effects' group from the effect registry.
+
+    Each simulated effect's strength (default 0 = off), then its further parameters.
+    """
+    out = []
+    for name in SIMULATED:
+        e = REGISTRY[name]
+        out.append(_fx(e.name, 'double', 0.0, e.unit, e.description, min=e.min, max=e.max))
+        out += [_fx(x.name, 'double', x.default, x.unit, x.description, min=x.min, max=x.max)
+                for x in e.params]
+    return out
+
+
+EFFECTS = _effect_specs()

@@ -26,12 +26,12 @@ def grip_over_wrist_and_opening(params, out: Path, current: float = 0.35, others
     instruments = [params, *others]
     wrist = np.linspace(0.0, math.pi / 2, 61)
     opening = np.linspace(0.0, math.pi / 2, 61)
-    W, O = np.meshgrid(wrist, opening, indexing='ij')
+    wrist_grid, open_grid = np.meshgrid(wrist, opening, indexing='ij')
     fig, axes = plt.subplots(1, len(instruments), figsize=(5.2 * len(instruments), 4.3), squeeze=False)
     for ax, p in zip(axes[0], instruments):
-        force = GripForceModel(p).forward(current, W, O, 'rigid').grip_force
-        mesh = ax.contourf(W, O, force, levels=20, cmap='viridis')
-        ax.contour(W, O, force, levels=8, colors='k', linewidths=0.4)
+        force = GripForceModel(p).forward(current, wrist_grid, open_grid, 'rigid').grip_force
+        mesh = ax.contourf(wrist_grid, open_grid, force, levels=20, cmap='viridis')
+        ax.contour(wrist_grid, open_grid, force, levels=8, colors='k', linewidths=0.4)
         fig.colorbar(mesh, ax=ax, label='grip force F_J [N]')
         ax.set_xlabel('wrist angle theta_32 [rad]')
         ax.set_ylabel('opening angle [rad]')

@@ -6,10 +6,11 @@ from pathlib import Path
 
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file, make_params
+from grip_force_ros.params.files import instrument_path
 from grip_force_ros.reproduce.figures import make_all
 from grip_force_ros.reproduce.rows import TOLERANCE, compute_rows, resistance_readings
 
-__all__ = ['find_config', 'build_report', 'rows_json']
+__all__ = ['build_report', 'rows_json']
 
 FIGURE_CAPTIONS = {
     'grip_over_wrist_and_opening.png':
@@ -35,20 +36,8 @@ FIGURE_CAPTIONS = {
 }
 
 
-def find_config(name: str = 'paper_needle_driver.yaml') -> Path | None:
-    """Locate an instrument YAML: the source tree, the working directory, or the ament share."""
-    here = Path(__file__).resolve().parents[2] / 'config' / name
-    candidates = [here, Path.cwd() / 'config' / name]
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(Path(get_package_share_directory('grip_force_ros')) / 'config' / name)
-    except Exception:  # noqa: BLE001 - ament index absent or package not installed
-        pass
-    return next((c for c in candidates if c.is_file()), None)
-
-
 def rows_json(rows) -> dict:
-    """The ``--json`` document ``{"rows": [...]}``."""
+    """Build the ``--json`` document ``{"rows": [...]}``."""
     def clean(value):
         return None if isinstance(value, float) and not math.isfinite(value) else value
     return {'rows': [{k: clean(v) for k, v in row.as_dict().items()} for row in rows]}
@@ -76,7 +65,13 @@ def build_report(out: Path, config: Path | None = None) -> tuple[list, Path]:
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    config = Path(config) if config else find_config()
+    if config:
+        config = Path(config)
+    else:
+        try:
+            config = instrument_path()
+        except FileNotFoundError:     # no shipped instrument file: the schema defaults
+            config = None
     params = load_params_file(config) if config else make_params()
     source = _shown_path(config) if config else 'schema defaults (Table 1)'
     others = []
@@ -126,7 +121,7 @@ def build_report(out: Path, config: Path | None = None) -> tuple[list, Path]:
               "| reading | static M' / (r_n F0) | slope, lambda_3 = 0.765 | slope, lambda_3 = "
               f'{lam:.3f} (model) |', '|---|---|---|---|']
     for (name, fraction, s_paper), (_, _, s_ours) in zip(resistance_readings(params, 0.765),
-                                                          resistance_readings(params, lam)):
+                                                         resistance_readings(params, lam)):
         lines.append(f'| {name} | {fraction:.3f} | {s_paper:+.4f} | {s_ours:+.4f} |')
     lines += ['', 'The paper reports 0.28 N*m/A.', '', '## Figures', '']
     for fig in figures:

@@ -126,11 +126,13 @@ def compute_rows(params) -> list[Row]:
     rows.append(_row('torque slope dM/dI [N*m/A]', PAPER['torque_slope'], slope,
                      f'M = r_n F0 (lambda_3 - f) with F0 = {per_amp:.1f} N/A * I, r_n = '
                      f'{p.drive_pulley_radius * 1e3:g} mm, f = {p.drive_resistance_fraction:g}: '
-                     f'{p.drive_pulley_radius:g} * {per_amp:.1f} * ({lam:.4f} - {p.drive_resistance_fraction:g}) '
+                     f'{p.drive_pulley_radius:g} * {per_amp:.1f} * '
+                     f'({lam:.4f} - {p.drive_resistance_fraction:g}) '
                      f'= {slope:.4f}. Readings of M\' (slope with the paper\'s lambda / ours): {listing}.'))
     rows.append(_row("torque slope, paper's lambda_3 = 0.765, M' leading 2 read as typo [N*m/A]",
                      PAPER['torque_slope'], readings_paper[2][2],
-                     f'{p.drive_pulley_radius:g} * {per_amp:.1f} * (0.765 - 0.5) = {readings_paper[2][2]:.4f}: '
+                     f'{p.drive_pulley_radius:g} * {per_amp:.1f} * (0.765 - 0.5) = '
+                     f'{readings_paper[2][2]:.4f}: '
                      "the only reading of M' under which the paper's lambda_3 and slope agree."))
     rows.append(_row("torque slope, paper's lambda_3 = 0.765, M' as printed [N*m/A]",
                      PAPER['torque_slope'], readings_paper[0][2],
@@ -143,7 +145,8 @@ def compute_rows(params) -> list[Row]:
                      'The static model has no constant term (M(0) = 0 in every reading). The only '
                      "other term of M' is r_n (m_n thd_n - m0 thd_0)/2, units kg*m/s (not N*m); "
                      f'-12.44e-6 needs m_n thd_n - m0 thd_0 = {needed_rate:.4g} kg*rad/s, e.g. a drum '
-                     f'rate of {drum_rate:.2f} rad/s with thd_n = {ratio:g} thd_0; the paper states no velocity.'))
+                     f'rate of {drum_rate:.2f} rad/s with thd_n = {ratio:g} thd_0; the paper states no '
+                     'velocity.'))
 
     # finger angle coefficients, in the paper's convention theta_4 = -jaw_angle
     def theta4(motor, wrist, current):
@@ -163,10 +166,12 @@ def compute_rows(params) -> list[Row]:
     rows.append(_row('finger angle: current (creep) coefficient [rad/A]', PAPER['current_coefficient'],
                      current_c,
                      f'sum_i F0 lambda_i R_i int(eta_i - 1)/(E A r_n) per A with EA = {ea:.4g} N: finger '
-                     f'{float(finger):.4g} rad/A, wrist cable {float(wrist):.4g} rad/A, net -({float(finger):.4g} - '
+                     f'{float(finger):.4g} rad/A, wrist cable {float(wrist):.4g} rad/A, '
+                     f'net -({float(finger):.4g} - '
                      f'{p.wrist_finger_coupling:g}*{float(wrist):.4g}) = {current_c:.4g}. '
                      f'-1.046 would need EA = {needed_ea:.3g} N (cable radius {needed_r * 1e6:.1f} um), '
-                     f'the paper\'s value is {abs(PAPER["current_coefficient"] / current_c):.0f}x ours. (For scale: the '
+                     f'the paper\'s value is {abs(PAPER["current_coefficient"] / current_c):.0f}x ours. '
+                     '(For scale: the '
                      f'straight stretch F0 L/(EA r_n) of a free cable of L = {free_length * 1e3:.0f} mm '
                      'alone would give 1.046 rad/A; the paper\'s creep model has no such term.)'))
 
@@ -177,29 +182,34 @@ def compute_rows(params) -> list[Row]:
     pull_ideal = float(ideal.forward(i_max, 0.0, 0.0, 'needle').pull_out_force)
     l1 = p.jaw_moment_arm_tip
     own_formula = (PAPER['torque_slope'] * i_max + PAPER['torque_offset']) / l1
+    needed_current = (PAPER['needle_grip_losses'] * l1 - PAPER['torque_offset']) / PAPER['torque_slope']
     rows.append(_row(f'needle grip force at {i_max:g} A, with losses [N]', PAPER['needle_grip_losses'], grip,
                      f'F_J = M/l1 = {slope:.4f} * {i_max:g} / {l1:g} = {grip:.3f}. The paper\'s own '
-                     f'F_J = (0.28 I - 12.44e-6)/l1 gives {own_formula:.2f} N at {i_max:g} A; 16 N would need '
-                     f'I = {(PAPER["needle_grip_losses"] * l1 - PAPER["torque_offset"]) / PAPER["torque_slope"]:.3f} A.'))
+                     f'F_J = (0.28 I - 12.44e-6)/l1 gives {own_formula:.2f} N at {i_max:g} A; 16 N would '
+                     f'need I = {needed_current:.3f} A.'))
     rows.append(_row(f'needle grip force at {i_max:g} A, ideal [N]', PAPER['needle_grip_ideal'], grip_ideal,
                      f'ideal (lambda = 1, no static M\'): r_n F0 / l1 = {p.drive_pulley_radius:g} * '
                      f'{per_amp:.1f} * {i_max:g} / {l1:g} = {grip_ideal:.3f}; keeping M\' = r_n F0/2: '
                      f'{grip_ideal / 2:.3f}.'))
-    rows.append(_row('needle grip ratio, losses / ideal', PAPER['needle_grip_losses'] / PAPER['needle_grip_ideal'],
-                     grip / grip_ideal,
+    rows.append(_row('needle grip ratio, losses / ideal',
+                     PAPER['needle_grip_losses'] / PAPER['needle_grip_ideal'], grip / grip_ideal,
                      f'model {grip:.3f}/{grip_ideal:.3f}. The paper\'s 16/33 = 0.485 matches neither its '
                      'lambda_3 = 0.765 nor (0.765 - 0.5)/(1 - 0.5) = 0.53 (ideal keeping M\') nor '
                      '(0.765 - 0.5)/1 = 0.265.'))
     rows.append(_row(f'needle pull-out force at {i_max:g} A, with losses [N]', PAPER['pull_out_losses'], pull,
-                     f'F_L = (sqrt2 + 1) mu\' F_J = {PULL_OUT_PER_MU:.4f} * {p.needle_friction_coefficient:g} * '
+                     f'F_L = (sqrt2 + 1) mu\' F_J = {PULL_OUT_PER_MU:.4f} * '
+                     f'{p.needle_friction_coefficient:g} * '
                      f'{grip:.3f} = {pull:.3f}'))
     rows.append(_row(f'needle pull-out force at {i_max:g} A, ideal [N]', PAPER['pull_out_ideal'], pull_ideal,
-                     f'{PULL_OUT_PER_MU:.4f} * {p.needle_friction_coefficient:g} * {grip_ideal:.3f} = {pull_ideal:.3f}'))
+                     f'{PULL_OUT_PER_MU:.4f} * {p.needle_friction_coefficient:g} * {grip_ideal:.3f} = '
+                     f'{pull_ideal:.3f}'))
     printed = (1 + 1 / math.sqrt(2)) * p.needle_friction_coefficient
-    rows.append(_row('pull-out / grip ratio (paper 6/16)', PAPER['pull_out_losses'] / PAPER['needle_grip_losses'],
-                     pull / grip,
-                     f'(sqrt2 + 1) mu\' = {PULL_OUT_PER_MU * p.needle_friction_coefficient:.4f} (45 deg force '
-                     f'balance, the paper\'s F_L formula). The printed F_N1 = sqrt2 F_N2 + sqrt2 F_N3 would give '
+    rows.append(_row('pull-out / grip ratio (paper 6/16)',
+                     PAPER['pull_out_losses'] / PAPER['needle_grip_losses'], pull / grip,
+                     f'(sqrt2 + 1) mu\' = {PULL_OUT_PER_MU * p.needle_friction_coefficient:.4f} '
+                     '(45 deg force '
+                     f'balance, the paper\'s F_L formula). The printed F_N1 = sqrt2 F_N2 + sqrt2 F_N3 would '
+                     'give '
                      f'(1 + 1/sqrt2) mu\' = {printed:.4f}.'))
     rows.append(_row('pull-out / grip ratio, ideal (paper 12/33)',
                      PAPER['pull_out_ideal'] / PAPER['needle_grip_ideal'], pull_ideal / grip_ideal,
@@ -208,9 +218,12 @@ def compute_rows(params) -> list[Row]:
     # efficiency loss at maximum current
     loss = 1.0 - float(model.efficiency(i_max))
     loss_zero = 1.0 - float(model.efficiency(0.0))
-    rows.append(_row(f'efficiency loss 1 - lambda_3 at {i_max:g} A', PAPER['efficiency_loss_max_current'], loss,
-                     f'constant mu (tension_friction_gain = {p.tension_friction_gain:g}): loss {loss_zero:.4f} '
+    rows.append(_row(f'efficiency loss 1 - lambda_3 at {i_max:g} A', PAPER['efficiency_loss_max_current'],
+                     loss,
+                     f'constant mu (tension_friction_gain = {p.tension_friction_gain:g}): '
+                     f'loss {loss_zero:.4f} '
                      f'at 0 A and {loss:.4f} at {i_max:g} A. The paper\'s own lambda_3 = 0.765 gives '
                      f'{1 - PAPER["lambda_3"]:.3f}. A loss that grows with current needs tension-dependent '
-                     'friction, which the paper\'s equations do not contain (see efficiency_vs_current.png).'))
+                     'friction, which the paper\'s equations do not contain '
+                     '(see efficiency_vs_current.png).'))
     return rows

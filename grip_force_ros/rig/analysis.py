@@ -182,7 +182,7 @@ def _parameters(est) -> dict:
 
 # -- where ------------------------------------------------------------------------------
 def _region_table(groups: list[tuple[str, str, np.ndarray]]) -> list[dict]:
-    """groups: (family, label, errors in N*m). Shares of the squared error are within a family."""
+    """Tabulate groups: (family, label, errors in N*m). Shares of the squared error are within a family."""
     out = []
     families = {}
     for family, label, err in groups:
@@ -267,6 +267,7 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
     Parameters
     ----------
     runs : sequence of RigRun
+        Imported rig runs (all of them: the splits are made here).
     quick : bool
         Estimators on the holdout split and leave-one-level-out, effects on the
         holdout split only, no sensitivity sweep (for tests and CI).
@@ -311,7 +312,7 @@ def analyse(runs: Sequence, *, quick: bool = False, progress=None) -> dict:
             say(f'effect {label}: {cand.name}')
             if cand.name == LINEAR.name:
                 rows.append({k: estimators[0][k] for k in ('name', 'effect', 'description',
-                                                             'holdout_rmse_mNm', 'cv_rmse_mNm')})
+                                                           'holdout_rmse_mNm', 'cv_rmse_mNm')})
                 continue
             row = evaluate(cand, runs, cache, kinds=() if quick else ('level',))
             rows.append({k: row[k] for k in ('name', 'effect', 'description', 'holdout_rmse_mNm',

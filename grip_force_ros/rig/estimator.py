@@ -458,8 +458,11 @@ class CableFrictionObserver:
                              self._prior)
 
     def _information(self, alpha):
-        """Weight (0..1) of an inverted sample: the inversion divides the current noise by
-        alpha(s), so its variance grows as 1/alpha^2; weight = (alpha/alpha_max)^2."""
+        """Return the weight (0..1) of an inverted sample: (alpha/alpha_max)^2.
+
+        The inversion divides the current noise by alpha(s), so its variance grows as
+        1/alpha^2.
+        """
         coef = dict(zip(self.fit_result.names, self.fit_result.values))
         alpha_max = abs(coef['alpha0']) + abs(coef.get('alpha1', 0.0)) + abs(coef.get('alpha2', 0.0))
         return (alpha / alpha_max) ** 2

@@ -180,7 +180,7 @@ def _convert(name, fx, ty, frequency, level, header, raw) -> RigRun:
 
 
 def run_files(directory) -> list[Path]:
-    """The ``XY.TXT`` run files of a rig folder, sorted by name.
+    """List the ``XY.TXT`` run files of a rig folder, sorted by name.
 
     Raises
     ------
@@ -207,7 +207,7 @@ EXTRA_COLUMNS = ('current_command', 'motor_shaft_angle', 'disk_torque', 'load_co
 
 
 def to_contract_log(run: RigRun) -> dict[str, np.ndarray]:
-    """The run as a log in the docs/design.md CSV contract (``jaw_torque`` variant).
+    """Convert the run to a log in the docs/design.md CSV contract (``jaw_torque`` variant).
 
     Columns: ``t`` (s), ``current`` (A), ``motor_angle`` (rad, input disk),
     ``wrist_angle`` (rad, 0: the rig does not move the wrist), ``jaw_angle`` (rad),

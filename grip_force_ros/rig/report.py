@@ -41,7 +41,7 @@ def plot_timeseries(runs: Sequence, path: Path, cache: dict | None = None) -> Pa
 
 
 def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
-    """Current against jaw torque while sliding: two friction branches and the fitted lines."""
+    """Plot current against jaw torque while sliding: two friction branches and the fitted lines."""
     plt = pyplot()
     settings = ObserverSettings()
     fig, ax = plt.subplots(figsize=(8, 6))
@@ -190,7 +190,8 @@ def write_report(result: dict, runs: Sequence, out_dir, *, cache: dict | None = 
               f"{lin['parameters']['intercept_Nm'] * 1e3:.2f} mN m.", '',
               '![friction branches](realdata_friction_branches.png)', '',
               '## Which effects (held-out RMSE on the 20/40 % runs, mN m)', '',
-              '| group | variant | effect | holdout | CV level | change vs full |', '|---|---|---|---|---|---|']
+              '| group | variant | effect | holdout | CV level | change vs full |',
+              '|---|---|---|---|---|---|']
     for group in ('ladder', 'drop_one', 'add_one'):
         for r in result['effects'][group]:
             ch = r.get('change_vs_full_mNm')

@@ -1,25 +1,17 @@
-"""Names of the optional unmodelled effects of the simulated instrument.
+"""The effects the simulated instrument can switch on, and the check of an ``effects`` dict.
 
-The names are the DESIGN.md vocabulary; each is a parameter of the 'effects'
-group (``params/sim.py``) whose value is the effect's strength, 0 = off.
+The names, units and ranges are the effect registry's (:mod:`grip_force_ros.effects`);
+each is a parameter of the 'effects' group (``params/sim.py``) whose value is the
+effect's strength, 0 = off.
 """
 from __future__ import annotations
 
 from typing import Any, Mapping
 
-#: The effects the sim can switch on, DESIGN.md names (``none`` is not an effect).
-EFFECT_NAMES: tuple[str, ...] = (
-    'pivot_coulomb_friction',      # N*m, stick-slip torque at the jaw pivot
-    'viscous_friction',            # N*m*s/rad, extra viscous torque at the jaw pivot
-    'cable_hysteresis',            # -, Dahl loop half-width as a fraction of the tension
-    'backlash',                    # rad, dead band at the jaw
-    'tension_dependent_friction',  # 1/N, mu(T) = mu*(1 + g*|T|)
-    'viscoelastic_creep',          # -, fraction of the jaw torque that relaxes under load
-    'sensor_delay',                # s, load-cell transport delay
-    'torque_constant_drift',       # -, K = K0*(1 - s*heat)
-    'force_sensor_offset',         # N, load-cell offset
-    'position_spring',             # N*m, jaw return spring: opening torque at the closed jaw
-)
+from grip_force_ros.effects import SIMULATED
+
+#: The effects the sim can switch on, docs/design.md names (``none`` is not an effect).
+EFFECT_NAMES: tuple[str, ...] = SIMULATED
 
 
 class SimError(ValueError):

@@ -49,7 +49,7 @@ class LoopLatency:
         self.states += 1
 
     def command_received(self, stamp_ns: int, arrival_ns: int) -> int | None:
-        """A command arrived (``arrival_ns`` on the states' clock); its round trip (ns) or None.
+        """Note a command's arrival (``arrival_ns`` on the states' clock); its round trip (ns) or None.
 
         None when the command does not answer a remembered, still unanswered state
         (a timer-fallback command stamped with the controller's clock, a second

@@ -287,8 +287,11 @@ class InstrumentSim:
         self._measurement = None
 
     def reset(self) -> None:
-        """Back to rest: no tension, jaw at ``initial_jaw_angle``, wrist at ``initial_wrist_angle``,
-        time 0, effect states and noise generator re-seeded."""
+        """Go back to rest, time 0.
+
+        No tension, jaw at ``initial_jaw_angle``, wrist at ``initial_wrist_angle``,
+        effect states and noise generator re-seeded.
+        """
         p = self.params
         self._t = 0.0
         self._rng = random.Random(self._seed)
@@ -505,7 +508,7 @@ class InstrumentSim:
         return hist[0][1]  # pragma: no cover
 
     def measure(self) -> SimMeasurement:
-        """The sensor readings now (noisy; the same object until the next :meth:`step`)."""
+        """Return the sensor readings now (noisy; the same object until the next :meth:`step`)."""
         if self._measurement is None:
             g = self._rng.gauss
             sc, sm, sv, sw, sj, sjv, sf = self._noise
@@ -537,8 +540,10 @@ class InstrumentSim:
                 'torque_constant': self.params.torque_constant * (1.0 - self._drift * self._heat)}
 
     def energy(self) -> float:
-        """Mechanical energy stored in the plant (J): kinetic + cable + contact springs
-        + the position spring (0 at its rest angle)."""
+        """Return the mechanical energy stored in the plant (J).
+
+        Kinetic + cable + contact springs + the position spring (0 at its rest angle).
+        """
         k1, k2, g2 = self._k1, self._k2, self._backlash_half
         u = self._x - self._rn * (self._coupling * self._wrist - self._phi)
         slack = u - g2 if u > g2 else (u + g2 if u < -g2 else 0.0)
@@ -557,4 +562,3 @@ class InstrumentSim:
             rest = self._spring_closed / self._spring_rate
             spring += 0.5 * self._spring_rate * (rest - self._phi) ** 2
         return kinetic + cable + spring
-
