@@ -111,8 +111,10 @@ python_tools() {
     "$s"/ros2cli/{ros2cli,ros2pkg,ros2run,ros2node,ros2service,ros2param,ros2topic,ros2interface,ros2lifecycle} \
     "$s/rosidl_runtime_py" "$s"/launch/{launch,launch_xml,launch_yaml} "$s"/launch_ros/{launch_ros,ros2launch}
 }
+# pip builds one package at a time: run it beside the cmake builds below (2 cores).
 step ros2cli_launch "$(tree_key "$vendor/ros2/ros2cli" "$vendor/ros2/rosidl_runtime_py" \
-  "$vendor/ros2/launch" "$vendor/ros2/launch_ros")-$pins_key" python_tools
+  "$vendor/ros2/launch" "$vendor/ros2/launch_ros")-$pins_key" python_tools &
+python_tools_pid=$!
 
 # 3. composition_interfaces: plain cmake, installed into the venv's prefix.
 composition_interfaces() {
@@ -149,6 +151,8 @@ if env -u PYTHONPATH "$py" -c 'import crtk_msgs.msg' 2>/dev/null && [ ! -d "$ros
 else
   step crtk_msgs "$(tree_key "$vendor/crtk_msgs")-$pins_key" crtk_msgs
 fi
+
+wait "$python_tools_pid" || exit 1
 
 # 5. PyKDL from Debian, the CRTK and dVRK Python clients.
 pykdl() {
