@@ -10,11 +10,13 @@ from __future__ import annotations
 import importlib.util
 import re
 import signal
+import subprocess
 import sysconfig
 from pathlib import Path
 
 
-from _ros_tools import ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop, stop_daemon
+from _ros_tools import (ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
+                        stop_daemon, vendor_dir)
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
 
@@ -115,3 +117,16 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
     log = (tmp_path / 'controller.log').read_text()
     assert code == 0, log
     assert 'Traceback' not in log, log
+
+
+def test_dev_ros2_runs_the_cli_from_the_callers_directory(tmp_path):
+    require_ros_tools()
+    # ./dev with the same vendored sources as this run: its set-up stamp matches, nothing rebuilds.
+    env = ros_env(GRIP_FORCE_VENDOR=str(vendor_dir()))
+    prefix = subprocess.run([str(ROOT / 'dev'), 'ros2', 'pkg', 'prefix', 'grip_force_ros'],
+                            capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert prefix.returncode == 0, prefix.stderr
+    assert prefix.stdout.strip() == str(VENV / 'ros' / 'install' / 'grip_force_ros')
+    where = subprocess.run([str(ROOT / 'dev'), 'ros2', 'pkg', 'xml', 'grip_force_ros', '--tag', 'name'],
+                           capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert where.returncode == 0 and where.stdout.strip() == 'grip_force_ros', where
