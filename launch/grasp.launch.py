@@ -19,7 +19,8 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from grip_force_ros.launch_args import DEFAULT_INSTRUMENT, INTERFACES, instrument_file
+from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_file
+from grip_force_ros.topics import INTERFACES
 
 PACKAGE = 'grip_force_ros'
 EXECUTABLES = ('sim_instrument', 'controller', 'master')

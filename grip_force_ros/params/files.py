@@ -1,7 +1,7 @@
-"""Arguments of the package's launch files (launch/*.launch.py), without ROS imports.
+"""Instrument parameter files by name or path (the launch files' ``instrument:=``).
 
-The launch files resolve ``instrument:=`` with :func:`instrument_file` and accept the
-``interface:=`` profiles in :data:`INTERFACES`; tests call them directly.
+No ROS imports: launch/*.launch.py pass the installed ``share/grip_force_ros/config``;
+tests call :func:`instrument_file` directly.
 """
 from __future__ import annotations
 
@@ -9,13 +9,6 @@ from pathlib import Path
 
 #: Default ``instrument:=``: the paper's needle driver (config/paper_needle_driver.yaml).
 DEFAULT_INSTRUMENT = 'paper_needle_driver.yaml'
-
-#: ``interface:=`` profiles: the names of the topics the nodes use. ``crtk``: the package's
-#: own CRTK-style names (grip_force_ros/topics.py). Another profile (``dvrk``: the dVRK
-#: PSM's topics) is added with the dVRK work; the argument is declared now so that the
-#: launch files' interface stays the same.
-INTERFACES = ('crtk',)
-
 
 def instrument_file(value: str, config_dir: str | Path) -> Path:
     """The parameter YAML that ``instrument:=value`` names.
