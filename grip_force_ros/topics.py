@@ -32,3 +32,7 @@ JAW_FRAME = 'jaw'
 #: Every topic a demo records (the rosbag2 of a run).
 RECORDED = (MASTER_JS, INSTRUMENT_JS, ACTUATOR_JS, SERVO_CURRENT, ESTIMATED_FORCE,
             TARGET_FORCE, MEASURED_FORCE, DIAGNOSTICS)
+
+#: Topic-name profiles (the launch files' ``interface:=``). ``crtk``: the names above. The
+#: dVRK PSM's names (``dvrk``) come with the dVRK work; the launch argument exists already.
+INTERFACES = ('crtk',)

@@ -8,7 +8,7 @@ EXCLUDED = ()
 
 
 def lint_files() -> list[str]:
-    """Every .py file of grip_force_ros/ and test/ (relative to the repository) but :data:`EXCLUDED`."""
-    files = sorted(p.relative_to(ROOT).as_posix() for folder in ('grip_force_ros', 'test')
+    """List the .py files the linters check (relative to the repository), without :data:`EXCLUDED`."""
+    files = sorted(p.relative_to(ROOT).as_posix() for folder in ('grip_force_ros', 'test', 'launch', 'tools')
                    for p in (ROOT / folder).rglob('*.py'))
     return [f for f in files if f not in EXCLUDED]

@@ -69,12 +69,13 @@ def test_bag_messages_are_standard_ros_messages(tmp_path):
     seen = {}
     with Reader(bag) as reader:
         for conn, _, raw in reader.messages():
-            if conn.topic in seen:
+            topic = conn.topic.lstrip('/')   # the bag has fully qualified names
+            if topic in seen:
                 continue
             cls = {'sensor_msgs/msg/JointState': JointState,
                    'geometry_msgs/msg/WrenchStamped': WrenchStamped}.get(conn.msgtype)
             if cls is not None:
-                seen[conn.topic] = rclpy_ser.deserialize_message(bytes(raw), cls)
+                seen[topic] = rclpy_ser.deserialize_message(bytes(raw), cls)
     act = seen[topics.ACTUATOR_JS]
     assert list(act.name) == [topics.DRUM_JOINT]
     assert act.effort[0] == pytest.approx(log['current'][0])

@@ -29,6 +29,8 @@ ROSDEP_KEYS = {
     'pytest': 'python3-pytest',
     'hypothesis': 'python3-hypothesis',
     'setuptools': 'python3-setuptools',
+    'launch': 'launch',
+    'launch_ros': 'launch_ros',
 }
 #: PyPI name of each import without a rosdep key (as pinned in requirements.txt).
 PIP_NAMES = {'control': 'control', 'rosbags': 'rosbags'}
@@ -37,6 +39,7 @@ NOT_IMPORTED = {
     'std_msgs': 'the Header of every stamped message',
     'python3-pytest-timeout': "pytest.ini's --timeout",
     'python3-colcon-common-extensions': 'test/test_colcon_build.py runs colcon',
+    'ros2launch': 'the `ros2 launch` verb of launch/*.launch.py',
 }
 RUNTIME_TAGS = ('depend', 'exec_depend')
 TEST_TAGS = RUNTIME_TAGS + ('test_depend',)
@@ -111,7 +114,7 @@ def check(imports: dict[str, set[str]], tags: tuple[str, ...]) -> list[str]:
 
 
 def test_every_import_of_the_package_is_a_declared_runtime_dependency():
-    imports = third_party_imports(ROOT / 'grip_force_ros')
+    imports = third_party_imports(ROOT / 'grip_force_ros', ROOT / 'launch')
     assert {'rclpy', 'numpy', 'control', 'rosbags'} <= set(imports)      # the scan sees them
     assert check(imports, RUNTIME_TAGS) == []
 
@@ -130,7 +133,7 @@ def test_the_build_script_imports_are_build_dependencies():
 
 def test_every_declared_key_is_used():
     used = {ROSDEP_KEYS.get(name) for name in third_party_imports(
-        ROOT / 'grip_force_ros', ROOT / 'test', ROOT / 'setup.py')}
+        ROOT / 'grip_force_ros', ROOT / 'launch', ROOT / 'test', ROOT / 'setup.py')}
     unused = keys_in(BUILD_TAGS + TEST_TAGS) - used - set(NOT_IMPORTED)
     assert unused == set(), f'declared in package.xml but imported nowhere: {sorted(unused)}'
 

@@ -186,9 +186,10 @@ def write_bag(path, log: Mapping[str, np.ndarray], *, storage: str = 'mcap',
                'tx': zeros, 'ty': zeros, 'tz': log.get('jaw_torque', zeros)}
 
     with Writer(path, version=9, storage_plugin=plugins[storage]) as writer:
-        act = writer.add_connection(topics.ACTUATOR_JS, _JS, typestore=ts)
-        ins = writer.add_connection(topics.INSTRUMENT_JS, _JS, typestore=ts)
-        wr = writer.add_connection(topics.MEASURED_FORCE, _WRENCH, typestore=ts)
+        # Fully qualified names, as `ros2 bag record` writes them.
+        act = writer.add_connection('/' + topics.ACTUATOR_JS, _JS, typestore=ts)
+        ins = writer.add_connection('/' + topics.INSTRUMENT_JS, _JS, typestore=ts)
+        wr = writer.add_connection('/' + topics.MEASURED_FORCE, _WRENCH, typestore=ts)
         diag = writer.add_connection(topics.DIAGNOSTICS, _DIAG, typestore=ts)
         objects = log.get(OBJECT_COLUMN)
         if objects is not None:

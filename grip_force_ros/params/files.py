@@ -56,16 +56,20 @@ def config_dir() -> Path:
         return _SOURCE_CONFIG
 
 
-def instrument_path(name_or_path: str | os.PathLike | None = None) -> Path:
+def instrument_path(name_or_path: str | os.PathLike | None = None,
+                    directory: str | os.PathLike | None = None) -> Path:
     """Find an instrument YAML by path, or by name in :func:`config_dir`.
 
     Parameters
     ----------
     name_or_path : str or path-like, optional
-        An existing file (returned as given); or a name with or without ``.yaml``
-        ('long_jaw_grasper'), or a path whose file name is looked up in
-        :func:`config_dir` ('config/long_jaw_grasper.yaml' from any directory).
+        An existing file (returned as given; ``~`` expanded); or a name with or without
+        ``.yaml`` ('long_jaw_grasper'), or a path whose file name is looked up in the
+        directory ('config/long_jaw_grasper.yaml' from any directory).
         None (default): :data:`DEFAULT_INSTRUMENT`.
+    directory : str or path-like, optional
+        Where names are looked up; default :func:`config_dir`. The launch files pass the
+        installed ``share/grip_force_ros/config`` (their ``instrument:=`` argument).
 
     Returns
     -------
@@ -76,14 +80,18 @@ def instrument_path(name_or_path: str | os.PathLike | None = None) -> Path:
     FileNotFoundError
         Naming what was asked for and where it looked.
     """
-    p = Path(DEFAULT_INSTRUMENT if name_or_path is None else name_or_path)
-    if p.is_file():
+    asked = DEFAULT_INSTRUMENT if name_or_path is None else str(name_or_path).strip()
+    directory = config_dir() if directory is None else Path(directory)
+    p = Path(asked).expanduser()
+    if asked and p.is_file():
         return p
-    directory = config_dir()
-    for candidate in (directory / p.name, directory / f'{p.name}{SUFFIX}'):
-        if candidate.is_file():
-            return candidate
-    raise FileNotFoundError(f'no instrument YAML {str(p)!r} (looked in {directory})')
+    if asked:
+        for candidate in (directory / p.name, directory / f'{p.name}{SUFFIX}'):
+            if candidate.is_file():
+                return candidate
+    known = ', '.join(f.stem for f in sorted(directory.glob(f'*{SUFFIX}'))) or 'none'
+    raise FileNotFoundError(f'no instrument YAML {asked!r} (looked in {directory}; '
+                            f'instruments there: {known}; or give a path to a YAML)')
 
 
 def list_instruments() -> list[Path]:

@@ -1,0 +1,125 @@
+"""Helpers for the tests of the ROS tools that ``./dev`` sets up (tools/ros_tools.sh).
+
+Every command runs as a user would run it: ``bash -c 'source .venv/ros_setup.bash &&
+exec CMD'``, with the test process's ROS_DOMAIN_ID and loopback discovery
+(test/conftest.py). CLI calls that can use the ros2 daemon pass ``--no-daemon``;
+:func:`stop_daemon` stops one that another verb may have started.
+
+Where the vendored sources are missing (a clone without ../shared), the tests that
+need the tools skip with the set-up's reason; where they are present but the tools
+are not set up, the tests fail: on this machine and in CI they must run.
+"""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+VENV = Path(sys.prefix)
+SETUP_FILE = VENV / 'ros_setup.bash'
+STATUS_FILE = VENV / 'ros_tools.status'
+
+
+def vendor_dir() -> Path:
+    """Where ./dev looks for the vendored sources ($GRIP_FORCE_VENDOR, else ../shared/vendor)."""
+    return Path(os.environ.get('GRIP_FORCE_VENDOR') or ROOT.parent / 'shared' / 'vendor')
+
+
+def require_ros_tools() -> None:
+    """Skip (no vendored sources) or fail (sources there, tools not set up)."""
+    if SETUP_FILE.is_file():
+        return
+    status = STATUS_FILE.read_text().strip() if STATUS_FILE.is_file() else 'never set up (run ./dev setup)'
+    if vendor_dir().is_dir():
+        pytest.fail(f'the vendored sources are at {vendor_dir()} but the ROS tools are not set '
+                    f'up in {VENV}: {status}')
+    pytest.skip(f'ROS tools not set up: {status}')
+
+
+def ros_env(**extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+    env.update(extra)
+    return env
+
+
+def sourced(*args: str) -> list[str]:
+    """Return the command line that runs ``args`` after sourcing the setup file."""
+    return ['bash', '-c', 'source "$0" && exec "$@"', str(SETUP_FILE), *args]
+
+
+def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
+        env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run a command in the sourced environment; output captured as text."""
+    return subprocess.run(sourced(*args), capture_output=True, text=True, timeout=timeout,
+                          cwd=cwd or ROOT, env=env or ros_env())
+
+
+def _default_sigint():
+    # A process started in the background by a non-interactive shell inherits SIGINT
+    # ignored, and Python then keeps ignoring it: give the child the default disposition.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start(*args: str, log: Path, cwd: Path | str | None = None,
+          env: dict[str, str] | None = None) -> subprocess.Popen:
+    """Start a long-running command (``exec``-ed: the pid is the command's) in its own session."""
+    out = open(log, 'w')
+    try:
+        return subprocess.Popen(sourced(*args), stdout=out, stderr=subprocess.STDOUT,
+                                cwd=cwd or ROOT, env=env or ros_env(), start_new_session=True,
+                                preexec_fn=_default_sigint)
+    finally:
+        out.close()
+
+
+def retry(fn, ok, timeout: float = 60.0, pause: float = 0.5):
+    """Call ``fn()`` until ``ok(result)`` or the timeout; return the last result."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = fn()
+        if ok(result) or time.monotonic() > deadline:
+            return result
+        time.sleep(pause)
+
+
+def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, group: bool = False,
+         timeout: float = 30.0) -> int | None:
+    """Signal the process (or its group) and wait; kill its group if it does not end."""
+    if proc.poll() is None:
+        if group:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        return None
+
+
+def stop_daemon(env: dict[str, str] | None = None) -> None:
+    """Stop the ros2 daemon of this domain (127.0.0.1:11511+domain) if a verb started one."""
+    subprocess.run(sourced('ros2', 'daemon', 'stop'), capture_output=True, text=True,
+                   timeout=30, cwd=ROOT, env=env or ros_env())
+
+
+_FINISHED = re.compile(r'\[(?P<name>[\w.]+)-\d+\]: process has finished cleanly \[pid (?P<pid>\d+)\]')
+_DIED = re.compile(r'\[(?P<name>[\w.]+)-\d+\]: process has died \[pid (?P<pid>\d+), '
+                   r'exit code (?P<code>-?\d+)')
+
+
+def launch_exit_codes(text: str) -> dict[str, int]:
+    """Exit code of each process, as ``ros2 launch`` reports them in its output."""
+    codes = {m['name']: 0 for m in _FINISHED.finditer(text)}
+    codes.update({m['name']: int(m['code']) for m in _DIED.finditer(text)})
+    return codes

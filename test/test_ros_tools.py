@@ -1,0 +1,132 @@
+"""The ROS 2 tools of the development environment (tools/ros_tools.sh, issue 14.1).
+
+After ``source .venv/ros_setup.bash``: the real ``ros2`` CLI finds grip_force_ros through
+the ament index (colcon, symlink install), ``ros2 run`` starts its executables,
+``ros2 param``/``node``/``topic``/``lifecycle`` talk to them; one copy of grip_force_ros
+is imported. Plus the wheels' CMake path fix (tools/fix_wheel_cmake_paths.py).
+"""
+from __future__ import annotations
+
+import importlib.util
+import re
+import signal
+import subprocess
+import sysconfig
+from pathlib import Path
+
+
+from _ros_tools import (ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
+                        stop_daemon, vendor_dir)
+
+EXECUTABLES = ('controller', 'master', 'sim_instrument')
+
+
+def _load_fix_script():
+    spec = importlib.util.spec_from_file_location('fix_wheel_cmake_paths',
+                                                  ROOT / 'tools' / 'fix_wheel_cmake_paths.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_fix_wheel_cmake_paths_repoints_and_is_idempotent(tmp_path):
+    import numpy
+    fix = _load_fix_script()
+    cmake = tmp_path / 'share' / 'pkg' / 'cmake' / 'export_pkg__rosidl_generator_pyExport.cmake'
+    cmake.parent.mkdir(parents=True)
+    cmake.write_text('INTERFACE_INCLUDE_DIRECTORIES "/opt/python/cp311-cp311/include/python3.11;'
+                     '/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include"\n')
+    other = tmp_path / 'share' / 'ament_index' / 'parent_prefix_path' / 'pkg'
+    other.parent.mkdir(parents=True)
+    other.write_text('/opt/python/cp311-cp311')   # not a .cmake file: left alone
+    assert fix.fix(tmp_path) == [cmake]
+    text = cmake.read_text()
+    assert text == (f'INTERFACE_INCLUDE_DIRECTORIES "{sysconfig.get_paths()["include"]};'
+                    f'{numpy.get_include()}"\n')
+    assert fix.fix(tmp_path) == []            # idempotent
+    assert cmake.read_text() == text
+    assert other.read_text() == '/opt/python/cp311-cp311'
+
+
+def test_venv_cmake_files_name_this_python():
+    require_ros_tools()
+    fix = _load_fix_script()
+    assert fix.fix(VENV) == []    # the set-up ran it: nothing left to repoint
+    stale = [p for p in (VENV / 'share').rglob('*.cmake')
+             if '/opt/python/cp3' in p.read_text(errors='replace')]
+    assert not stale, stale[:5]
+
+
+def test_setup_file_ament_index_and_one_grip_force_ros(tmp_path):
+    require_ros_tools()
+    prefix = run('ros2', 'pkg', 'prefix', 'grip_force_ros')
+    assert prefix.returncode == 0, prefix.stderr
+    install = Path(prefix.stdout.strip())
+    assert install == VENV / 'ros' / 'install' / 'grip_force_ros'
+    exes = run('ros2', 'pkg', 'executables', 'grip_force_ros')
+    assert exes.returncode == 0, exes.stderr
+    listed = {line.split()[1] for line in exes.stdout.splitlines() if line.strip()}
+    assert set(EXECUTABLES) <= listed, exes.stdout
+    for name in EXECUTABLES:
+        assert (install / 'lib' / 'grip_force_ros' / name).is_file()
+    share = install / 'share' / 'grip_force_ros'
+    for launch_file in ('grasp.launch.py', 'controller.launch.py'):
+        assert (share / 'launch' / launch_file).resolve() == ROOT / 'launch' / launch_file
+    assert (share / 'config' / 'paper_needle_driver.yaml').resolve() == \
+        ROOT / 'config' / 'paper_needle_driver.yaml'
+    # One grip_force_ros: outside the repository, the colcon (symlinked) package comes
+    # first on PYTHONPATH; its files are the repository's, so edits are live.
+    where = run('python', '-c', 'import grip_force_ros, crtk_msgs, launch_ros; '
+                'print(grip_force_ros.__file__)', cwd=tmp_path)
+    assert where.returncode == 0, where.stderr
+    imported = Path(where.stdout.strip())
+    assert imported.parent == VENV / 'ros' / 'build' / 'grip_force_ros' / 'grip_force_ros'
+    assert imported.resolve() == ROOT / 'grip_force_ros' / '__init__.py'
+
+
+def test_ros2_run_param_node_topic_lifecycle(tmp_path):
+    require_ros_tools()
+    env = ros_env()
+    proc = start('ros2', 'run', 'grip_force_ros', 'controller', '--ros-args', '--params-file',
+                 'config/paper_needle_driver.yaml', log=tmp_path / 'controller.log', env=env)
+    try:
+        got = retry(lambda: run('ros2', 'param', 'get', '/controller', 'instrument_name',
+                                '--no-daemon', env=env),
+                    lambda r: r.returncode == 0, timeout=60)
+        assert got.stdout.strip() == 'String value is: paper_needle_driver', \
+            (got.stdout, got.stderr, (tmp_path / 'controller.log').read_text())
+        nodes = retry(lambda: run('ros2', 'node', 'list', '--no-daemon', '--spin-time', '2', env=env),
+                      lambda r: '/controller' in r.stdout.split(), timeout=30)
+        assert '/controller' in nodes.stdout.split(), nodes
+        topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
+                       lambda r: '/instrument/actuator/servo_jf' in r.stdout.split(), timeout=30)
+        assert {'/instrument/actuator/servo_jf', '/grip/estimated_force', '/diagnostics'} <= \
+            set(topics.stdout.split()), topics.stdout
+        # ros2lifecycle: imports, lists its verbs, and finds no lifecycle node (yet).
+        helped = run('ros2', 'lifecycle', '--help', env=env)
+        assert helped.returncode == 0, helped.stderr
+        assert {'get', 'list', 'nodes', 'set'} <= set(re.findall(r'^\s+(\w+)\s', helped.stdout, re.M))
+        lifecycle = run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time', '2', env=env)
+        assert lifecycle.returncode == 0, lifecycle.stderr
+        assert '/controller' not in lifecycle.stdout.split()
+        assert proc.poll() is None
+    finally:
+        # ros2 run does not pass SIGINT on to its child: signal the process group.
+        code = stop(proc, signal.SIGINT, group=True)
+        stop_daemon(env)
+    log = (tmp_path / 'controller.log').read_text()
+    assert code == 0, log
+    assert 'Traceback' not in log, log
+
+
+def test_dev_ros2_runs_the_cli_from_the_callers_directory(tmp_path):
+    require_ros_tools()
+    # ./dev with the same vendored sources as this run: its set-up stamp matches, nothing rebuilds.
+    env = ros_env(GRIP_FORCE_VENDOR=str(vendor_dir()))
+    prefix = subprocess.run([str(ROOT / 'dev'), 'ros2', 'pkg', 'prefix', 'grip_force_ros'],
+                            capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert prefix.returncode == 0, prefix.stderr
+    assert prefix.stdout.strip() == str(VENV / 'ros' / 'install' / 'grip_force_ros')
+    where = subprocess.run([str(ROOT / 'dev'), 'ros2', 'pkg', 'xml', 'grip_force_ros', '--tag', 'name'],
+                           capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert where.returncode == 0 and where.stdout.strip() == 'grip_force_ros', where
