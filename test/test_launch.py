@@ -37,7 +37,7 @@ def test_instrument_by_path(tmp_path, monkeypatch):
     assert instrument_path(str(own), CONFIG) == own
     monkeypatch.chdir(tmp_path)
     assert instrument_path('./my_tool.yaml', CONFIG).resolve() == own   # relative to the cwd
-    assert instrument_path('my_tool.yaml', CONFIG) == own        # an existing file wins
+    assert instrument_path('my_tool.yaml', CONFIG).resolve() == own     # an existing file wins
 
 
 def test_unknown_instrument_lists_the_installed_ones(tmp_path):
