@@ -499,10 +499,10 @@ class CableFrictionObserver:
         names = blocks[0][0]
         ata = sum(b[1] for b in blocks)
         aty = sum(b[2] for b in blocks)
-        values = np.linalg.solve(ata, aty)
+        values = self._solve(names, ata, aty)
         n = len(blocks)
         if n > 2:
-            jack = np.array([np.linalg.solve(ata - b[1], aty - b[2]) for b in blocks])
+            jack = np.array([self._solve(names, ata - b[1], aty - b[2]) for b in blocks])
             std = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(0)) ** 2, axis=0))
             phys_jack = [_physical(names, j) for j in jack]
         else:
@@ -517,6 +517,20 @@ class CableFrictionObserver:
         self.fit_result = FitResult(names, values, std, physical, sum(b[3] for b in blocks))
         self._prior = sum(b[4] for b in blocks) / sum(b[5] for b in blocks)   # mean torque
         return self
+
+    @staticmethod
+    def _solve(names, ata, aty):
+        """Least squares from normal equations; the load-dependent efficiency term is kept
+        only with the physical sign (>= 0: friction grows at least in proportion to the
+        load, efficiency never rises with it), else fitted as 0."""
+        values = np.linalg.solve(ata, aty)
+        if 'alpha1_quad' in names:
+            q = names.index('alpha1_quad')
+            if values[q] < 0:
+                keep = [i for i in range(len(names)) if i != q]
+                values = np.zeros(len(names))
+                values[keep] = np.linalg.solve(ata[np.ix_(keep, keep)], aty[keep])
+        return values
 
     def _normal_equations(self, source, cache=None):
         """(names, A'A, A'y, sliding samples, sum of torque, samples) of one run."""
