@@ -217,7 +217,9 @@ class ObserverSettings:
         The friction split between the branches grows with the square of the load
         as well (a forward term ``alpha1_quad * s * tau**2``): efficiency falls as
         the load grows (the cable's slack side unloads; found across the 10-100 %
-        loads of ``Tool_4_Maryland_L_4``). Needs ``efficiency``.
+        loads of ``Tool_4_Maryland_L_4``). Needs ``efficiency``. Off by default (one
+        folder of 10-40 % loads cannot see it); on in the transfer model
+        (:data:`grip_force_ros.rig.transfer.TRANSFER_SETTINGS`).
     coulomb : bool
         pivot_coulomb_friction: constant friction b1 * s.
     hysteresis : bool
@@ -254,7 +256,7 @@ class ObserverSettings:
     """
 
     efficiency: bool = True
-    load_dependent_efficiency: bool = True
+    load_dependent_efficiency: bool = False
     coulomb: bool = True
     hysteresis: bool = True
     viscous: bool = True
