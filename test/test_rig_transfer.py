@@ -171,13 +171,19 @@ def test_corrupting_the_jaw_side_of_scored_runs_leaves_predictions_bit_identical
     assert set(preds[0]) == {'00', '37', '49'}
     for name in preds[0]:
         assert np.array_equal(preds[0][name], preds[1][name])
-    # the calibration run's jaw torque is read: changing it changes the calibrated estimate
+    # the calibration run's jaw torque is read: scaling it changes the calibrated estimate ...
     test = load_folder(clean)
-    cal = test.run('24')
+    cal, other = test.run('24'), test.run('00')
+    base = calibrate(model, [cal])
+    scaled = type(cal)(**dict(cal.__dict__, jaw_torque=cal.jaw_torque * 1.3))
+    assert not np.allclose(calibrate(model, [scaled]).estimator.predict(other),
+                           base.estimator.predict(other))
+    # ... while a constant offset is the sensor zero the jig finds, and nothing else moves
     shifted = type(cal)(**dict(cal.__dict__, jaw_torque=cal.jaw_torque + 0.01))
-    other = test.run('00')
-    assert not np.allclose(calibrate(model, [shifted]).estimator.predict(other),
-                           calibrate(model, [cal]).estimator.predict(other))
+    moved = calibrate(model, [shifted])
+    assert moved.target_zero_Nm == pytest.approx(base.target_zero_Nm + 0.01, abs=1e-12)
+    assert np.allclose(moved.estimator.predict(other), base.estimator.predict(other),
+                       rtol=0, atol=1e-9)
     assert set(FORBIDDEN_INPUTS) >= {'jaw_torque', 'jaw_angle', 'disk_torque', 'load_command'}
 
 

@@ -31,10 +31,13 @@ what remains that can be fixed:
 Scoring target. Zero-shot: the jaw torque sensor as recorded (the rig firmware tares
 it at the start of each session, header ``torque0AverageTorque``), with the sign of
 the header's spindle convention (upstream's loader negates the right spindle). With
-a calibration run: the sign is fixed by the calibration run (the jaw holds a closing
-torque against the resisting motor, so its mean is positive); the zero stays as
-recorded, and a residual zero is what the calibration's ``zeros`` group absorbs. The
-scored runs' jaw-side columns are read only to score.
+a calibration run, the calibration run fixes the sensor's sign and zero, as a jig
+would: the sign so that its mean jaw torque is positive (the jaw holds a closing
+torque against the resisting motor), the zero as its mean reading minus the
+resisting motor's torque (front-end gain x command, the gain fitted on the training
+folders: 0.1175 N*m/A in ``L_2``, 0.1171 in ``L_4``; the sensor zeros found that way:
++0.1 and +1.3 mN*m). Training folders are put in the same frame (their own zeros
+removed). The scored runs' jaw-side columns are read only to score.
 """
 from __future__ import annotations
 
@@ -310,9 +313,9 @@ class CalibrationGroup:
 #: The per-instrument groups. Prior widths are engineering tolerances: motor torque
 #: constant and pulley radii (Maxon datasheet +-5 %, here +-3 % on their product),
 #: friction efficiency of cable over pulleys (+-30 % of the direction-dependent part),
-#: Coulomb friction from pretension (+-15 %), the jaw torque sensor zero of an unknown jaw
-#: and session (+-50 mA: 50 mN*m at the jaw, i.e. not known at all), spring from cable
-#: pretension (+-5 mA per Legendre coefficient), viscous friction (+-2 mA*s/rad).
+#: Coulomb friction from pretension (+-15 %), zeros left after the current tare and the
+#: jaw sensor zero found against the resisting motor (+-5 mA: 5 mN*m at the jaw), spring
+#: from cable pretension (+-5 mA per Legendre coefficient), viscous friction (+-2 mA*s/rad).
 GROUPS = (
     CalibrationGroup('gain', ('alpha0', 'alpha1', 'alpha1_quad'), 'scale', 0.03, '1 (relative)',
                      'loss-free current-to-jaw-torque gain G: motor torque constant x gear x '
@@ -324,10 +327,9 @@ GROUPS = (
                      'load-independent friction from cable pretension (Coulomb)'),
     CalibrationGroup('spring', ('spring_P1', 'spring_P2'), 'shift', 0.005, 'A',
                      'position spring over the stroke (cable pretension, jaw), Legendre P1, P2'),
-    CalibrationGroup('zeros', ('offset',), 'shift', 0.05, 'A',
-                     'zeros: the jaw torque sensor zero of this jaw and session (not known: '
-                     'the firmware tares each session, the right spindle is not the left) and '
-                     'what is left of the current sensor zero after the tare'),
+    CalibrationGroup('zeros', ('offset',), 'shift', 0.005, 'A',
+                     'zeros left after the current tare and the jaw sensor zero found against '
+                     'the resisting motor (current offset, sensor zero residual)'),
     CalibrationGroup('viscous', ('viscous',), 'shift', 0.002, 'A*s/rad',
                      'viscous friction of the transmission'),
 )
@@ -401,6 +403,11 @@ class TrainedModel:
         Coefficients fitted on each training folder alone (when more than one).
     max_torque_Nm : float
         Largest jaw torque in training (the load range the physics was learned on).
+    front_end : dict
+        The resisting motor as a torque reference: ``gain_Nm_per_A`` (mean jaw torque
+        per resisting-motor command, fitted on the training runs with one intercept
+        per folder) and each training folder's sensor zero ``zeros_Nm`` (its
+        intercept; removed from its jaw torque before the fit).
     """
 
     estimator: CableFrictionObserver
@@ -409,6 +416,7 @@ class TrainedModel:
     priors: dict
     per_folder: dict
     max_torque_Nm: float
+    front_end: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict, repr=False)
 
 
@@ -422,12 +430,51 @@ def _group_parameter(group: CalibrationGroup, coef: dict, reference: dict) -> li
     return [coef[k] - reference[k] for k in names]
 
 
+def front_end_reference(folders: Sequence[Folder]) -> dict:
+    """Jaw torque sensor zeros of folders against the resisting motor (the rig's torque jig).
+
+    Per run, the mean jaw torque against the mean resisting-motor command; least
+    squares with one gain for all folders (the same front-end motor) and one
+    intercept per folder. The intercept is that folder's sensor zero: a motor at zero
+    current holds zero torque. Reads the jaw side: training folders only.
+
+    Returns
+    -------
+    dict
+        ``gain_Nm_per_A``, ``zeros_Nm`` (folder name to N*m), ``residual_std_Nm``.
+    """
+    x, y, which = [], [], []
+    for k, f in enumerate(folders):
+        for r in f.runs:
+            x.append(abs(float(np.mean(r.load_command))))
+            y.append(float(np.mean(r.jaw_torque)))
+            which.append(k)
+    x, y, which = np.array(x), np.array(y), np.array(which)
+    if np.ptp(x) < 1e-9:
+        return {'gain_Nm_per_A': float('nan'), 'zeros_Nm': {f.name: 0.0 for f in folders},
+                'residual_std_Nm': float('nan')}
+    design = np.column_stack([x] + [(which == k).astype(float) for k in range(len(folders))])
+    coef = np.linalg.lstsq(design, y, rcond=None)[0]
+    res = y - design @ coef
+    return {'gain_Nm_per_A': float(coef[0]),
+            'zeros_Nm': {f.name: float(c) for f, c in zip(folders, coef[1:])},
+            'residual_std_Nm': float(np.std(res))}
+
+
 def train(folders: Sequence[Folder], settings: ObserverSettings | None = None) -> TrainedModel:
-    """Fit the estimator on every run of the training folders, and the calibration priors."""
+    """Fit the estimator on every run of the training folders, and the calibration priors.
+
+    Each training folder's jaw torque is taken relative to its sensor zero against the
+    resisting motor (:func:`front_end_reference`), so that folders recorded with
+    different tares share one torque frame.
+    """
     if not folders:
         raise EstimatorError('train needs at least one folder')
     cache: dict = {}
     settings = TRANSFER_SETTINGS if settings is None else settings
+    front = front_end_reference(folders)
+    folders = [replace(f, runs=[replace(r, jaw_torque=r.jaw_torque - front['zeros_Nm'][f.name])
+                                for r in f.runs]) for f in folders]
     runs = [r for f in folders for r in f.runs]
     est = CableFrictionObserver(settings).fit(runs, cache=cache)
     coef = est.coefficients
@@ -444,7 +491,7 @@ def train(folders: Sequence[Folder], settings: ObserverSettings | None = None) -
         priors[g.name] = max(g.prior_std, spread)
     noise = noise_model(est, runs, cache)
     max_torque = float(max(np.max(r.jaw_torque) for r in runs))
-    return TrainedModel(est, list(folders), noise, priors, per_folder, max_torque, cache)
+    return TrainedModel(est, list(folders), noise, priors, per_folder, max_torque, front, cache)
 
 
 # -- calibration -------------------------------------------------------------------------------
@@ -465,6 +512,10 @@ class Calibration:
     target_sign : int
         Sign applied to the test folder's jaw torque sensor for scoring (+1: as the
         header's spindle convention reads it).
+    target_zero_Nm : float
+        The test folder's jaw torque sensor zero found on the calibration runs against
+        the resisting motor (mean reading minus front-end gain x command), subtracted
+        from the sensor for scoring.
     prior_torque_Nm : float
         Estimate before the first sliding sample of a run (calibration runs' mean).
     shrunk : float
@@ -476,6 +527,7 @@ class Calibration:
     groups: dict
     coefficients: dict
     target_sign: int
+    target_zero_Nm: float
     prior_torque_Nm: float
     shrunk: float
     physical: dict
@@ -485,8 +537,21 @@ class Calibration:
         return {'runs': list(self.runs), 'groups': self.groups,
                 'coefficients': self.coefficients, 'physical': self.physical,
                 'target_sign': self.target_sign,
+                'target_zero_Nm': round(self.target_zero_Nm, 7),
                 'prior_torque_Nm': round(self.prior_torque_Nm, 6),
                 'update_shrunk_to': round(self.shrunk, 4)}
+
+
+def _alias(cache: dict, copy, original) -> list:
+    """Point ``copy`` (same motor side, another jaw torque) at the original run's cached
+    signals; returns the keys added, to be removed once ``copy`` is done with (a cache
+    is keyed by object id, which Python reuses after an object is freed)."""
+    added = []
+    for key in [k for k in cache if isinstance(k, tuple) and len(k) == 2 and k[0] == id(original)]:
+        new = (id(copy),) + key[1:]
+        cache[new] = cache[key]
+        added.append(new)
+    return added
 
 
 def _physical_ok(coef: dict, max_torque: float) -> bool:
@@ -530,13 +595,19 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
     if target_sign is None:
         mean_tau = np.mean([np.mean(r.jaw_torque) for r in cal_runs])
         target_sign = 1 if mean_tau >= 0 else -1
+    gain = model.front_end.get('gain_Nm_per_A', float('nan'))
+    target_zero = float(np.mean([target_sign * np.mean(r.jaw_torque)
+                                 - gain * abs(float(np.mean(r.load_command)))
+                                 for r in cal_runs])) if np.isfinite(gain) else 0.0
     coef = est.coefficients
     names = list(est.fit_result.names)
     theta = np.array([coef[k] for k in names])
     rows, resid, branches = [], [], []
     for run in cal_runs:
-        signed = replace(run, jaw_torque=target_sign * run.jaw_torque) if target_sign < 0 else run
-        rnames, a, y, _ = est._rows(signed, None if signed is not run else cache)
+        signed = replace(run, jaw_torque=target_sign * run.jaw_torque - target_zero)
+        est._design(run, cache)                   # the original's signals, cached first
+        added = _alias(cache, signed, run)
+        rnames, a, y, _ = est._rows(signed, cache)
         assert rnames == names
         resid.append(y - a @ theta)
         # one run holds one load: its torque columns enter at the run's mean torque, so the
@@ -544,7 +615,7 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
         # can tell), never fit the within-run torque ripple
         a = a.copy()
         mean_tau = float(np.mean(signed.jaw_torque))
-        sig = est._design(signed, None if signed is not run else cache)[0]
+        sig = est._design(signed, cache)[0]
         s_sl = sig.direction[sig.sliding > 0]
         for i, k in enumerate(names):
             if k == 'alpha0':
@@ -555,6 +626,8 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
                 a[:, i] = s_sl * mean_tau ** 2
         rows.append(a)
         branches.append(np.sign(s_sl))
+        for key in added:
+            cache.pop(key, None)
     a_all = np.vstack(rows)
     r_all = np.concatenate(resid)
     cols, prior, updates, labels = [], [], [], []
@@ -606,7 +679,8 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
     if not _physical_ok(dict(zip(names, theta + shrink * step)), model.max_torque_Nm):
         shrink = 0.0
     new = theta + shrink * step
-    prior_torque = float(np.mean([target_sign * np.mean(r.jaw_torque) for r in cal_runs]))
+    prior_torque = float(np.mean([target_sign * np.mean(r.jaw_torque) - target_zero
+                                  for r in cal_runs]))
     calibrated = est.with_coefficients(dict(zip(names, new)), prior_torque=prior_torque)
     report: dict = {}
     for (gname, what), d, sd in zip(labels, delta, post_std):
@@ -620,7 +694,7 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
                     'calibrated': float(calibrated.fit_result.physical[k][0])}
                 for k in est.fit_result.physical}
     return Calibration(calibrated, [r.file or r.name for r in cal_runs], report, coefficients,
-                       int(target_sign), prior_torque, shrink, physical)
+                       int(target_sign), target_zero, prior_torque, shrink, physical)
 
 
 # -- choosing the calibration run ------------------------------------------------------------------
@@ -702,12 +776,14 @@ def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
     return out, prior
 
 
-def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int,
-          cache: dict | None = None, *, session_prior: bool = True) -> dict:
+def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int = 1,
+          cache: dict | None = None, *, target_zero: float = 0.0,
+          session_prior: bool = True) -> dict:
     """Held-out RMSE over every sample of ``runs`` and per run (N*m).
 
-    ``session_prior``: the start of each run at the folder's mean estimate
-    (:func:`predict_session`), else at the estimator's own prior.
+    The target is ``target_sign * jaw_torque - target_zero`` (N*m). ``session_prior``:
+    the start of each run at the folder's mean estimate (:func:`predict_session`),
+    else at the estimator's own prior.
     """
     if session_prior:
         preds, prior = predict_session(est, runs, cache)
@@ -715,7 +791,7 @@ def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int,
         preds, prior = [est.predict(run, cache=cache) for run in runs], est.prior_torque
     se_total, n_total, per_run = 0.0, 0, []
     for run, pred in zip(runs, preds):
-        se, n = _rmse(pred, target_sign * run.jaw_torque)
+        se, n = _rmse(pred, target_sign * run.jaw_torque - target_zero)
         se_total += se
         n_total += n
         per_run.append({'file': run.file or run.name, 'rmse': math.sqrt(se / n)})
@@ -737,7 +813,8 @@ def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NA
     for cal in candidates:
         calib = calibrate(model, [cal], groups=groups)
         scored = [r for r in test.runs if r is not cal]
-        res = score(calib.estimator, scored, calib.target_sign, cache)
+        res = score(calib.estimator, scored, calib.target_sign, cache,
+                    target_zero=calib.target_zero_Nm)
         rows.append({'calibration_run': cal.file or cal.name, 'heldout_rmse': res['heldout_rmse']})
         top = max(res['per_run'], key=lambda p: p['rmse'])
         if top['rmse'] > worst_run['rmse']:
@@ -763,8 +840,8 @@ def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
     for label, groups in configs:
         calib = calibrate(model, cal_runs, groups=groups)
         row = {'groups': label, 'calibrated': list(groups),
-               'heldout_rmse': score(calib.estimator, scored, calib.target_sign,
-                                     model.cache)['heldout_rmse']}
+               'heldout_rmse': score(calib.estimator, scored, calib.target_sign, model.cache,
+                                     target_zero=calib.target_zero_Nm)['heldout_rmse']}
         if sweep_candidates:
             sw = sweep(model, test, groups=groups, candidates=sweep_candidates)
             row['sweep_mean'] = sw['mean']
@@ -825,12 +902,15 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
                   'per_training_folder': model.per_folder,
                   'calibration_priors': model.priors,
                   'noise': vars(model.noise), 'training_max_torque_Nm': model.max_torque_Nm,
+                  'front_end_reference': model.front_end,
                   'prior_torque_Nm': est.prior_torque},
         'target': {
             'zero_shot': 'jaw torque sensor as recorded (firmware tare at session start), sign '
                          'of the header spindle convention (right spindle negated as upstream)',
-            'calibrated': 'the same, with the sign fixed by the calibration run (its mean jaw '
-                          'torque is a closing torque, > 0); the zero as recorded',
+            'calibrated': 'sign * sensor - zero: the sign fixed by the calibration run (its '
+                          'mean jaw torque is a closing torque, > 0), the zero found on it '
+                          'against the resisting motor (mean reading - front-end gain x '
+                          'command; the gain fitted on the training folders)',
             'samples': 'every sample of every scored run (start-up included)',
             'startup': 'before the first sliding sample of a run the estimate is the mean '
                        'estimate of the folder\'s runs after their first second (motor side, '
@@ -839,7 +919,8 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     if cal_runs:
         say('calibrating on ' + ', '.join(r.file or r.name for r in cal_runs))
         calib = calibrate(model, cal_runs, groups=groups)
-        res = score(calib.estimator, scored, calib.target_sign, cache)
+        res = score(calib.estimator, scored, calib.target_sign, cache,
+                    target_zero=calib.target_zero_Nm)
         result['calibration'] = calib.to_json()
         result['calibration']['rule'] = DEFAULT_RULE if 'auto' in calibrate_runs else 'given'
         result['calibration']['default_rule_run'] = default_calibration_run(test.runs).file
