@@ -420,14 +420,29 @@ class TrainedModel:
     cache: dict = field(default_factory=dict, repr=False)
 
 
+#: Load (N*m) at which the efficiency group's spread between training folders is measured.
+SPREAD_TORQUE = 0.05
+
+
 def _group_parameter(group: CalibrationGroup, coef: dict, reference: dict) -> list[float]:
-    """A folder's value of a group relative to the reference fit (scale) or its coefficients (shift)."""
-    names = [k for k in group.coefficients if k in coef]
+    """A folder's value of a group relative to the reference fit: for ``scale`` groups the
+    relative change of what the group scales (gain: alpha0; efficiency: the friction split
+    alpha1*tau + alpha1_quad*tau^2 at :data:`SPREAD_TORQUE`; Coulomb: coulomb), for
+    ``shift`` groups the coefficient differences."""
     if group.kind == 'scale':
-        ref = np.array([reference[k] for k in names])
-        val = np.array([coef[k] for k in names])
-        return [float(ref @ val / (ref @ ref) - 1.0)] if ref @ ref > 0 else [0.0]
-    return [coef[k] - reference[k] for k in names]
+        if group.name == 'gain':
+            value, ref = coef['alpha0'], reference['alpha0']
+        elif group.name == 'efficiency':
+            def split(c):
+                return c.get('alpha1', 0.0) * SPREAD_TORQUE + c.get('alpha1_quad', 0.0) * \
+                    SPREAD_TORQUE ** 2
+            value, ref = split(coef), split(reference)
+        else:
+            names = [k for k in group.coefficients if k in coef]
+            value = sum(coef[k] for k in names)
+            ref = sum(reference[k] for k in names)
+        return [value / ref - 1.0] if ref != 0 else [0.0]
+    return [coef[k] - reference[k] for k in group.coefficients if k in coef]
 
 
 def front_end_reference(folders: Sequence[Folder]) -> dict:
