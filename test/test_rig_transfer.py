@@ -117,6 +117,14 @@ def test_motor_side_orientation_finds_a_wrong_header(tmp_path):
         # the disk re-referenced to the folder's most closed angle: the same stroke
         assert np.allclose(a.motor_angle - a.motor_angle.max(), b.motor_angle - b.motor_angle.max(),
                            atol=2e-3)
+    assert report['disk_reference_shift_rad'] == 0.0 and report['disk_stroke_in_trained_range'] > 0.9
+    # a disk frame 2 rad off (another encoder reference, a right-spindle offset that does not
+    # hold) is moved back so that the most closed angle is 0, as on the left spindle
+    off = [type(r)(**dict(r.__dict__, motor_angle=r.motor_angle + 2.0)) for r in runs]
+    moved, _, report_m = orient(off)
+    assert report_m['disk_reference_shift_rad'] == pytest.approx(-2.0, abs=0.01)
+    for a, b in zip(good, moved):
+        assert np.allclose(a.motor_angle, b.motor_angle, atol=0.01)
 
 
 # -- the real folders -----------------------------------------------------------------------

@@ -50,9 +50,8 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from grip_force_ros.rig import constants as C
-from grip_force_ros.rig.estimator import (CableFrictionObserver, EstimatorError, ObserverSettings,
-                                          REFERENCE_TORQUE, causal_lowpass, causal_velocity,
-                                          hold_observer, motor_side_inputs)
+from grip_force_ros.rig.estimator import (POSITION_RANGE, CableFrictionObserver, EstimatorError,
+                                          ObserverSettings, causal_lowpass, causal_velocity)
 from grip_force_ros.rig.reader import RigDataError, RigRun, data_root, read_runs
 
 #: Samples of a run used by the motor-side statistics (every n-th sample; 1 kHz data).
@@ -211,7 +210,9 @@ def orient(runs: Sequence[RigRun]) -> tuple[list[RigRun], CurrentTare, dict]:
     4. ``current_vs_disk_motion``: friction makes the current push the way the disk
        moves; a negative vote negates the disk angle (and re-references it so the
        folder's most closed disk angle is 0, as on the left spindle);
-    5. ``shaft_vs_disk_motion``: the gearbox encoder turns with the disk.
+    5. ``shaft_vs_disk_motion``: the gearbox encoder turns with the disk;
+    6. the disk angle's frame: kept unless the strokes lie mostly outside the range the
+       spring was fitted on (:func:`_disk_reference`).
 
     Reads ``t``, ``current``, ``current_command``, ``motor_angle`` and
     ``motor_shaft_angle`` only.
@@ -253,8 +254,42 @@ def orient(runs: Sequence[RigRun]) -> tuple[list[RigRun], CurrentTare, dict]:
         runs = [replace(r, motor_shaft_angle=-r.motor_shaft_angle) for r in runs]
         flips.append('motor encoder')
     report['flips_against_header_convention'] = flips
+    runs, shift, overlap = _disk_reference(runs)
+    report['disk_stroke_in_trained_range'] = round(overlap, 4)
+    report['disk_reference_shift_rad'] = round(shift, 6)
     tared = [replace(r, current=r.current - tare.zero_A) for r in runs]
     return tared, tare, report
+
+
+#: Below this median fraction of a folder's strokes inside the spring's disk range, the
+#: disk angle is taken to be in another frame and is re-referenced.
+MIN_STROKE_OVERLAP = 0.5
+
+
+def _disk_reference(runs: list) -> tuple[list, float, float]:
+    """Keep the disk angle's frame, unless the folder's strokes lie mostly outside the range
+    the spring was fitted on (:data:`.estimator.POSITION_RANGE`): then shift it so that the
+    folder's median most-closed angle is 0, as in the left-spindle folders (a right-spindle
+    offset that does not hold, another encoder reference).
+
+    Returns
+    -------
+    (list, float, float)
+        Runs, the shift applied (rad, 0 when none) and the median overlap fraction.
+    """
+    lo, hi = POSITION_RANGE
+    overlaps, closed = [], []
+    for r in runs:
+        a, b = float(np.min(r.motor_angle)), float(np.max(r.motor_angle))
+        span = max(b - a, 1e-9)
+        overlaps.append(max(0.0, min(b, hi) - max(a, lo)) / span)
+        closed.append(b)
+    overlap = float(np.median(overlaps)) if overlaps else 1.0
+    if overlap >= MIN_STROKE_OVERLAP:
+        return runs, 0.0, overlap
+    shift = hi - float(np.median(closed))
+    return ([replace(r, motor_angle=r.motor_angle + shift,
+                     trajectory_angle=r.trajectory_angle + shift) for r in runs], shift, overlap)
 
 
 def resolve_folder(folder) -> Path:
