@@ -1,9 +1,10 @@
 """Sim-to-real across instruments and occasions: fit on some rig folders, judge on another.
 
 The observer (:mod:`.estimator`) fitted on one folder of the MRDLab rig was 10-21 mN*m
-off on the others. Two things in the data explain most of it, and one run of the
-new folder whose jaw torque is read (a calibration jig, once per instrument) fixes
-what remains that can be fixed:
+off on the others. What the motor side alone fixes, and what one run of the new folder
+whose jaw torque is read (a calibration jig, once per instrument) fixes of the rest
+(the model itself gains a load-dependent efficiency, :data:`TRANSFER_SETTINGS`, and a
+run's start-up estimate is the session's, :func:`predict_session`):
 
 * **Motor-side conventions, per folder, from the motor side alone.** Which way is
   closing (:func:`orient`): the current pushes the motor the way it moves (friction),
