@@ -245,6 +245,8 @@ def test_transfer_cli_json_contract(tmp_path, capsys):
     assert cal['runs'] == ['21.TXT'] and cal['target_sign'] == 1
     assert set(cal['groups']) == set(GROUP_NAMES)
     assert all(g['unit'] for g in cal['groups'].values())
+    assert all(cal['coefficient_units'][k] for k in cal['coefficients'])
+    assert cal['physical_units']['coulomb_Nm'] == 'N*m' and 'target_zero_Nm' in cal
     assert result['test']['current_tare']['zero_A'] < 0
     # zero-shot: every run scored, nothing calibrated
     assert cli_main(['realdata', '--train', str(train_dir), '--test', str(test_dir), '--json']) == 0

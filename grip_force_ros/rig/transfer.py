@@ -371,6 +371,15 @@ GROUPS = (
 )
 GROUP_NAMES = tuple(g.name for g in GROUPS)
 
+#: Units of the forward-model coefficients (I in A, tau in N*m, v in rad/s).
+COEFFICIENT_UNITS = {'alpha0': 'A/(N*m)', 'alpha1': 'A/(N*m)', 'alpha2': 'A/(N*m)',
+                     'alpha1_quad': 'A/(N*m)^2', 'offset': 'A', 'coulomb': 'A',
+                     'coulomb_slow': 'A', 'spring': 'A', 'viscous': 'A*s/rad'}
+#: Units of the interpretable parameters (:func:`.estimator._physical`).
+PHYSICAL_UNITS = {'gain_Nm_per_A': 'N*m/A', 'efficiency': '1', 'efficiency_at_100mNm': '1',
+                  'offset_Nm': 'N*m', 'coulomb_Nm': 'N*m', 'viscous_Nms_per_rad': 'N*m*s/rad',
+                  'spring_span_Nm': 'N*m'}
+
 
 @dataclass
 class NoiseModel:
@@ -585,8 +594,12 @@ class Calibration:
 
     def to_json(self) -> dict:
         """The calibration as plain JSON types, with units."""
+        units = {k: COEFFICIENT_UNITS.get(k.split('_P')[0] if k.startswith('spring_P') else k, '')
+                 for k in self.coefficients}
         return {'runs': list(self.runs), 'groups': self.groups,
-                'coefficients': self.coefficients, 'physical': self.physical,
+                'coefficients': self.coefficients, 'coefficient_units': units,
+                'physical': self.physical,
+                'physical_units': {k: PHYSICAL_UNITS.get(k, '') for k in self.physical},
                 'target_sign': self.target_sign,
                 'target_zero_Nm': round(self.target_zero_Nm, 7),
                 'prior_torque_Nm': round(self.prior_torque_Nm, 6),
