@@ -257,3 +257,25 @@ def test_transfer_cli_json_contract(tmp_path, capsys):
     assert cli_main(['realdata', '--test', str(test_dir)]) == 2
     assert cli_main(['realdata', '--train', str(train_dir), '--test', str(test_dir),
                      '--calibrate', '99']) == 1
+
+
+@needs_data
+def test_streaming_observer_with_the_load_dependent_efficiency(folders):
+    """The transfer model's quadratic branch gives the same numbers one sample at a time."""
+    from grip_force_ros.rig.streaming import StreamingJawTorqueObserver
+    from grip_force_ros.rig.transfer import TRANSFER_SETTINGS
+    from grip_force_ros.rig.estimator import CableFrictionObserver
+    f2, f4 = folders
+    est = CableFrictionObserver(TRANSFER_SETTINGS).fit(f4.runs[::7])
+    assert est.coefficients['alpha1_quad'] > 0                 # 0.88 A/(N*m)^2 on all of L_4
+    run = f4.run('39')                                          # 100 % load: the term matters
+    n = 6000
+    log = {'t': run.t[:n], 'current': run.current[:n], 'motor_angle': run.motor_angle[:n],
+           'motor_shaft_angle': run.motor_shaft_angle[:n]}
+    batch = est.predict(log)
+    live = StreamingJawTorqueObserver(est, dt=C.SAMPLE_PERIOD)
+    stream = np.array([live.step(i, x, xs) for i, x, xs in
+                       zip(log['current'], log['motor_angle'], log['motor_shaft_angle'])])
+    assert np.allclose(stream, batch, rtol=0, atol=1e-9)
+    linear = est.with_coefficients({'alpha1_quad': 0.0}).predict(log)
+    assert np.max(np.abs(linear - batch)) > 1e-3               # the term is exercised
