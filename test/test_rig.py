@@ -4,22 +4,21 @@ Uses the real data in ../shared/data/mis-tool-characterization (skipped when abs
 """
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from grip_force_ros.cli import main as cli_main
 from grip_force_ros.logs import read_csv
-from grip_force_ros.rig import RigDataError, read_run, read_runs, run_files, to_contract_log
+from grip_force_ros.rig import (RigDataError, data_root, read_run, read_runs, run_files,
+                                to_contract_log)
 from grip_force_ros.rig import constants as C
 from grip_force_ros.rig.analysis import holdout_split
 from grip_force_ros.rig.estimator import (ALLOWED_INPUTS, FORBIDDEN_INPUTS, CableFrictionObserver,
                                           EstimatorError, LinearCurrentEstimator, dahl_direction,
                                           hold_observer, motor_side_inputs, rmse)
 
-DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data' / 'mis-tool-characterization' \
-    / 'Tool_4_Maryland_L_2'
+DATA = data_root() / 'Tool_4_Maryland_L_2'
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f'rig data not found at {DATA}')
 
 

@@ -1,4 +1,13 @@
-"""`grip-force realdata`: held-out jaw torque from motor current on the MRDLab rig runs."""
+"""`grip-force realdata`: held-out jaw torque from motor current on the MRDLab rig runs.
+
+Two forms:
+
+* ``grip-force realdata [DIR]``: fit and judge inside one folder (holdout split,
+  cross-validation, effects, regions, report);
+* ``grip-force realdata --train DIR [DIR ...] --test DIR [--calibrate RUN ...]``: fit on
+  the training folders, judge every run of another folder, zero-shot or after one
+  calibration run whose jaw torque is read (:mod:`grip_force_ros.rig.transfer`).
+"""
 from __future__ import annotations
 
 import json
@@ -19,6 +28,23 @@ def add_arguments(parser) -> None:
     parser.add_argument('--quick', action='store_true',
                         help='fewer splits: estimators on holdout + leave-one-level-out, '
                              'effects on holdout only')
+    parser.add_argument('--train', nargs='+', metavar='DIR', default=None,
+                        help='transfer: fit on these folders (paths, or names under '
+                             '../shared/data/mis-tool-characterization)')
+    parser.add_argument('--test', metavar='DIR', default=None,
+                        help='transfer: judge on every run of this folder')
+    parser.add_argument('--calibrate', nargs='+', metavar='RUN', default=(),
+                        help="transfer: runs of the test folder whose jaw torque may be read "
+                             "(e.g. 21 or 21.TXT; 'auto' = the default rule: mid frequency, mid "
+                             "load); never scored. Without it: zero-shot")
+    parser.add_argument('--groups', nargs='+', metavar='GROUP', default=None,
+                        help='transfer: calibration groups (default all: gain efficiency coulomb '
+                             'spring zeros viscous)')
+    parser.add_argument('--sweep', action='store_true',
+                        help='transfer: also every single run of the test folder as the '
+                             'calibration run (mean, worst, best)')
+    parser.add_argument('--ablation', action='store_true',
+                        help='transfer: each calibration group alone and all but one')
 
 
 def _summary(result) -> str:
@@ -40,7 +66,59 @@ def _summary(result) -> str:
     return '\n'.join(lines)
 
 
+def _transfer_summary(result) -> str:
+    mode = 'zero-shot' if result['zero_shot'] else \
+        'calibrated on ' + ', '.join(result['calibration']['runs'])
+    train = ' + '.join(f['folder'] for f in result['train'])
+    lines = [f"train {train} -> test {result['test']['folder']} ({mode})",
+             f"held-out RMSE {result['heldout_rmse'] * 1e3:.2f} mN m over "
+             f"{len(result['per_run'])} runs (published {result['published_rmse_mNm']:.2f}); "
+             f"worst run {result['worst_run']['file']} {result['worst_run']['rmse'] * 1e3:.2f}"]
+    if not result['zero_shot']:
+        lines.append(f"zero-shot on the same runs {result['zero_shot_heldout_rmse'] * 1e3:.2f} mN m")
+    tare = result['test']['current_tare']
+    lines.append(f"test folder: spindle {result['test']['spindle']} ({result['test']['spindle_source']}), "
+                 f"current sensor zero {tare['zero_A'] * 1e3:.1f} mA, flips "
+                 f"{result['test']['motor_side_orientation']['flips_against_header_convention'] or 'none'}")
+    if 'sweep' in result:
+        sw = result['sweep']
+        lines.append(f"every run as the calibration run: mean {sw['mean'] * 1e3:.2f}, worst "
+                     f"{sw['worst'] * 1e3:.2f}, best {sw['best'] * 1e3:.2f} mN m")
+    for row in result.get('ablation', {}).get('rows', []):
+        extra = f", sweep mean {row['sweep_mean'] * 1e3:.2f}" if 'sweep_mean' in row else ''
+        lines.append(f"  {row['groups']:24s} {row['heldout_rmse'] * 1e3:6.2f} mN m{extra}")
+    lines.append(f"runtime {result['runtime_s']:.1f} s")
+    return '\n'.join(lines)
+
+
+def _run_transfer(args) -> int:
+    from grip_force_ros.rig import RigDataError
+    from grip_force_ros.rig.estimator import EstimatorError
+    from grip_force_ros.rig.transfer import GROUP_NAMES, transfer
+    if not args.test:
+        print('error: --train needs --test', file=sys.stderr)
+        return 2
+    progress = (lambda msg: print(f'[realdata] {msg}', file=sys.stderr))
+    try:
+        result = transfer(args.train, args.test, calibrate_runs=list(args.calibrate),
+                          groups=tuple(args.groups) if args.groups else GROUP_NAMES,
+                          with_sweep=args.sweep, with_ablation=args.ablation, progress=progress)
+    except (RigDataError, EstimatorError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result, indent=1, default=float))
+    else:
+        print(_transfer_summary(result))
+    return 0
+
+
 def run(args) -> int:
+    if args.train or args.test:
+        if not args.train:
+            print('error: --test needs --train', file=sys.stderr)
+            return 2
+        return _run_transfer(args)
     from grip_force_ros.rig import RigDataError, default_data_dir, read_runs
     from grip_force_ros.rig.analysis import analyse
     directory = Path(args.directory) if args.directory else default_data_dir()

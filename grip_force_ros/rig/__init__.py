@@ -8,11 +8,13 @@ while a second motor resists it at the jaw. No rclpy here.
 >>> runs = read_runs(default_data_dir())                          # doctest: +SKIP
 
 Estimator: :mod:`grip_force_ros.rig.estimator` (batch, fit/predict),
+:mod:`grip_force_ros.rig.transfer` (other folders: signs, current tare, calibration run),
 :mod:`grip_force_ros.rig.streaming` (the same observer one sample at a time),
 analysis and report: :mod:`grip_force_ros.rig.analysis`, :mod:`grip_force_ros.rig.report`.
 """
-from grip_force_ros.rig.reader import (EXTRA_COLUMNS, RigDataError, RigRun, default_data_dir,
-                                       read_run, read_runs, run_files, to_contract_log)
+from grip_force_ros.rig.reader import (EXTRA_COLUMNS, RigDataError, RigRun, data_root,
+                                       default_data_dir, read_run, read_runs, run_files, spindle_of,
+                                       to_contract_log)
 
-__all__ = ['EXTRA_COLUMNS', 'RigDataError', 'RigRun', 'default_data_dir', 'read_run',
-           'read_runs', 'run_files', 'to_contract_log']
+__all__ = ['EXTRA_COLUMNS', 'RigDataError', 'RigRun', 'data_root', 'default_data_dir', 'read_run',
+           'read_runs', 'run_files', 'spindle_of', 'to_contract_log']

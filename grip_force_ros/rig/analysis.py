@@ -85,6 +85,10 @@ DROP_ONE = (
 
 #: Effects the full model lacks, each added on its own.
 ADD_ONE = (
+    Candidate('+load_dependent_efficiency', 'tension_dependent_friction (load-dependent)',
+              'friction split growing with the square of the load (the transfer model: it needs '
+              'the 10-100 % loads of Tool_4_Maryland_L_4 to be seen)',
+              _observer(load_dependent_efficiency=True)),
     Candidate('+backlash', 'backlash', 'friction state driven by the input-disk encoder '
               '(after the coupling backlash) instead of the motor shaft',
               _observer(backlash_angle='motor_angle')),

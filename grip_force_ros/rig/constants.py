@@ -78,7 +78,20 @@ TORQUE_STEP_PERCENT = 10.0
 TORQUE_FIRST_PERCENT = 10.0
 
 #: Where the shared data lives, relative to the repository root's parent.
-DEFAULT_DATA_DIR = ('shared', 'data', 'mis-tool-characterization', 'Tool_4_Maryland_L_2')
+DATA_ROOT = ('shared', 'data', 'mis-tool-characterization')
+#: The folder of the one-folder analysis.
+DEFAULT_FOLDER = 'Tool_4_Maryland_L_2'
+DEFAULT_DATA_DIR = DATA_ROOT + (DEFAULT_FOLDER,)
+
+#: Disk angle (rad) added to a right-spindle run after its columns are negated, so
+#: that its stroke lies where a left-spindle stroke does: upstream's own alignment
+#: for the right jaw (compileData.m: ``-counts*CountToRadCUI + (2.172+0.4131)``; our
+#: disk angle is minus theirs).
+RIGHT_SPINDLE_DISK_OFFSET = -(2.172 + 0.4131)
+
+#: A trajectory column whose magnitude exceeds this holds disk-encoder counts (later
+#: folders, 0..1365.33 counts for 60 degrees), not rad (Tool_4_Maryland_L_2, 0..1.05).
+TRAJECTORY_COUNTS_ABOVE = 2.0 * math.pi
 
 #: Attribution required by the ODbL/DbCL licence of the data.
 ATTRIBUTION = (

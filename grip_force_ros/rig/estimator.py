@@ -148,8 +148,22 @@ def dahl_direction(angle: np.ndarray, width: float, start: float = 0.0) -> np.nd
     return out
 
 
+def observer_gains(weight: np.ndarray, gain: float) -> np.ndarray:
+    """Per-sample gain g[k] of :func:`hold_observer` (0 where the weight is 0).
+
+    g[k] = max(gain * w[k], w[k] / W[k]), W the weight seen up to and including k:
+    a running mean of the first measurements, then an exponential average.
+    """
+    w = np.asarray(weight, dtype=np.float64)
+    seen = np.cumsum(w)
+    out = np.zeros_like(w)
+    on = w > 0.0
+    out[on] = np.maximum(gain * w[on], w[on] / seen[on])
+    return out
+
+
 def hold_observer(measurement: np.ndarray, weight: np.ndarray, gain: float,
-                  initial: float) -> np.ndarray:
+                  initial: float, *, block: int = 256) -> np.ndarray:
     """First-order observer that holds while ``weight`` is 0.
 
     estimate[k] = estimate[k-1] + g[k] * (measurement[k] - estimate[k-1]) with
@@ -157,16 +171,34 @@ def hold_observer(measurement: np.ndarray, weight: np.ndarray, gain: float,
     running mean of the first measurements, then an exponential average. Before
     the first measurement with weight > 0 the estimate is ``initial`` (the
     training mean: nothing is known yet).
+
+    The recursion est[k] = a[k] est[k-1] + b[k] (a = 1 - g, b = g z) is solved in
+    blocks of ``block`` samples with cumulative products (the same numbers as the
+    sample loop to ~1e-12 relative; the streaming observer runs the loop).
     """
-    out = np.empty(measurement.size)
+    z = np.asarray(measurement, dtype=np.float64)
+    g = observer_gains(weight, gain)
+    a = 1.0 - g
+    b = g * z
+    out = np.empty(z.size)
     est = float(initial)
-    seen = 0.0
-    for i, (z, w) in enumerate(zip(measurement.tolist(), weight.tolist())):
-        if w > 0.0:
-            seen += w
-            g = max(gain * w, w / seen)
-            est += g * (z - est)
-        out[i] = est
+    n = z.size
+    # a[k] == 0 (the first measurement: g = 1) resets the estimate to b[k]; split there
+    resets = np.flatnonzero(a == 0.0)
+    cuts = sorted(set(range(0, n, block)) | set(resets.tolist()) | {n})
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        seg_a, seg_b = a[lo:hi], b[lo:hi]
+        if seg_a[0] == 0.0:                       # reset: the estimate restarts at b
+            est = seg_b[0]
+            out[lo] = est
+            if hi - lo == 1:
+                continue
+            seg_a, seg_b, lo = seg_a[1:], seg_b[1:], lo + 1
+        prod = np.cumprod(seg_a)
+        # est[k] = P[k] * (est0 + sum_{j<=k} b[j] / P[j]); P >= (1-g)^block stays well above 0
+        vals = prod * (est + np.cumsum(seg_b / prod))
+        out[lo:hi] = vals
+        est = vals[-1]
     return out
 
 
@@ -181,6 +213,13 @@ class ObserverSettings:
     ----------
     efficiency : bool
         tension_dependent_friction: direction-dependent efficiency alpha(s).
+    load_dependent_efficiency : bool
+        The friction split between the branches grows with the square of the load
+        as well (a forward term ``alpha1_quad * s * tau**2``): efficiency falls as
+        the load grows (the cable's slack side unloads; found across the 10-100 %
+        loads of ``Tool_4_Maryland_L_4``). Needs ``efficiency``. Off by default (one
+        folder of 10-40 % loads cannot see it); on in the transfer model
+        (:data:`grip_force_ros.rig.transfer.TRANSFER_SETTINGS`).
     coulomb : bool
         pivot_coulomb_friction: constant friction b1 * s.
     hysteresis : bool
@@ -217,6 +256,7 @@ class ObserverSettings:
     """
 
     efficiency: bool = True
+    load_dependent_efficiency: bool = False
     coulomb: bool = True
     hysteresis: bool = True
     viscous: bool = True
@@ -248,13 +288,25 @@ class _Signals:
     velocity: np.ndarray        # rad/s
     direction: np.ndarray       # s in [-1, 1]
     slow_direction: np.ndarray | None   # second, slower Dahl state (or None)
-    position: np.ndarray        # rad, disk angle scaled to [-1, 1] for the Legendre terms
+    position: np.ndarray        # disk angle scaled to [-1, 1] for the Legendre terms (clipped)
     sliding: np.ndarray         # 0..1 confidence that the friction direction is known
 
 
 #: Disk angle range used to scale the spring's Legendre argument (rad): the rig
 #: sweeps the input disk over [-1.05, 0] rad (a 30 degree amplitude sine).
 POSITION_RANGE = (-1.05, 0.0)
+
+
+def scaled_position(motor_angle):
+    """Disk angle (rad) mapped to the Legendre argument in [-1, 1] over :data:`POSITION_RANGE`.
+
+    Clipped at the ends: a stroke beyond the range the spring was fitted on (another
+    jaw stopping position, another spindle) uses the spring's end value, never an
+    extrapolated polynomial.
+    """
+    lo, hi = POSITION_RANGE
+    return np.clip(2.0 * (np.asarray(motor_angle, dtype=np.float64) - lo) / (hi - lo) - 1.0,
+                   -1.0, 1.0)
 
 
 def _signals(inputs: Mapping[str, np.ndarray], settings: ObserverSettings) -> _Signals:
@@ -277,8 +329,7 @@ def _signals(inputs: Mapping[str, np.ndarray], settings: ObserverSettings) -> _S
         sliding = np.ones_like(velocity)
     slow = dahl_direction(angle, settings.slow_hysteresis_width) \
         if settings.slow_hysteresis_width > 0 else None
-    lo, hi = POSITION_RANGE
-    position = 2.0 * (inputs['motor_angle'] - lo) / (hi - lo) - 1.0
+    position = scaled_position(inputs['motor_angle'])
     return _Signals(current, velocity, direction, slow, position, sliding)
 
 
@@ -311,11 +362,13 @@ class FitResult:
     ----------
     names : list of str
         Coefficient names: ``alpha0`` (A/(N*m)), ``alpha1`` (A/(N*m), efficiency
-        term), then the nuisance columns (A, or A*s/rad for ``viscous``).
+        term), ``alpha1_quad`` (A/(N*m)^2, load-dependent efficiency), then the
+        nuisance columns (A, or A*s/rad for ``viscous``).
     values, std : ndarray
         Estimates and leave-one-run-out jackknife standard errors.
     physical : dict of str to (value, std)
-        Interpretable parameters: ``gain_Nm_per_A`` G, ``efficiency`` eta,
+        Interpretable parameters: ``gain_Nm_per_A`` G, ``efficiency`` eta (at
+        zero load), ``efficiency_at_100mNm`` (with the load-dependent term),
         ``coulomb_Nm`` (at the jaw), ``offset_Nm``, ``viscous_Nms_per_rad``,
         ``spring_span_Nm`` (peak-to-peak of k(x) over the disk range).
     training_samples : int
@@ -339,6 +392,12 @@ def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
     else:
         gain, eff = float('nan'), float('nan')
     out = {'gain_Nm_per_A': gain, 'efficiency': eff, 'offset_Nm': -coef['offset'] * gain}
+    if 'alpha1_quad' in coef:
+        # branch slopes dI/dtau at 0.1 N*m: alpha0 +- (alpha1 + 2 * alpha1_quad * tau)
+        split = a1 + 2.0 * coef['alpha1_quad'] * REFERENCE_TORQUE
+        c_slope, o_slope = a0 + split, a0 - split
+        out['efficiency_at_100mNm'] = math.sqrt(o_slope / c_slope) \
+            if c_slope > 0 and o_slope > 0 else float('nan')
     if 'coulomb' in coef:
         out['coulomb_Nm'] = coef['coulomb'] * gain
     if 'viscous' in coef:
@@ -350,6 +409,38 @@ def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
                     for k in spring)
         out['spring_span_Nm'] = float(np.ptp(shape)) * gain
     return out
+
+
+#: Load (N*m) at which the load-dependent efficiency is reported.
+REFERENCE_TORQUE = 0.1
+
+
+def invert_forward(current, a, quad, beta):
+    """Jaw torque (N*m) solving I = a*tau + quad*tau**2 + beta, and the local slope dI/dtau.
+
+    Parameters
+    ----------
+    current, beta : ndarray
+        Measured (filtered) current and the torque-free part of the forward model (A).
+    a : ndarray
+        Linear coefficient alpha(s) (A/(N*m)), > 0 for a physical fit.
+    quad : ndarray or float
+        Quadratic coefficient alpha1_quad * s (A/(N*m)^2); 0 gives tau = (I - beta)/a.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        The root continuous with the linear solution, tau = 2y/(a + sqrt(a^2 + 4 quad y))
+        (y = I - beta; where the square root would be negative, the turning point
+        -a/(2 quad)), and |dI/dtau| there (A/(N*m)).
+    """
+    y = current - beta
+    a = np.where(np.abs(a) < 1e-6, 1e-6, a)
+    if np.all(np.asarray(quad) == 0.0):
+        return y / a, np.abs(a)
+    a = np.maximum(a, 1e-6)
+    root = np.sqrt(np.maximum(a * a + 4.0 * quad * y, 0.0))
+    return 2.0 * y / (a + root), root
 
 
 class CableFrictionObserver:
@@ -388,6 +479,9 @@ class CableFrictionObserver:
         if self.settings.efficiency:
             torque_cols.append(tau[mask] * sig.direction[mask])
             coef_names.append('alpha1')
+            if self.settings.load_dependent_efficiency:
+                torque_cols.append(tau[mask] ** 2 * sig.direction[mask])
+                coef_names.append('alpha1_quad')
             if sig.slow_direction is not None:
                 torque_cols.append(tau[mask] * sig.slow_direction[mask])
                 coef_names.append('alpha2')
@@ -407,10 +501,10 @@ class CableFrictionObserver:
         names = blocks[0][0]
         ata = sum(b[1] for b in blocks)
         aty = sum(b[2] for b in blocks)
-        values = np.linalg.solve(ata, aty)
+        values = self._solve(names, ata, aty)
         n = len(blocks)
         if n > 2:
-            jack = np.array([np.linalg.solve(ata - b[1], aty - b[2]) for b in blocks])
+            jack = np.array([self._solve(names, ata - b[1], aty - b[2]) for b in blocks])
             std = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(0)) ** 2, axis=0))
             phys_jack = [_physical(names, j) for j in jack]
         else:
@@ -426,6 +520,23 @@ class CableFrictionObserver:
         self._prior = sum(b[4] for b in blocks) / sum(b[5] for b in blocks)   # mean torque
         return self
 
+    @staticmethod
+    def _solve(names, ata, aty):
+        """Solve the least squares from the normal equations.
+
+        The load-dependent efficiency term is kept only with the physical sign (>= 0:
+        friction grows at least in proportion to the load, efficiency never rises with
+        it), else fitted as 0.
+        """
+        values = np.linalg.solve(ata, aty)
+        if 'alpha1_quad' in names:
+            q = names.index('alpha1_quad')
+            if values[q] < 0:
+                keep = [i for i in range(len(names)) if i != q]
+                values = np.zeros(len(names))
+                values[keep] = np.linalg.solve(ata[np.ix_(keep, keep)], aty[keep])
+        return values
+
     def _normal_equations(self, source, cache=None):
         """(names, A'A, A'y, sliding samples, sum of torque, samples) of one run."""
         key = (id(source), self.settings, 'normal')
@@ -437,35 +548,87 @@ class CableFrictionObserver:
             cache[key] = out
         return out
 
+    # -- coefficients ----------------------------------------------------------------
+    @property
+    def coefficients(self) -> dict[str, float]:
+        """Forward-model coefficients by name (see :class:`FitResult`)."""
+        if self.fit_result is None:
+            raise EstimatorError('no coefficients before fit')
+        return {k: float(v) for k, v in zip(self.fit_result.names, self.fit_result.values)}
+
+    @property
+    def prior_torque(self) -> float:
+        """Estimate (N*m) before the first sliding sample of a run (the training mean)."""
+        return self._prior
+
+    def with_coefficients(self, changes: Mapping[str, float], *,
+                          prior_torque: float | None = None) -> 'CableFrictionObserver':
+        """Return a copy with some forward coefficients replaced (a calibrated instrument).
+
+        Parameters
+        ----------
+        changes : mapping of str to float
+            New values by coefficient name (units of :class:`FitResult`).
+        prior_torque : float, optional
+            New estimate before the first sliding sample (N*m).
+        """
+        if self.fit_result is None:
+            raise EstimatorError('with_coefficients before fit')
+        unknown = set(changes) - set(self.fit_result.names)
+        if unknown:
+            raise EstimatorError(f'unknown coefficients {sorted(unknown)}')
+        pairs = zip(self.fit_result.names, self.fit_result.values)
+        values = np.array([changes.get(k, v) for k, v in pairs])
+        out = CableFrictionObserver(self.settings)
+        out.fit_result = FitResult(list(self.fit_result.names), values, self.fit_result.std.copy(),
+                                   {k: (v, float('nan')) for k, v in
+                                    _physical(self.fit_result.names, values).items()},
+                                   self.fit_result.training_samples)
+        out._prior = self._prior if prior_torque is None else float(prior_torque)
+        return out
+
     # -- prediction ------------------------------------------------------------------
-    def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
-        """Jaw torque estimate (N*m) of a run or log, from its motor-side columns only."""
+    def inversion(self, source, *, cache: dict | None = None):
+        """Per-sample inverted torque (N*m), observer weight (0..1) and sample period (s).
+
+        The forward model solved for the jaw torque at every sample, and the weight
+        the observer gives it (0 while stuck or reversing).
+        """
         if self.fit_result is None:
             raise EstimatorError('predict before fit')
         sig, names, nuisance, dt = self._design(source, cache)
-        coef = dict(zip(self.fit_result.names, self.fit_result.values))
-        alpha = coef['alpha0'] + coef.get('alpha1', 0.0) * sig.direction
+        coef = self.coefficients
+        a = coef['alpha0'] + coef.get('alpha1', 0.0) * sig.direction
         if sig.slow_direction is not None:
-            alpha = alpha + coef.get('alpha2', 0.0) * sig.slow_direction
-        alpha = np.where(np.abs(alpha) < 1e-6, 1e-6, alpha)
+            a = a + coef.get('alpha2', 0.0) * sig.slow_direction
+        quad = coef.get('alpha1_quad', 0.0) * sig.direction
         beta = nuisance @ np.array([coef[k] for k in names])
-        inverted = (sig.current - beta) / alpha       # tau = (I - b(s, x, v)) / alpha(s)
+        inverted, slope = invert_forward(sig.current, a, quad, beta)
+        weight = sig.sliding * self._information(slope)
+        return inverted, weight, dt
+
+    def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
+        """Jaw torque estimate (N*m) of a run or log, from its motor-side columns only."""
+        inverted, weight, dt = self.inversion(source, cache=cache)
         if not self.settings.hysteresis:
             return inverted
         tc = self.settings.observer_time_constant
         gain_per_sample = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
-        return hold_observer(inverted, sig.sliding * self._information(alpha), gain_per_sample,
-                             self._prior)
+        return hold_observer(inverted, weight, gain_per_sample, self._prior)
 
-    def _information(self, alpha):
-        """Return the weight (0..1) of an inverted sample: (alpha/alpha_max)^2.
+    def alpha_max(self) -> float:
+        """Return the largest branch slope at zero load, |alpha0| + |alpha1| + |alpha2| (A/(N*m))."""
+        coef = self.coefficients
+        return abs(coef['alpha0']) + abs(coef.get('alpha1', 0.0)) + abs(coef.get('alpha2', 0.0))
 
-        The inversion divides the current noise by alpha(s), so its variance grows as
-        1/alpha^2.
+    def _information(self, slope):
+        """Return the weight (0..1) of an inverted sample.
+
+        The inversion divides the current noise by the branch slope dI/dtau, so its variance
+        grows as 1/slope^2; weight = min(slope/alpha_max, 1)^2 (alpha_max: the driving
+        branch's slope at zero load).
         """
-        coef = dict(zip(self.fit_result.names, self.fit_result.values))
-        alpha_max = abs(coef['alpha0']) + abs(coef.get('alpha1', 0.0)) + abs(coef.get('alpha2', 0.0))
-        return (alpha / alpha_max) ** 2
+        return np.minimum(np.abs(slope) / self.alpha_max(), 1.0) ** 2
 
 
 class LinearCurrentEstimator:

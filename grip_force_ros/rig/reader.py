@@ -12,7 +12,7 @@ sees SI values, closing-positive signs, and named fields.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +63,20 @@ class RigRun:
     load_command : ndarray
         Front-end (resisting) motor command (A), as recorded.
     trajectory_angle : ndarray
-        Commanded input-disk angle (rad), positive closing.
+        Commanded input-disk angle (rad), positive closing (the file holds rad in
+        ``Tool_4_Maryland_L_2`` and disk-encoder counts in later folders: both read).
+    yaw_step : int or None
+        Z of a ``ZXY.TXT`` name (jaw stopping position of the roll/pitch/yaw folders),
+        None for ``XY.TXT``.
+    spindle : str
+        ``'left'`` or ``'right'``: the instrument input spindle the back end drives.
+    spindle_source : str
+        Where ``spindle`` comes from: ``'header'`` (the ``Used left spindle`` line),
+        ``'folder'`` (``_L_``/``_R_`` in the folder name) or ``'default'`` (neither: left).
+    file : str
+        File name as on disk, e.g. ``'11.TXT'``.
+    folder : str
+        Name of the folder holding the file.
     """
 
     name: str
@@ -82,14 +95,22 @@ class RigRun:
     disk_torque: np.ndarray = field(repr=False)
     load_command: np.ndarray = field(repr=False)
     trajectory_angle: np.ndarray = field(repr=False)
+    yaw_step: int | None = None
+    spindle: str = 'left'
+    spindle_source: str = 'default'
+    file: str = ''
+    folder: str = ''
 
     def __len__(self) -> int:
         return int(self.t.size)
 
 
-_NAME = re.compile(r'^(\d)(\d)\.txt$', re.IGNORECASE)
+#: ``XY.TXT`` or ``ZXY.TXT`` (upstream README): X frequency, Y resisting torque, Z yaw.
+_NAME = re.compile(r'^(\d)?(\d)(\d)\.txt$', re.IGNORECASE)
 _FREQ = re.compile(r'([0-9.]+)\s*Hz', re.IGNORECASE)
 _TORQUE = re.compile(r'reaction torque of\s*([0-9.]+)\s*percent', re.IGNORECASE)
+_SPINDLE = re.compile(r'\b(left|right)\s+spindle', re.IGNORECASE)
+_FOLDER_SIDE = re.compile(r'(?:^|_)([LR])(?:_|$)')
 
 
 def _parse_header(lines: list[str]) -> dict[str, str]:
@@ -106,8 +127,85 @@ def _parse_header(lines: list[str]) -> dict[str, str]:
     return header
 
 
+def spindle_of(header: dict, folder: str) -> tuple[str, str]:
+    """Which input spindle a run drives, and where that was read.
+
+    Parameters
+    ----------
+    header : dict
+        Parsed header (:func:`read_run`); its ``description`` says ``Used left
+        spindle ...`` or ``Used right spindle ...``.
+    folder : str
+        Folder name, e.g. ``Tool_4_Maryland_R_5`` (``_L_``/``_R_``).
+
+    Returns
+    -------
+    (str, str)
+        ``('left' | 'right', 'header' | 'folder' | 'default')``.
+    """
+    match = _SPINDLE.search(header.get('description', ''))
+    if match:
+        return match.group(1).lower(), 'header'
+    match = _FOLDER_SIDE.search(folder)
+    if match:
+        return ('left' if match.group(1) == 'L' else 'right'), 'folder'
+    return 'left', 'default'
+
+
+def _load_rows(path: Path, skip: int, rows: int | None) -> np.ndarray:
+    """Numeric rows of a run file: the fast reader first, a tolerant line parser on failure.
+
+    The tolerant path keeps rows of exactly :data:`.constants.RAW_COLUMNS` finite
+    numbers and drops the rest (a truncated last line of an SD-card log, a stray
+    text line); it refuses a file where more than 1 % of the lines are dropped.
+    """
+    ncol = len(C.RAW_COLUMNS)
+    try:
+        raw = np.loadtxt(path, delimiter=',', comments='%', dtype=np.float64, ndmin=2,
+                         skiprows=skip, max_rows=rows, encoding='latin-1')
+    except ValueError:
+        raw = None
+    if raw is not None:
+        if raw.shape[1] != ncol:
+            raise RigDataError(f'{path}: expected {ncol} columns, got {raw.shape[1]}')
+        if np.all(np.isfinite(raw)):
+            return raw
+    kept, dropped = [], 0
+    with open(path, 'r', encoding='latin-1') as fh:
+        for line in fh:
+            text = line.strip()
+            if not text or text.startswith('%'):
+                continue
+            parts = text.rstrip(',').split(',')
+            try:
+                values = [float(v) for v in parts]
+            except ValueError:
+                dropped += 1
+                continue
+            if len(values) != ncol or not all(np.isfinite(values)):
+                dropped += 1
+                continue
+            kept.append(values)
+            if rows is not None and len(kept) >= rows:
+                break
+    if not kept:
+        raise RigDataError(f'{path}: no row of {ncol} numbers')
+    if dropped > 0.01 * (len(kept) + dropped):
+        raise RigDataError(f'{path}: {dropped} of {len(kept) + dropped} data lines are not '
+                           f'{ncol} numbers (expected {ncol} columns)')
+    return np.asarray(kept, dtype=np.float64)
+
+
 def read_run(path, *, rows: int | None = None) -> RigRun:
-    """Read one ``XY.TXT`` run.
+    """Read one ``XY.TXT`` or ``ZXY.TXT`` run.
+
+    Both upstream formats are read: ``Tool_4_Maryland_L_2`` (values with decimals,
+    disk encoder 0 at the start, trajectory in rad) and the later folders
+    (integer-like encoder and torque counts, the disk encoder at its index-pulse
+    reference, trajectory in disk counts, current with another resolution). A
+    right-spindle run (header ``Used right spindle``, or ``_R_`` in the folder
+    name) has every raw column negated first, as upstream's own loader does
+    (``compileData.m``), so that closing is positive on both spindles.
 
     Parameters
     ----------
@@ -123,64 +221,98 @@ def read_run(path, *, rows: int | None = None) -> RigRun:
     Raises
     ------
     RigDataError
-        Unreadable file, a name not of the form ``XY.TXT``, a wrong column count,
-        or non-rising time.
+        Unreadable file, a name not of the form ``XY.TXT``/``ZXY.TXT``, a wrong
+        column count, or time that does not rise.
     """
     path = Path(path)
     match = _NAME.match(path.name)
     if not match:
-        raise RigDataError(f'{path}: expected a run file named XY.TXT (X = frequency, '
-                           f'Y = torque level)')
+        raise RigDataError(f'{path}: expected a run file named XY.TXT or ZXY.TXT (Z = yaw, '
+                           f'X = frequency, Y = torque level)')
     try:
         with open(path, 'r', encoding='latin-1') as fh:
             header_lines = []
             for line in fh:
-                if line.startswith('%'):
+                if line.startswith('%') or not line.strip():
                     header_lines.append(line)
                 else:
                     break
-        raw = np.loadtxt(path, delimiter=',', comments='%', dtype=np.float64, ndmin=2,
-                         skiprows=len(header_lines), max_rows=rows, encoding='latin-1')
-    except (OSError, ValueError) as exc:
+        raw = _load_rows(path, len(header_lines), rows)
+    except OSError as exc:
         raise RigDataError(f'{path}: cannot read rig file: {exc}') from None
-    if raw.shape[1] != len(C.RAW_COLUMNS):
-        raise RigDataError(f'{path}: expected {len(C.RAW_COLUMNS)} columns, got {raw.shape[1]}')
-    if raw.shape[0] < 2 or np.any(np.diff(raw[:, 0]) <= 0):
-        raise RigDataError(f'{path}: time must rise strictly over at least 2 rows')
+    raw = _monotonic_time(path, raw)
     header = _parse_header(header_lines)
     desc = header.get('description', '')
     freq_match, torque_match = _FREQ.search(desc), _TORQUE.search(desc)
-    fx, ty = int(match.group(1)), int(match.group(2))
+    yaw = int(match.group(1)) if match.group(1) is not None else None
+    fx, ty = int(match.group(2)), int(match.group(3))
     frequency = float(freq_match.group(1)) if freq_match else \
         C.FREQUENCY_FIRST_HZ + C.FREQUENCY_STEP_HZ * fx
     level = float(torque_match.group(1)) if torque_match else \
         C.TORQUE_FIRST_PERCENT + C.TORQUE_STEP_PERCENT * ty
-    return _convert(path.stem, fx, ty, frequency, level, header, raw)
+    folder = path.resolve().parent.name
+    spindle, source = spindle_of(header, folder)
+    run = _convert(path.stem, fx, ty, frequency, level, header, raw, spindle)
+    return replace(run, yaw_step=yaw, spindle=spindle, spindle_source=source, file=path.name,
+                   folder=folder)
 
 
-def _convert(name, fx, ty, frequency, level, header, raw) -> RigRun:
-    col = {n: raw[:, i] for i, n in enumerate(C.RAW_COLUMNS)}
+def _monotonic_time(path: Path, raw: np.ndarray) -> np.ndarray:
+    """Time in s, strictly rising: ms are converted, a few repeated stamps dropped."""
+    if raw.shape[0] < 2:
+        raise RigDataError(f'{path}: time must rise strictly over at least 2 rows')
+    t = raw[:, 0]
+    if np.median(np.diff(t)) > 0.5:          # stamps in ms (the upstream header's unit)
+        raw = raw.copy()
+        raw[:, 0] = t / 1000.0
+        t = raw[:, 0]
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    if not np.all(keep):
+        # a stamp that does not rise is dropped with its row; more than 1 % is an error
+        running = np.maximum.accumulate(t)
+        keep = np.concatenate([[True], t[1:] > running[:-1]])
+        if keep.sum() < 0.99 * t.size or keep.sum() < 2:
+            raise RigDataError(f'{path}: time must rise strictly over at least 2 rows')
+        raw = raw[keep]
+    return raw
+
+
+def _convert(name, fx, ty, frequency, level, header, raw, spindle='left') -> RigRun:
+    col = {n: raw[:, i].copy() for i, n in enumerate(C.RAW_COLUMNS)}
+    disk_offset = 0.0
+    if spindle == 'right':
+        # upstream compileData.m: "Flip pretty much everything, since we are doing right jaw"
+        for key in col:
+            if key != 'time':
+                col[key] = -col[key]
+        disk_offset = C.RIGHT_SPINDLE_DISK_OFFSET
     disk_counts = col['disk_counts']
     motor_counts = col['motor_counts'] - col['motor_counts'][0]   # not zeroed upstream
+    target = col['trajectory_target']
+    if np.max(np.abs(target)) > C.TRAJECTORY_COUNTS_ABOVE:
+        target = target * (C.TWO_PI / C.DISK_COUNTS_PER_REV)      # later folders: counts
     return RigRun(
         name=name, frequency_step=fx, torque_step=ty, frequency_hz=frequency,
         torque_level_percent=level, header=header,
         t=col['time'] - col['time'][0],
         current=col['measured_current'].copy(),
         current_command=C.BACKEND_COMMAND_SIGN * C.BACKEND_COMMAND_FULL_SCALE * col['backend_command'],
-        motor_angle=C.DISK_SIGN * disk_counts * (C.TWO_PI / C.DISK_COUNTS_PER_REV) + 0.0,  # no -0.0
+        motor_angle=C.DISK_SIGN * disk_counts * (C.TWO_PI / C.DISK_COUNTS_PER_REV) + disk_offset
+        + 0.0,  # no -0.0
         motor_shaft_angle=C.MOTOR_SIGN * motor_counts * (C.TWO_PI / C.MOTOR_COUNTS_PER_OUTPUT_REV),
         jaw_angle=C.JAW_CLOSING_SIGN * (C.JAW_REFERENCE_COUNTS - col['jaw_counts'])
         * (C.TWO_PI / C.JAW_COUNTS_PER_REV),
         jaw_torque=C.JAW_TORQUE_SIGN * C.TORQUE_NM_PER_COUNT * col['jaw_torque_counts'],
         disk_torque=C.DISK_TORQUE_SIGN * C.TORQUE_NM_PER_COUNT * col['disk_torque_counts'],
         load_command=col['load_command'].copy(),
-        trajectory_angle=C.DISK_SIGN * col['trajectory_target'] + 0.0,
+        trajectory_angle=C.DISK_SIGN * target + 0.0,
     )
 
 
 def run_files(directory) -> list[Path]:
-    """List the ``XY.TXT`` run files of a rig folder, sorted by name.
+    """List the ``XY.TXT`` / ``ZXY.TXT`` run files of a rig folder, sorted by name.
+
+    Other files (``ReadME.txt``, ``SerialLog.txt``) are skipped.
 
     Raises
     ------
@@ -192,7 +324,7 @@ def run_files(directory) -> list[Path]:
         raise RigDataError(f'{directory}: not a directory')
     files = sorted(p for p in directory.iterdir() if _NAME.match(p.name))
     if not files:
-        raise RigDataError(f'{directory}: no XY.TXT run files')
+        raise RigDataError(f'{directory}: no XY.TXT run files (nor ZXY.TXT)')
     return files
 
 
@@ -225,6 +357,21 @@ def to_contract_log(run: RigRun) -> dict[str, np.ndarray]:
     return log
 
 
+def data_root() -> Path:
+    """Find the ``mis-tool-characterization`` folder: ``shared/data/...`` beside the repository.
+
+    Looked for beside every parent of the package (a git worktree one level deeper
+    finds the same shared copy); the first that exists wins, else the one beside
+    the repository root.
+    """
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        candidate = parent.joinpath(*C.DATA_ROOT)
+        if candidate.is_dir():
+            return candidate
+    return here.parents[3].joinpath(*C.DATA_ROOT)
+
+
 def default_data_dir() -> Path:
-    """``../shared/data/mis-tool-characterization/Tool_4_Maryland_L_2`` beside the repository."""
-    return Path(__file__).resolve().parents[3].joinpath(*C.DEFAULT_DATA_DIR)
+    """``../shared/data/mis-tool-characterization/Tool_4_Maryland_L_2`` (see :func:`data_root`)."""
+    return data_root() / C.DEFAULT_FOLDER

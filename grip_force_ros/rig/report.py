@@ -58,9 +58,11 @@ def plot_friction_branches(runs: Sequence, result: dict, path: Path) -> Path:
     tau = np.linspace(0.0, 0.06, 50)
     for sign, label in ((1, 'closing (motor drives)'), (-1, 'opening (load back-drives)')):
         alpha = coef['alpha0'] + sign * coef.get('alpha1', 0.0)
+        quad = sign * coef.get('alpha1_quad', 0.0)
         beta = coef['offset'] + sign * coef.get('coulomb', 0.0)
-        ax.plot(tau * 1e3, alpha * tau + beta, color=colours[sign], lw=2.5,
-                label=f'{label}: I = {alpha:.2f} A/(N m) * tau {beta:+.3f} A')
+        ax.plot(tau * 1e3, alpha * tau + quad * tau ** 2 + beta, color=colours[sign], lw=2.5,
+                label=f'{label}: I = {alpha:.2f} A/(N m) * tau {quad:+.2f} A/(N m)^2 * tau^2 '
+                      f'{beta:+.3f} A')
     phys = result['estimators'][1]['parameters']['physical']
     ax.set_title('Friction branches (sliding samples, all runs); lines: fit on the 10/30 % runs, '
                  'mid-stroke, v = 0\n'
@@ -176,7 +178,8 @@ def write_report(result: dict, runs: Sequence, out_dir, *, cache: dict | None = 
               '## Fitted parameters (holdout training runs; +- leave-one-run-out jackknife)', '']
     phys = full['parameters']['physical']
     units = {'gain_Nm_per_A': ('gain G (loss-free current to jaw torque)', 'N m/A', 1.0),
-             'efficiency': ('one-way efficiency eta', '-', 1.0),
+             'efficiency': ('one-way efficiency eta (zero load)', '-', 1.0),
+             'efficiency_at_100mNm': ('one-way efficiency eta at 100 mN m', '-', 1.0),
              'coulomb_Nm': ('Coulomb friction at the jaw', 'mN m', 1e3),
              'offset_Nm': ('offset at the jaw', 'mN m', 1e3),
              'viscous_Nms_per_rad': ('viscous friction', 'mN m s/rad', 1e3),

@@ -62,6 +62,7 @@ class StreamingJawTorqueObserver:
         self.settings, self.dt = s, float(dt)
         coef = dict(zip(estimator.fit_result.names, (float(v) for v in estimator.fit_result.values)))
         self._alpha = (coef['alpha0'], coef.get('alpha1', 0.0), coef.get('alpha2', 0.0))
+        self._quad = coef.get('alpha1_quad', 0.0)
         self._alpha_max = sum(abs(a) for a in self._alpha)
         self._offset, self._coulomb = coef['offset'], coef.get('coulomb', 0.0)
         self._coulomb_slow, self._viscous = coef.get('coulomb_slow', 0.0), coef.get('viscous', 0.0)
@@ -160,7 +161,7 @@ class StreamingJawTorqueObserver:
             self._slow = self._dahl(self._slow, d, s.slow_hysteresis_width)
             slow = self._slow
         lo, hi = POSITION_RANGE
-        x = 2.0 * (motor_angle - lo) / (hi - lo) - 1.0
+        x = min(max(2.0 * (motor_angle - lo) / (hi - lo) - 1.0, -1.0), 1.0)
         beta = (self._offset + (self._coulomb if s.coulomb else 0.0) * direction
                 + self._coulomb_slow * slow + self._horner(self._spring, x)
                 + direction * self._horner(self._friction, x)
@@ -169,10 +170,17 @@ class StreamingJawTorqueObserver:
         alpha = a0 + a1 * direction + a2 * slow
         if abs(alpha) < 1e-6:
             alpha = 1e-6
-        inverted = (i_f - beta) / alpha               # tau = (I - b(s, x, v)) / alpha(s)
+        quad = self._quad * direction
+        y = i_f - beta
+        if quad == 0.0 and self._quad == 0.0:
+            inverted, slope = y / alpha, abs(alpha)   # tau = (I - b(s, x, v)) / alpha(s)
+        else:                                          # I - b = alpha*tau + quad*tau^2
+            alpha = max(alpha, 1e-6)
+            slope = math.sqrt(max(alpha * alpha + 4.0 * quad * y, 0.0))
+            inverted = 2.0 * y / (alpha + slope)
         if not s.hysteresis:
             return inverted
-        weight = sliding * (alpha / self._alpha_max) ** 2      # information of this sample
+        weight = sliding * min(slope / self._alpha_max, 1.0) ** 2   # information of this sample
         if weight > 0.0:
             self._seen += weight
             g = max(self._gain * weight, weight / self._seen)
