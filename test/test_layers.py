@@ -28,13 +28,13 @@ MAY_IMPORT = {
              'params', 'topics', 'plotting'},
     'faults': {'objects', 'effects', 'nodes', 'control', 'sim', 'params', 'topics'},
     'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics',
-              'objects', 'effects'},
+              'objects', 'effects', 'demo', 'trajectories'},
     'cli': None,                                       # the command: anything
 }
 #: The only parts that import rclpy or ROS message packages.
 ROS_PARTS = {'nodes', 'demo', 'faults', 'bench'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
-               'geometry_msgs', 'diagnostic_msgs'}
+               'geometry_msgs', 'diagnostic_msgs', 'crtk_msgs'}
 
 
 def part_of(path: Path) -> str:
