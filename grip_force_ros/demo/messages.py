@@ -130,7 +130,7 @@ class RecordedTopics:
                       topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
 
     def values(self, topic: str, msg: Any) -> dict[str, float]:
-        """Return the plain values (SI) of a message of ``topic``, named as in ``fields``."""
+        """Return the plain SI numbers a message of ``topic`` carries, named as in ``fields``."""
         n = self.names
         if n.interface == 'crtk':
             return values_of(topic, msg)

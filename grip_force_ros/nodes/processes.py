@@ -104,7 +104,7 @@ ROS_SETUP_FILE = 'ros_setup.bash'
 
 def ros_tools_environment(base: Mapping[str, str] | None = None,
                           setup_file: str | os.PathLike | None = None) -> dict[str, str]:
-    """The environment of ``source .venv/ros_setup.bash`` (crtk_msgs, the dVRK client, ros2).
+    """Return the environment of ``source .venv/ros_setup.bash`` (crtk_msgs, dVRK client, ros2).
 
     What a node of the ``dvrk`` profile needs: crtk_msgs' typesupport libraries on the
     library path (``PYTHONPATH`` alone is not enough). On a ROS machine with crtk_msgs
