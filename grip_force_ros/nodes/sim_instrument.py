@@ -60,6 +60,9 @@ GROUPS = ('instrument', 'limits', 'sim', 'effects', 'interface')
 #: periods; longer stalls slow the simulation down.
 MAX_STEP = 0.01
 MAX_STEP_PERIODS = 2.5
+#: Period of the drive's own command-timeout check (s), as a drive's watchdog runs beside its
+#: current loop: independent of the rate the sensors are published at (dvrk: 100 Hz).
+DRIVE_CHECK_PERIOD = 1e-3
 DIAGNOSTICS_PERIOD = 1.0  # s
 
 
@@ -90,6 +93,9 @@ class SimInstrumentNode(Node):
         self._started = self._last
         self._max_step = max(MAX_STEP, MAX_STEP_PERIODS / params.publish_rate)
         self._timer = self.create_timer(1.0 / params.publish_rate, self._tick)
+        # at 1 kHz and above the step checks the drive; slower, its own timer does
+        self._drive_timer = (self.create_timer(DRIVE_CHECK_PERIOD, self._check_drive)
+                             if params.publish_rate * DRIVE_CHECK_PERIOD < 1.0 else None)
         self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
         where = f' as arm {params.arm}' if params.interface == 'dvrk' else ''
         self.get_logger().info(
@@ -126,6 +132,9 @@ class SimInstrumentNode(Node):
             self.destroy_timer(self._timer)
             self._max_step = max(MAX_STEP, MAX_STEP_PERIODS / params.publish_rate)
             self._timer = self.create_timer(1.0 / params.publish_rate, self._tick)
+        if 'publish_rate' in changed and self._drive_timer is None \
+                and params.publish_rate * DRIVE_CHECK_PERIOD < 1.0:
+            self._drive_timer = self.create_timer(DRIVE_CHECK_PERIOD, self._check_drive)
         if 'command_timeout' in changed:
             self.drive.timeout = params.command_timeout
         self.get_logger().info(f'parameters changed: {sorted(changed)}')
@@ -140,18 +149,38 @@ class SimInstrumentNode(Node):
         if dt > self._max_step:
             dt = self._max_step
             self.capped_steps += 1
-        self.io.update(now)
         if self.drive.expired(now):
-            self.get_logger().warning(
-                f'no command for {self.drive.timeout * 1e3:g} ms: drive current cut from '
-                f'{self.current_command:.4f} A to 0 A (command timeout)')
-            self.current_command = 0.0
+            self._cut()
+        self.io.update(now)
         if not self.io.powered():        # dvrk: a disabled arm's drives carry no current
             self.current_command = 0.0
         self.sim.step(self.current_command, dt)
         stamp = self.get_clock().now()
         self.io.publish_state(self.sim.measure(), stamp.to_msg())
         self.loop.state_published(stamp.nanoseconds)
+
+    def _check_drive(self) -> None:
+        """Check the drive's command timeout between sensor steps (publish rate < 1 kHz).
+
+        On a cut the plant is first advanced to now with the held command, so the current
+        falls from the moment of the cut, not from the next sensor step.
+        """
+        now = time.monotonic()
+        if not self.drive.expired(now):
+            return
+        dt = min(now - self._last, self._max_step)
+        if dt > 0.0:
+            self.sim.step(self.current_command, dt)
+            self._last = now
+        self._cut()
+
+    def _cut(self) -> None:
+        """Cut the drive current (the command timeout expired) and say so."""
+        self.get_logger().warning(
+            f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
+            f'{self.drive.timeout * 1e3:g} ms): drive current cut from {self.current_command:.4f} A '
+            'to 0 A')
+        self.current_command = 0.0
 
     def _publish_diagnostics(self) -> None:
         params = self._param.params

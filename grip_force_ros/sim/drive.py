@@ -37,6 +37,7 @@ class CommandTimeout:
         self.last_command = math.nan   # s, time of the last command (nan: none since the last cut)
         self.expiries = 0              # how often the current was cut
         self.last_expiry = math.nan    # s, when it was last cut
+        self.last_silence = math.nan   # s, the time without a command at the last cut
 
     def command(self, now: float) -> None:
         """Note a command received at ``now`` (s): (re-)arms the timeout."""
@@ -46,6 +47,7 @@ class CommandTimeout:
         """Tell whether the timeout expired at ``now`` (s): True once per expiry, then disarmed."""
         if self.last_command != self.last_command or now - self.last_command <= self.timeout:
             return False
+        self.last_silence = now - self.last_command
         self.last_command = math.nan
         self.expiries += 1
         self.last_expiry = now
