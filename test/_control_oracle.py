@@ -4,8 +4,10 @@ The controller steps on the measured time since its previous step (docs/control.
 independence"): the current may change by at most ``max_current_slew * dt`` in a step.
 ``dt`` is ``now - previous now`` when that is a usable step interval, 0 <= dt <=
 ``watchdog_timeout``; otherwise (the first step, a clock that is not finite or went
-backwards, a stall longer than the watchdog) the step is safe and ramps by the nominal
-period ``1 / expected_state_rate``.
+backwards) the step is safe and ramps by the nominal period ``1 / expected_state_rate``.
+After a stall longer than the watchdog nobody knows what the drive did (a drive with a
+command timeout cut the current, a dVRK held it): the controller restarts from the measured
+current, so that step has no slew bound (``dt`` is infinite), only the current limit.
 """
 import math
 
@@ -25,4 +27,6 @@ class StepClock:
         if last == -math.inf:
             return nominal
         interval = now - last
-        return interval if 0.0 <= interval <= params.watchdog_timeout else nominal
+        if interval > params.watchdog_timeout:
+            return math.inf
+        return interval if interval >= 0.0 else nominal

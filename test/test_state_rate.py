@@ -92,3 +92,30 @@ def test_the_node_refuses_to_start_outside_the_range():
     assert done.returncode == 2
     line = [ln for ln in done.stderr.splitlines() if 'refusing to start' in ln]
     assert line and 'expected_state_rate' in line[0] and '[100.0, 1500.0]' in line[0], done.stderr
+
+
+@pytest.mark.parametrize('drive', ['cut', 'held'])
+def test_after_a_stall_the_command_restarts_from_the_measured_current(drive):
+    """A drive with a command timeout cut the current during the stall (the sim), a dVRK held
+    it: the controller continues from what the actuator measures, so the drive sees no step."""
+    params = make_params({'expected_state_rate': 100.0})
+    ctrl = GripController(params)
+    inputs = ctrl.new_inputs()
+    t = 0.0
+    for _ in range(100):
+        t += 0.01
+        inputs.set_master(t, 0.0)
+        inputs.set_instrument(t, 0.0, 0.04, 0.0)
+        inputs.set_actuator(t, ctrl.command)
+        out = ctrl.step(t, inputs)
+    held = ctrl.command
+    assert out.mode == 'grip' and held > 0.2
+    t += 0.2
+    measured = 0.0 if drive == 'cut' else held
+    inputs.set_master(t, 0.0)
+    inputs.set_instrument(t, 0.0, 0.04, 0.0)
+    inputs.set_actuator(t, measured)
+    out = ctrl.step(t, inputs)
+    step = params.max_current_slew * 0.01            # the safe ramp's one nominal period
+    assert out.mode == 'safe'
+    assert out.current_command == pytest.approx(max(measured - step, 0.0))

@@ -227,24 +227,40 @@ class GripController:
 
     # ------------------------------------------------------------------ step
     def _step_interval(self, now: float):
-        """Return ``(dt [s], fault or None)``: the time since the previous step, checked.
+        """Return ``(dt [s], fault or None, stalled)``: the time since the previous step, checked.
 
         A clock that is not finite or went backwards, or an interval longer than
         ``watchdog_timeout``, is a fault; ``dt`` is then the nominal period (for the safe
-        ramp). The first step has the nominal period.
+        ramp). The first step has the nominal period. ``stalled``: the interval was longer than
+        the watchdog timeout (the controller was stalled).
         """
         last = self.last_now
         if not _isfinite(now):
-            return self.period, None          # _input_faults names the clock
+            return self.period, None, False   # _input_faults names the clock
         if last == -math.inf:
-            return self.period, None
+            return self.period, None, False
         dt = now - last
         if dt < 0.0:
-            return self.period, f'controller clock went backwards by {-dt * 1e3:.3f} ms'
+            return self.period, f'controller clock went backwards by {-dt * 1e3:.3f} ms', False
         if dt > self.watchdog_timeout:
             return self.period, (f'step interval {dt * 1e3:.1f} ms > {self.watchdog_timeout * 1e3:.1f} '
-                                 'ms (the controller was stalled)')
-        return dt, None
+                                 'ms (the controller was stalled)'), True
+        return dt, None, False
+
+    def _after_stall(self, now: float, inputs: ControlInputs) -> None:
+        """Continue from the current the actuator measures now, after a stall of the controller.
+
+        During a stall longer than the watchdog nobody knows what the drive did with the last
+        command: a drive with a command timeout has cut it to 0 A (the sim, issue 11), a dVRK
+        holds it. The measured current says which; with no fresh, valid one the command is
+        kept.
+        """
+        age = now - inputs.actuator_time
+        if inputs.actuator_fault is None and 0.0 <= age <= self.watchdog_timeout:
+            limit = self.current_limit
+            measured = inputs.measured_current
+            self.command = limit if measured > limit else (-limit if measured < -limit else measured)
+            self.filtered_current = self.command
 
     def step(self, now: float, inputs: ControlInputs, interlock: str | None = None) -> ControlOutput:
         """One control step, on the time measured since the previous one.
@@ -264,13 +280,15 @@ class GripController:
         ControlOutput
         """
         self.steps += 1
-        dt, interval_fault = self._step_interval(now)
+        dt, interval_fault, stalled = self._step_interval(now)
         self.last_dt = dt
         faults = self._input_faults(now, inputs)
         if _isfinite(now):
             self.last_now = now
         if interval_fault is not None:
             faults = faults + (interval_fault,)
+        if stalled:
+            self._after_stall(now, inputs)
         if interlock is not None:
             faults = faults + (interlock,)
         if faults:

@@ -56,8 +56,9 @@ class LimitMonitor:
         max_current_slew / expected_state_rate.
     period : float, optional
         The nominal period (s). Given, a change may be ``max_step * dt / period`` for the time
-        ``dt`` between the commands' receipts (at least one period, at most ``max_period``,
-        plus :data:`DELIVERY_JITTER` periods): the controller steps on the measured time.
+        ``dt`` between the commands' receipts (at least one period, plus
+        :data:`DELIVERY_JITTER` periods): the controller steps on the measured time; after a
+        gap longer than ``max_period`` (a stall) the step is not bounded.
     max_period : float
         The longest step time the controller integrates (its watchdog timeout, s).
     """
@@ -79,8 +80,11 @@ class LimitMonitor:
         why = None
         step = self.max_step
         if self.period and t == t and self.previous_time == self.previous_time:
-            dt = (min(max(t - self.previous_time, self.period), self.max_period)
-                  + DELIVERY_JITTER * self.period)
+            gap = t - self.previous_time
+            # after a stall longer than the watchdog the controller restarts from the measured
+            # current (what the drive did is unknown): no slew bound on that step
+            dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
+                  else max(gap, self.period) + DELIVERY_JITTER * self.period)
             step = self.max_step * dt / self.period
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
