@@ -144,10 +144,18 @@ class _Probe:
         rclpy.try_shutdown(context=self.context)
 
 
+#: The sim's measured current (A) that counts as holding a grip (the hold needs ~0.12-0.3 A).
+GRIP_CURRENT = 0.05
+
+
 def _gripping(probe: _Probe) -> bool:
+    """Tell whether the controller grips and the sim's last states carry the grip current."""
     status = probe.latest('controller')
+    with probe.lock:
+        recent = [i for _, i in probe.states[-5:]]
     return status is not None and status['values'].get('mode') == 'grip' and \
-        float(status['values'].get('current_command_A', 0.0)) > 0.05
+        float(status['values'].get('current_command_A', 0.0)) > GRIP_CURRENT and \
+        len(recent) == 5 and min(recent) > GRIP_CURRENT
 
 
 class _Loop:
@@ -203,6 +211,8 @@ def _zero_current(loop: _Loop) -> float:
 
 def _kill_case(loop: _Loop, detail: dict) -> list[str]:
     problems = []
+    if not loop.probe.wait(lambda: _gripping(loop.probe), 5.0):
+        return ['not gripping before the kill']
     kill = time.time()
     loop.procs['controller'].signal(signal.SIGKILL)
     time.sleep(0.5)
@@ -214,6 +224,8 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         return ['no sim state after the kill']
     first_zero = next((t for t, i in after if abs(i) < zero), math.nan)
     detail['current_at_kill_A'] = round(after[0][1], 4) if after else None
+    if not after or after[0][1] < GRIP_CURRENT:
+        problems.append('the sim carried no grip current at the kill')
     detail['current_zero_after_ms'] = round((first_zero - kill) * 1e3, 1)
     detail['largest_current_35ms_after_A'] = round(max(abs(i) for _, i in late), 4)
     if max(abs(i) for _, i in late) >= zero:
