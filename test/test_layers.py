@@ -26,7 +26,7 @@ MAY_IMPORT = {
     'nodes': {'objects', 'effects', 'control', 'model', 'sim', 'trajectories', 'params', 'topics'},
     'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
              'params', 'topics', 'plotting'},
-    'faults': {'objects', 'effects', 'nodes', 'control', 'sim', 'params', 'topics'},
+    'faults': {'objects', 'effects', 'nodes', 'control', 'model', 'sim', 'params', 'topics'},
     'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics',
               'objects', 'effects', 'demo', 'trajectories'},
     'cli': None,                                       # the command: anything

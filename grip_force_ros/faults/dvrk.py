@@ -78,7 +78,6 @@ class _Probe:
         from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
 
-        from grip_force_ros.demo.messages import diagnostic_summary
         from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
@@ -103,8 +102,10 @@ class _Probe:
 
         def on_diag(msg):
             now = time.time()
+            statuses = [{'name': s.name, 'values': {kv.key: kv.value for kv in s.values}}
+                        for s in msg.status]
             with self.lock:
-                self.diagnostics += [(now, s) for s in diagnostic_summary(msg)]
+                self.diagnostics += [(now, s) for s in statuses]
 
         self.node.create_subscription(JointState, names.actuator_js, on_state, RECORD_QOS)
         self.node.create_subscription(JointState, names.command, on_command, RECORD_QOS)

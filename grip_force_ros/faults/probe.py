@@ -39,9 +39,11 @@ def to_time_msg(seconds: float):
 #: Delivery jitter allowed between a command's step and its receipt in the probe, as a share
 #: of the nominal period: the controller steps on the time it measured, which the probe sees
 #: only as receive times, and one executor thread delivers the probe's callbacks behind
-#: others on a loaded 2-core machine. (The exact per-step check, on the controller's own
+#: others on a loaded 2-core machine (half a period was exceeded by 5 % at load 10). So one
+#: pair of commands may differ by up to two slew steps when their receipts came bunched; a
+#: runaway command is still caught. (The exact per-step check, on the controller's own
 #: clock, is test/test_control_properties.py.)
-DELIVERY_JITTER = 0.5
+DELIVERY_JITTER = 1.0
 
 
 class LimitMonitor:
