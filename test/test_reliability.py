@@ -71,11 +71,17 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
     (0.1 A per period) when control resumes; the command continues where the ramp left it."""
     params = session.params
     step = params.max_current_slew / params.control_rate
+    # the master fully closed (4 N): the hold current (~0.2-0.3 A) is more than one slew step
+    # (0.1 A), so a resume can come mid-ramp; at the default 2 N the stick band's middle
+    # branch holds with ~0.1 A, which one safe period ramps to 0 A
     single_nan = FaultCase('single_nan_jaw', 'non-finite', 'one NaN jaw angle', 'reject_once',
                            'instrument', set_field('position', 1, float('nan')), ticks=1,
-                           reason='nan')
+                           reason='nan', master_angle=0.0)
+    silent = FaultCase('silence_instrument', 'silence', 'no instrument messages', 'stale_safe',
+                       'instrument', silence(), ticks=31, reason='stale instrument',
+                       master_angle=0.0)
     resumed_from = []
-    for case in (_silence('instrument', ticks=31), single_nan) * 3:
+    for case in (silent, single_nan) * 3:
         d = run_message_case(session, case)
         # one bad sample or 31 ms of silence need not make a safe period (the next good
         # sample may come first); when one happened, the resume must be bumpless
