@@ -96,16 +96,24 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
 
 
 def test_safe_output_ramps_at_the_slew_limit(session):
-    """While safe, the current falls to 0 A at exactly the slew limit, never faster."""
+    """While safe, the current falls to 0 A at the slew limit, never faster.
+
+    The controller steps on the time it measured between states, which the probe sees as
+    the gaps between the commands' receipts and stamps (plus one period of delivery jitter:
+    faults/probe.py); the exact per-step check is test/test_control_properties.py.
+    """
+    from grip_force_ros.faults.probe import DELIVERY_JITTER
     probe, params = session.probe, session.params
-    step = params.max_current_slew / params.control_rate
+    period = 1.0 / params.expected_state_rate
     d = run_message_case(session, _silence('instrument', ticks=60))
     assert d['passed'], d
-    # the commands of the safe stretch: |I| decreasing by at most one slew step to 0 A
-    safe = [command for _, _, command, target in probe.steps if target == 0.0]
+    # the commands of the safe stretch: |I| decreasing to 0 A, by at most the slew over the time
+    safe = [(t, stamp, command) for t, stamp, command, target in probe.steps if target == 0.0]
     assert safe, 'no safe output recorded'
-    assert all(abs(b) <= abs(a) + 1e-12 and abs(a - b) <= step * (1 + 1e-9)
-               for a, b in zip(safe, safe[1:]))
+    for (t0, s0, a), (t1, s1, b) in zip(safe, safe[1:]):
+        dt = max(t1 - t0, s1 - s0, period) + DELIVERY_JITTER * period
+        assert abs(b) <= abs(a) + 1e-12 and abs(a - b) <= params.max_current_slew * dt * (1 + 1e-9)
+    safe = [command for _, _, command in safe]
     assert abs(safe[-1]) < 1e-9     # 60 ms of silence: reached 0 A (<= 0.5 A at 0.1 A/ms)
     assert probe.limits.violations == []
 

@@ -73,16 +73,24 @@ class LimitMonitor:
         self.max_period = max_period
         self.previous: float | None = None
         self.previous_time = math.nan
+        self.previous_stamp = math.nan
         self.count = 0
         self.violations: list[str] = []
 
-    def check(self, command: float, t: float = math.nan) -> None:
-        """Check one command received at ``t`` (s, the probe's clock; nan: one period)."""
+    def check(self, command: float, t: float = math.nan, stamp: float = math.nan) -> None:
+        """Check one command received at ``t`` (s, the probe's clock; nan: one period).
+
+        ``stamp``: the command's header stamp (s; the state it answers, or the controller's
+        clock at the step): the larger of the gaps between receipts and between stamps is
+        the time the controller can have stepped over.
+        """
         self.count += 1
         why = None
         step = self.max_step
         if self.period and t == t and self.previous_time == self.previous_time:
             gap = t - self.previous_time
+            if stamp == stamp and self.previous_stamp == self.previous_stamp:
+                gap = max(gap, stamp - self.previous_stamp)
             # after a stall longer than the watchdog the controller restarts from the measured
             # current (what the drive did is unknown): no slew bound on that step
             dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
@@ -100,6 +108,7 @@ class LimitMonitor:
             self.violations.append(why)
         self.previous = command if math.isfinite(command) else self.previous
         self.previous_time = t
+        self.previous_stamp = stamp
 
 
 class FaultProbe(Node):
@@ -275,7 +284,7 @@ class FaultProbe(Node):
     def _on_command(self, msg: JointState) -> None:
         value = float(msg.effort[0]) if len(msg.effort) else math.nan
         self.command = value if math.isfinite(value) else 0.0
-        self.limits.check(value, self.now())
+        self.limits.check(value, self.now(), self._stamp(msg))
         self.commands.append((self.now(), self._stamp(msg), value))
 
     def _on_target(self, msg: WrenchStamped) -> None:
