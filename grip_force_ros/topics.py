@@ -12,7 +12,14 @@ CRTK-style names, as used by the dVRK. All remappable with ``--ros-args -r``.
 | grip/target_force | geometry_msgs/WrenchStamped | controller -> any | force.z = target grip force (N) |
 | grip/measured_force | geometry_msgs/WrenchStamped | sim load cell -> any | force.z = measured grip force (N) |
 | /diagnostics | diagnostic_msgs/DiagnosticArray | controller, sim | state, limits hit, watchdog, rejected inputs |
+
+
+The ``dvrk`` profile (the da Vinci Research Kit's names under an arm and a master):
+:func:`topic_set` and the ``DVRK_*`` names below.
 """  # noqa: E501 - Markdown table rows are kept whole
+from __future__ import annotations
+
+from dataclasses import dataclass
 
 MASTER_JS = 'master/gripper/measured_js'
 INSTRUMENT_JS = 'instrument/measured_js'
@@ -29,10 +36,73 @@ JAW_JOINT = 'jaw'
 DRUM_JOINT = 'jaw_drum'
 JAW_FRAME = 'jaw'
 
-#: Every topic a demo records (the rosbag2 of a run).
-RECORDED = (MASTER_JS, INSTRUMENT_JS, ACTUATOR_JS, SERVO_CURRENT, ESTIMATED_FORCE,
-            TARGET_FORCE, MEASURED_FORCE, DIAGNOSTICS)
 
-#: Topic-name profiles (the launch files' ``interface:=``). ``crtk``: the names above. The
-#: dVRK PSM's names (``dvrk``) come with the dVRK work; the launch argument exists already.
-INTERFACES = ('crtk',)
+# --- the dVRK profile (interface 'dvrk'; docs/dvrk.md) ---------------------------------------
+# The da Vinci Research Kit's topics of an arm (PSM1, PSM2, ...) and a master (MTML, MTMR),
+# relative names under the device's own (``PSM1/jaw/measured_js``), as the dVRK publishes them.
+DVRK_ARM_JS = 'measured_js'             # the arm's joints by name, wrist_pitch among them
+DVRK_JAW_JS = 'jaw/measured_js'         # jaw: position (rad), velocity (rad/s), effort (N*m)
+DVRK_JAW_SERVO = 'jaw/servo_jf'         # jaw: effort = jaw effort command (N*m, positive opens)
+DVRK_GRIPPER_JS = 'gripper/measured_js'  # the master gripper: position (rad)
+DVRK_OPERATING_STATE = 'operating_state'  # crtk_msgs/OperatingState, topic and service
+DVRK_STATE_COMMAND = 'state_command'    # crtk_msgs/StringStamped: enable, disable, home, ...
+#: The PSM's joints in ``measured_js`` (dVRK 2.2+: the arm's three, then the tool file's;
+#: share/kinematic/psm.json and share/tool/*.json of sawIntuitiveResearchKit).
+DVRK_PSM_JOINTS = ('outer_yaw', 'outer_pitch', 'outer_insertion', 'roll', 'wrist_pitch', 'wrist_yaw')
+#: Names of the wrist pitch joint, in the order they are looked for: dVRK 2.2+ (tool files),
+#: then dVRK 2.1 and before.
+DVRK_WRIST_JOINTS = ('wrist_pitch', 'outer_wrist_pitch')
+
+
+@dataclass(frozen=True)
+class TopicSet:
+    """The topics of one interface profile (relative names; None: not in the profile).
+
+    The ``crtk`` profile carries the jaw and the wrist in ``instrument_js`` and the motor
+    current in ``actuator_js``; the ``dvrk`` one the wrist in ``instrument_js`` (the arm's
+    ``measured_js``) and the jaw, with the jaw effort, in ``actuator_js`` (``jaw/measured_js``).
+    """
+
+    interface: str
+    master_js: str
+    instrument_js: str
+    actuator_js: str
+    command: str
+    estimated_force: str
+    target_force: str
+    measured_force: str
+    operating_state: str | None = None
+    state_command: str | None = None
+
+    def recorded(self) -> tuple[str, ...]:
+        """Every topic a demo of this profile records (its rosbag2), /diagnostics last."""
+        extra = (self.operating_state,) if self.operating_state else ()
+        return (self.master_js, self.instrument_js, self.actuator_js, self.command,
+                self.estimated_force, self.target_force, self.measured_force) + extra + (DIAGNOSTICS,)
+
+
+def dvrk_topic(device: str, name: str) -> str:
+    """Return the dVRK topic ``name`` of ``device`` (an arm or a master): 'PSM1/jaw/measured_js'."""
+    return f'{device}/{name}'
+
+
+def topic_set(interface: str = 'crtk', arm: str = 'PSM1', master: str = 'MTML') -> TopicSet:
+    """Return the topics of ``interface`` ('crtk' or 'dvrk', with the dVRK arm and master names).
+
+    In ``dvrk`` the grip force topics go under the arm too (``PSM1/grip/estimated_force``), so
+    that two arms with a controller each run side by side.
+    """
+    if interface == 'crtk':
+        return TopicSet('crtk', MASTER_JS, INSTRUMENT_JS, ACTUATOR_JS, SERVO_CURRENT,
+                        ESTIMATED_FORCE, TARGET_FORCE, MEASURED_FORCE)
+    if interface == 'dvrk':
+        return TopicSet('dvrk', dvrk_topic(master, DVRK_GRIPPER_JS), dvrk_topic(arm, DVRK_ARM_JS),
+                        dvrk_topic(arm, DVRK_JAW_JS), dvrk_topic(arm, DVRK_JAW_SERVO),
+                        dvrk_topic(arm, ESTIMATED_FORCE), dvrk_topic(arm, TARGET_FORCE),
+                        dvrk_topic(arm, MEASURED_FORCE), dvrk_topic(arm, DVRK_OPERATING_STATE),
+                        dvrk_topic(arm, DVRK_STATE_COMMAND))
+    raise ValueError(f"unknown interface {interface!r}: 'crtk' or 'dvrk'")
+
+
+#: Every topic a demo of the crtk profile records (the rosbag2 of a run).
+RECORDED = topic_set('crtk').recorded()

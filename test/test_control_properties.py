@@ -1,6 +1,7 @@
 """Safety properties of the controller over random and garbage input sequences (issue 5).
 
-For every step: |current command| <= max_current, |change| <= max_current_slew / control_rate,
+For every step: |current command| <= max_current, |change| <= max_current_slew * dt (the step
+time, test/_control_oracle.py),
 every output finite, 0 <= target force <= min(grip_force_max, max_grip_force).
 
 CI runs ``test_random_sequences``: 120 000 steps (>= 100k, issue 5) over 30 seeded numpy
@@ -16,6 +17,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _control_oracle import StepClock
 from grip_force_ros.control import GripController
 from grip_force_ros.params import make_params
 
@@ -55,21 +57,23 @@ def value(rng, nominal, spread, garbage_rate):
 
 class Checker:
     def __init__(self, params):
+        self.params = params
         self.max_current = params.max_current
-        self.max_step = params.max_current_slew / params.control_rate
+        self.clock = StepClock()
         self.force_max = min(params.grip_force_max, params.max_grip_force)
         self.previous = 0.0
         self.steps = 0
         self.modes = {'free': 0, 'grip': 0, 'safe': 0}
         self.limits = 0
 
-    def check(self, out):
+    def check(self, out, now):
+        max_step = self.params.max_current_slew * self.clock.dt(now, self.params)
         c = out.current_command
         for name in ('current_command', 'target_force', 'estimated_force', 'pull_out_force',
                      'target_jaw_angle', 'feedforward_current'):
             assert math.isfinite(getattr(out, name)), (name, out)
         assert abs(c) <= self.max_current + 1e-12, out
-        assert abs(c - self.previous) <= self.max_step * (1 + 1e-9) + 1e-15, (self.previous, out)
+        assert abs(c - self.previous) <= max_step * (1 + 1e-9) + 1e-15, (self.previous, out)
         assert 0.0 <= out.target_force <= self.force_max + 1e-12, out
         assert out.mode in ('free', 'grip', 'safe')
         assert set(out.limits_hit) <= {'current_limit', 'slew_limit'}
@@ -123,7 +127,7 @@ def run_sequence(seed, n_steps):
             inp.set_force(tk, force, stamp=sk)
         if k in malformed:
             inp.reject('instrument', tk, 'missing joint jaw')
-        check.check(ctrl.step(now, inp))
+        check.check(ctrl.step(now, inp), now)
     return check
 
 
@@ -176,13 +180,13 @@ def test_hypothesis_input_sequences(samples, seed):
             inp.set_actuator(t, a, b, c, stamp=stamp)
         if which in ('force', 'all'):
             inp.set_force(t, b, stamp=stamp)
-        check.check(ctrl.step(t, inp))
+        check.check(ctrl.step(t, inp), t)
         # and a good sample of every input, so grip and free modes are visited too
         inp.set_master(t, float(rng.uniform(0.0, 1.2)))
         inp.set_instrument(t, 0.0, float(rng.uniform(0.0, 1.0)), 0.0)
         inp.set_actuator(t, ctrl.command)
         inp.set_force(t, float(rng.uniform(0.0, 10.0)))
-        check.check(ctrl.step(t + 1e-3, inp))
+        check.check(ctrl.step(t + 1e-3, inp), t + 1e-3)
 
 
 @settings(max_examples=300, deadline=None)

@@ -51,7 +51,11 @@ def test_needle_grasp_holds_the_target_force(paper, sensor):
     assert target == pytest.approx(min(paper.grip_force_max, paper.max_grip_force))
     assert hold[:, 5].mean() == pytest.approx(target, rel=0.03)           # load cell
     free = log[(log[:, 0] > 0.05) & (log[:, 0] < 0.3)]
-    assert np.sqrt(np.mean((free[:, 2] - free[:, 3]) ** 2)) < 0.03        # jaw follows (rad)
+    # jaw follows (rad): the gains hold from 100 to 1500 Hz states (docs/control.md), so the jaw
+    # loop's crossover is ~6 Hz; while the master closes at 1.6 rad/s the drum damping
+    # (6e-3 N*m*s/rad at ~1 rad/s, 3.4 mA through 1.77 N*m/A) needs an error of 3.4 mA /
+    # jaw_kp 0.0755 A/rad = 0.045 rad, on top of the 0.2 rad the jaw starts away from its target
+    assert np.sqrt(np.mean((free[:, 2] - free[:, 3]) ** 2)) < 0.07
     assert np.all(log[-50:, 7] == 0)                                       # released: free again
     assert np.max(np.abs(np.diff(log[:, 6]))) <= paper.max_current_slew * PERIOD + 1e-12
 

@@ -17,7 +17,7 @@ import pytest
 from _ros_tools import (ROOT, launch_exit_codes, require_ros_tools, retry, ros_env, run, start,
                         stop, stop_daemon)
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
-from grip_force_ros.topics import INTERFACES
+from grip_force_ros.params.interface import INTERFACES
 
 NODES = ('sim_instrument', 'controller', 'master')
 CONFIG = ROOT / 'config'
@@ -52,7 +52,7 @@ def test_unknown_instrument_lists_the_installed_ones(tmp_path):
 
 
 def test_interface_profiles():
-    assert INTERFACES == ('crtk',)
+    assert INTERFACES == ('crtk', 'dvrk')
 
 
 # --- ros2 launch ------------------------------------------------------------------------------
@@ -145,14 +145,45 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
 def test_launch_rejects_unknown_interface_and_instrument(tmp_path):
     require_ros_tools()
     env = ros_env()
-    bad = run('ros2', 'launch', 'grip_force_ros', 'grasp.launch.py', 'interface:=dvrk', env=env,
+    bad = run('ros2', 'launch', 'grip_force_ros', 'grasp.launch.py', 'interface:=ros1', env=env,
               timeout=60)
     assert bad.returncode != 0
-    assert 'crtk' in bad.stdout + bad.stderr
+    assert 'crtk' in bad.stdout + bad.stderr and 'dvrk' in bad.stdout + bad.stderr
     missing = run('ros2', 'launch', 'grip_force_ros', 'controller.launch.py',
                   'instrument:=no_such_tool', env=env, timeout=60)
     assert missing.returncode != 0
     assert 'no_such_tool' in missing.stdout + missing.stderr
+
+
+def test_grasp_launch_dvrk_profile_as_psm2_and_mtmr(tmp_path):
+    """interface:=dvrk: the dVRK's names under the arm and master given (PSM2, MTMR), the
+    controller asks the simulated arm to enable and home, then grips (force echoed)."""
+    require_ros_tools()
+    env = ros_env()
+    log = tmp_path / 'launch.log'
+    proc = start('ros2', 'launch', 'grip_force_ros', 'grasp.launch.py', 'interface:=dvrk',
+                 'arm:=PSM2', 'master:=MTMR', log=log, env=env)
+    try:
+        want = {'/PSM2/jaw/measured_js', '/PSM2/measured_js', '/PSM2/jaw/servo_jf',
+                '/PSM2/operating_state', '/PSM2/state_command', '/MTMR/gripper/measured_js',
+                '/PSM2/grip/estimated_force'}
+        topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
+                       lambda r: want <= set(r.stdout.split()), timeout=60)
+        assert want <= set(topics.stdout.split()), (topics.stdout, log.read_text())
+        assert not any(t.startswith(('/PSM1', '/MTML', '/instrument')) for t in topics.stdout.split())
+        state = retry(lambda: run('ros2', 'service', 'call', '/PSM2/operating_state',
+                                  'crtk_msgs/srv/TriggerOperatingState', env=env, timeout=60),
+                      lambda r: "is_homed=True" in r.stdout, timeout=60)
+        assert "state='ENABLED'" in state.stdout and 'is_homed=True' in state.stdout, state.stdout
+        echo = run('ros2', 'topic', 'echo', '--once', '--no-daemon', '/PSM2/jaw/servo_jf',
+                   'sensor_msgs/msg/JointState', timeout=120, env=env)
+        assert echo.returncode == 0 and '- jaw' in echo.stdout, (echo.stdout, echo.stderr)
+        assert proc.poll() is None, log.read_text()
+    finally:
+        code, text = _stop_launch(proc, log, env)
+    assert code == 0, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    assert 'asked arm PSM2 to enable' in text and 'Traceback' not in text
 
 
 def test_controller_launch_alone(tmp_path):

@@ -23,18 +23,18 @@ MAY_IMPORT = {
     'diagnosis': {'objects', 'effects', 'model', 'sim', 'logs', 'params', 'plotting'},
     'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
     'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
-    'nodes': {'objects', 'effects', 'control', 'sim', 'trajectories', 'params', 'topics'},
+    'nodes': {'objects', 'effects', 'control', 'model', 'sim', 'trajectories', 'params', 'topics'},
     'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
              'params', 'topics', 'plotting'},
-    'faults': {'objects', 'effects', 'nodes', 'control', 'sim', 'params', 'topics'},
+    'faults': {'objects', 'effects', 'nodes', 'control', 'model', 'sim', 'params', 'topics'},
     'bench': {'nodes', 'control', 'model', 'sim', 'diagnosis', 'logs', 'params', 'topics',
-              'objects', 'effects'},
+              'objects', 'effects', 'demo', 'trajectories'},
     'cli': None,                                       # the command: anything
 }
 #: The only parts that import rclpy or ROS message packages.
 ROS_PARTS = {'nodes', 'demo', 'faults', 'bench'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
-               'geometry_msgs', 'diagnostic_msgs'}
+               'geometry_msgs', 'diagnostic_msgs', 'crtk_msgs'}
 
 
 def part_of(path: Path) -> str:

@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: installed with pip (requirements.txt) and package.xml says so in a comment.
 ROSDEP_KEYS = {
     'rclpy': 'rclpy',
+    'crtk_msgs': 'crtk_msgs',           # the dvrk interface profile (imported lazily)
     'builtin_interfaces': 'builtin_interfaces',
     'rcl_interfaces': 'rcl_interfaces',
     'sensor_msgs': 'sensor_msgs',

@@ -71,11 +71,17 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
     (0.1 A per period) when control resumes; the command continues where the ramp left it."""
     params = session.params
     step = params.max_current_slew / params.control_rate
+    # the master fully closed (4 N): the hold current (~0.2-0.3 A) is more than one slew step
+    # (0.1 A), so a resume can come mid-ramp; at the default 2 N the stick band's middle
+    # branch holds with ~0.1 A, which one safe period ramps to 0 A
     single_nan = FaultCase('single_nan_jaw', 'non-finite', 'one NaN jaw angle', 'reject_once',
                            'instrument', set_field('position', 1, float('nan')), ticks=1,
-                           reason='nan')
+                           reason='nan', master_angle=0.0)
+    silent = FaultCase('silence_instrument', 'silence', 'no instrument messages', 'stale_safe',
+                       'instrument', silence(), ticks=31, reason='stale instrument',
+                       master_angle=0.0)
     resumed_from = []
-    for case in (_silence('instrument', ticks=31), single_nan) * 3:
+    for case in (silent, single_nan) * 3:
         d = run_message_case(session, case)
         # one bad sample or 31 ms of silence need not make a safe period (the next good
         # sample may come first); when one happened, the resume must be bumpless
@@ -90,16 +96,24 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
 
 
 def test_safe_output_ramps_at_the_slew_limit(session):
-    """While safe, the current falls to 0 A at exactly the slew limit, never faster."""
+    """While safe, the current falls to 0 A at the slew limit, never faster.
+
+    The controller steps on the time it measured between states, which the probe sees as
+    the gaps between the commands' receipts and stamps (plus one period of delivery jitter:
+    faults/probe.py); the exact per-step check is test/test_control_properties.py.
+    """
+    from grip_force_ros.faults.probe import DELIVERY_JITTER
     probe, params = session.probe, session.params
-    step = params.max_current_slew / params.control_rate
+    period = 1.0 / params.expected_state_rate
     d = run_message_case(session, _silence('instrument', ticks=60))
     assert d['passed'], d
-    # the commands of the safe stretch: |I| decreasing by at most one slew step to 0 A
-    safe = [command for _, _, command, target in probe.steps if target == 0.0]
+    # the commands of the safe stretch: |I| decreasing to 0 A, by at most the slew over the time
+    safe = [(t, stamp, command) for t, stamp, command, target in probe.steps if target == 0.0]
     assert safe, 'no safe output recorded'
-    assert all(abs(b) <= abs(a) + 1e-12 and abs(a - b) <= step * (1 + 1e-9)
-               for a, b in zip(safe, safe[1:]))
+    for (t0, s0, a), (t1, s1, b) in zip(safe, safe[1:]):
+        dt = max(t1 - t0, s1 - s0, period) + DELIVERY_JITTER * period
+        assert abs(b) <= abs(a) + 1e-12 and abs(a - b) <= params.max_current_slew * dt * (1 + 1e-9)
+    safe = [command for _, _, command in safe]
     assert abs(safe[-1]) < 1e-9     # 60 ms of silence: reached 0 A (<= 0.5 A at 0.1 A/ms)
     assert probe.limits.violations == []
 

@@ -9,7 +9,8 @@ with ``GripController.update_params``. The read-only hardware limits stay fixed,
 node guarantees.
 
 Properties, every period:
-* |command| <= max_current and |command - previous command| <= max_current_slew / rate,
+* |command| <= max_current and |command - previous command| <= max_current_slew * dt (the
+  step time, test/_control_oracle.py),
   across every retune (the retune itself never makes the output jump);
 * every output is finite;
 * 0 <= target force <= min(grip_force_max in force, max_grip_force).
@@ -20,6 +21,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _control_oracle import StepClock
 from grip_force_ros.control import GripController
 from grip_force_ros.params import SPECS, make_params
 
@@ -66,20 +68,21 @@ def test_tunables_are_not_read_only_and_limits_are():
 class Checker:
     def __init__(self, params):
         self.max_current = params.max_current
-        self.max_step = params.max_current_slew / params.control_rate
+        self.clock = StepClock()
         self.previous = 0.0
         self.steps = 0
         self.retunes = 0
         self.modes = {'free': 0, 'grip': 0, 'safe': 0}
 
-    def check(self, out, params):
+    def check(self, out, params, now):
+        max_step = params.max_current_slew * self.clock.dt(now, params)
         force_max = min(params.grip_force_max, params.max_grip_force)
         for name in ('current_command', 'target_force', 'estimated_force', 'pull_out_force',
                      'target_jaw_angle', 'feedforward_current'):
             assert math.isfinite(getattr(out, name)), (name, out)
         c = out.current_command
         assert abs(c) <= self.max_current + 1e-12, out
-        assert abs(c - self.previous) <= self.max_step * (1 + 1e-9) + 1e-15, (self.previous, out)
+        assert abs(c - self.previous) <= max_step * (1 + 1e-9) + 1e-15, (self.previous, out)
         assert 0.0 <= out.target_force <= force_max + 1e-12, (force_max, out)
         self.previous = c
         self.steps += 1
@@ -121,7 +124,7 @@ def run_sequence(seed: int, n_steps: int) -> Checker:
             inputs.set_actuator(t, v(ctrl.command, 0.02), v(0.0, 1.0), v(0.0, 1.0), stamp=t)
         if rng.random() < 0.95:
             inputs.set_force(t, v(3.0, 3.0), stamp=t)
-        check.check(ctrl.step(t, inputs), params)
+        check.check(ctrl.step(t, inputs), params, t)
     return check
 
 
@@ -154,7 +157,7 @@ def test_hypothesis_retune_schedules(schedule, seed):
             inputs.set_instrument(t, 0.0, 0.02, 0.0, stamp=t)  # blocked on the needle
             inputs.set_actuator(t, ctrl.command * 0.5, 0.0, 0.0, stamp=t)   # weak plant
             inputs.set_force(t, 0.1, stamp=t)
-            check.check(ctrl.step(t, inputs), params)
+            check.check(ctrl.step(t, inputs), params, t)
         params = make_params({**dict(params), **tunable(np.random.default_rng(tune_seed))})
         ctrl.update_params(params)
     assert check.steps == sum(p for _, p in schedule)

@@ -57,7 +57,7 @@ def node(monkeypatch):
 def _state(ctl) -> None:
     """One actuator state (drum current, position, velocity) delivered to the node."""
     stamp = ctl.get_clock().now().to_msg()
-    ctl._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
+    ctl.io._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
 
 
 def _run(ctl, clock, events) -> list[float]:
@@ -169,8 +169,8 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
     period = ctl._period
 
     def deliver(stamp):
-        ctl._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
-        return ctl._servo_msg.header.stamp, ctl._estimate_msg.header.stamp
+        ctl.io._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
+        return ctl.io._servo_msg.header.stamp, ctl.io._estimate_msg.header.stamp
 
     stamp = ctl.get_clock().now().to_msg()
     stamp.nanosec = (stamp.nanosec // 1000) * 1000 + 123          # recognisable
@@ -183,7 +183,7 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
     clock.now += 2 * period
     ctl._tick()                                                     # fallback step
     assert ctl.steps['on_timer'] == 1
-    fallback = ctl._servo_msg.header.stamp
+    fallback = ctl.io._servo_msg.header.stamp
     assert (fallback.sec, fallback.nanosec) != (stamp.sec, stamp.nanosec)
     zero = type(stamp)()                                            # unstamped driver
     servo, _ = deliver(zero)
@@ -203,12 +203,12 @@ def test_command_at_once_forces_once_the_loop_has_closed(node):
         def publish(self, msg):
             log.append(self.name)
 
-    ctl._servo_pub, ctl._estimate_pub, ctl._target_pub = (
+    ctl.io._servo_pub, ctl.io._estimate_pub, ctl.io._target_pub = (
         Recorder('command'), Recorder('estimate'), Recorder('target'))
     _state(ctl)
     assert log == ['command']
-    ctl._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
-                                   [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
+    ctl.io._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
+                                      [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
     assert log == ['command', 'estimate', 'target']
     clock.now += ctl._period
     _state(ctl)

@@ -109,7 +109,9 @@ def test_master_with_the_wrong_joint_is_rejected(loop):
 
 def test_sim_holds_its_last_good_command(loop):
     ros, ctl, probe, pubs, diags = loop
-    sim = ros.add(SimInstrumentNode, sim_object='free')
+    # the drive's 30 ms command timeout would cut the held command while the bad ones are
+    # published on a loaded machine: this test is about rejection, so the timeout is long
+    sim = ros.add(SimInstrumentNode, sim_object='free', command_timeout=10.0)
     pub = pubs[topics.SERVO_CURRENT]
     stamp = probe.get_clock().now().to_msg()
     # the controller node in this process also publishes servo_jf (0 A, safe): silence it

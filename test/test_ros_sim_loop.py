@@ -29,9 +29,9 @@ def sim():
     node = ros.add(SimInstrumentNode)
     node._timer.cancel()                       # the test ticks it
     log: list = []
-    node._actuator_pub = _Recorder('actuator', log)
-    node._joint_pub = _Recorder('joint', log)
-    node._force_pub = _Recorder('force', log)
+    node.io._actuator_pub = _Recorder('actuator', log)
+    node.io._joint_pub = _Recorder('joint', log)
+    node.io._force_pub = _Recorder('force', log)
     try:
         yield node, log
     finally:
@@ -42,7 +42,7 @@ def _answer(node, stamp_ns, current=0.1):
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
     stamp = node.get_clock().now().to_msg()
     stamp.sec, stamp.nanosec = sec, nanosec
-    node._on_command(joint_state(stamp, [topics.DRUM_JOINT], effort=[current]))
+    node.io._on_command(joint_state(stamp, [topics.DRUM_JOINT], effort=[current]))
 
 
 def test_actuator_state_first_the_rest_once_answered(sim):

@@ -23,6 +23,7 @@ COMMANDS = {
     'calibrate': 'calibrate',
     'monitor': 'monitor',
     'import-rig': 'import_rig',
+    'import-dvrk-tool': 'import_dvrk_tool',
     'realdata': 'realdata',
     'diagnose': 'diagnose',
     'blindcheck': 'blindcheck',

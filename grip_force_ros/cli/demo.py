@@ -45,6 +45,12 @@ def add_arguments(parser) -> None:
                         help='--compare-instruments: run the instruments of each stage at the '
                              'same time, one ROS domain each (needs a core per instrument: on a '
                              'loaded machine the controllers miss their 30 ms watchdog)')
+    parser.add_argument('--interface', choices=('crtk', 'dvrk'), default='crtk',
+                        help='topic profile of the nodes: crtk (default) or dvrk (the sim plays a '
+                             'dVRK arm, 100 Hz, jaw effort in N*m; docs/dvrk.md)')
+    parser.add_argument('--arm', default='PSM1', help='--interface dvrk: the arm (default PSM1)')
+    parser.add_argument('--master', default='MTML',
+                        help='--interface dvrk: the master (default MTML)')
     parser.add_argument('--quiet', action='store_true', help='no live progress')
 
 
@@ -71,6 +77,9 @@ def print_report(result: dict, stream=sys.stdout) -> None:
     m = result['metrics'] or {}
     w = stream.write
     w(f"instrument        {result['instrument']} ({result['config']})\n")
+    if result.get('interface') == 'dvrk':
+        w(f"interface         dvrk: arm {result['arm']}, master {result['master']} (jaw effort in "
+          'N*m, 100 Hz states)\n')
     w(f"task              needle grasp, {result['duration']:.2f} s, "
       f"ROS domain {result['domain_id']}\n")
     w(f"steady hold       target {_fmt(m.get('target_force'))}, measured (load cell) "
@@ -106,6 +115,9 @@ def run(args) -> int:
         print(f'error: --out {args.out} is not empty; choose a new directory', file=sys.stderr)
         return 2
     try:
+        if args.compare_instruments and args.interface != 'crtk':
+            print('error: --compare-instruments runs the crtk profile only', file=sys.stderr)
+            return 2
         if args.compare_instruments:
             from grip_force_ros.demo.compare import TASK_DURATION, compare_instruments
             out = Path(args.out) if args.out else _default_out('compare')
@@ -128,11 +140,12 @@ def run(args) -> int:
         out = Path(args.out) if args.out else _default_out('demo')
         domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]
         spec = RunSpec(config=config, duration=args.duration or DEMO_DURATION,
-                       label=params.instrument_name)
+                       label=params.instrument_name, interface=args.interface, arm=args.arm,
+                       master=args.master)
         progress = None if args.quiet else Progress(sys.stderr)
         if progress is not None:
-            sys.stderr.write(f'grip-force demo: {params.instrument_name}, ROS domain {domain}, '
-                             f'output {out}\n')
+            sys.stderr.write(f'grip-force demo: {params.instrument_name}, {args.interface} '
+                             f'interface, ROS domain {domain}, output {out}\n')
         try:
             result = run_task(spec, out, domain, progress=progress)
         finally:

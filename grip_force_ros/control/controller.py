@@ -9,6 +9,7 @@ from grip_force_ros.control.force_map import ForceMap
 from grip_force_ros.control.inputs import SOURCES, ControlInputs
 from grip_force_ros.control.limits import CurrentLimiter
 from grip_force_ros.control.pid import PID
+from grip_force_ros.model.dvrk_jaw import command_current_limit
 
 #: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
@@ -28,6 +29,7 @@ STICK_FILTER_TIME = 0.002
 HOLD_BAND = 0.005
 
 _isfinite = math.isfinite
+_exp = math.exp
 _NO_REASONS: tuple = ()
 
 
@@ -87,8 +89,15 @@ class GripController:
 
     Notes
     -----
-    One :meth:`step` per control period (``1 / control_rate`` s). The PID and the slew
-    limit assume that period; ``now`` is used for the watchdog only.
+    One :meth:`step` per instrument state (nominally ``1 / expected_state_rate`` s apart).
+    Every time-dependent part (PID integral, derivative filter, anti-windup, bumpless
+    offset, slew limit, stick-band filter, resume ramp) steps on the measured time since
+    the previous step, ``now - previous now`` (the controller clock, the clock of the
+    inputs' receive times). A step interval that cannot be an integration step is a fault:
+    the clock going backwards, or an interval longer than ``watchdog_timeout`` (the
+    controller was stalled): that step is safe, and the safe ramp advances by the nominal
+    period. In the ``dvrk`` interface the current limit is also that of the tool's jaw
+    effort limit (:func:`~grip_force_ros.model.dvrk_jaw.command_current_limit`).
     """
 
     def __init__(self, params, model=None, *, resume_ramp_time: float = RESUME_RAMP_TIME):
@@ -110,6 +119,7 @@ class GripController:
         self.retuned = False            # parameters changed at runtime: preset on the next step
         self.estimated_force = 0.0      # N, last good estimate
         self.last_now = -math.inf
+        self.last_dt = self.period      # s, the step time of the last step
         self.safe_steps = 0             # consecutive safe periods
         self.steps = 0                  # periods run
         self.limit_steps = 0            # periods in which a limit acted
@@ -122,8 +132,8 @@ class GripController:
     def _configure(self, params) -> None:
         """Build the map, PIDs and limiter from ``params`` (state of the loop kept by caller)."""
         self.params = params
-        self.period = 1.0 / params.control_rate                       # s
-        self.watchdog_timeout = params.watchdog_timeout               # s
+        self.period = 1.0 / params.expected_state_rate                # s, nominal step time
+        self.watchdog_timeout = params.watchdog_timeout               # s, also the longest step
         self.object_kind = params.object_kind
         self.use_sensor = bool(params.force_sensor_enabled)
         self.use_feedforward = bool(params.feedforward_enabled)
@@ -139,15 +149,15 @@ class GripController:
         self._required = tuple((src, src + '_fault', src + '_time')
                                for src in SOURCES
                                if src != 'force' or self.use_sensor)
-        self.stick_filter = 1.0 - math.exp(-self.period / STICK_FILTER_TIME)   # per period
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
                                    if params.object_kind == 'needle' else 0.0)
         self.force_map = ForceMap.from_params(params)
         self.force_max = self.force_map.force_max                     # N
-        self.resume_ramp_step = (self.force_max * self.period / self.resume_ramp_time
-                                 if self.resume_ramp_time > 0.0 else math.inf)   # N per period
-        self.limiter = CurrentLimiter(params.max_current, params.max_current_slew, self.period)
-        bound = 2.0 * params.max_current + 1e-3                       # A, integrator guard
+        self.resume_ramp_rate = (self.force_max / self.resume_ramp_time
+                                 if self.resume_ramp_time > 0.0 else math.inf)   # N/s
+        self.current_limit = command_current_limit(params)            # A
+        self.limiter = CurrentLimiter(self.current_limit, params.max_current_slew, self.period)
+        bound = 2.0 * self.current_limit + 1e-3                       # A, integrator guard
         self.force_pid = PID(params.force_kp, params.force_ki, params.force_kd,
                              params.force_derivative_filter_time, self.period,
                              params.anti_windup_tracking_time, sign=1.0, integral_limit=bound,
@@ -168,8 +178,8 @@ class GripController:
         self._configure(params)
         self.force_map.gripping, self.force_map.contact_angle = gripping, contact
         self.retuned = True             # the next step presets the PID (bumpless)
-        if abs(self.command) > params.max_current:
-            self.command = math.copysign(params.max_current, self.command)
+        if abs(self.command) > self.current_limit:
+            self.command = math.copysign(self.current_limit, self.command)
 
     def status(self, inputs: ControlInputs | None = None) -> dict:
         """Key/value strings for /diagnostics (state, counters, limits, rejected inputs)."""
@@ -216,8 +226,44 @@ class GripController:
         return _NO_REASONS if reasons is None else tuple(reasons)
 
     # ------------------------------------------------------------------ step
-    def step(self, now: float, inputs: ControlInputs) -> ControlOutput:
-        """One control period.
+    def _step_interval(self, now: float):
+        """Return ``(dt [s], fault or None, stalled)``: the time since the previous step, checked.
+
+        A clock that is not finite or went backwards, or an interval longer than
+        ``watchdog_timeout``, is a fault; ``dt`` is then the nominal period (for the safe
+        ramp). The first step has the nominal period. ``stalled``: the interval was longer than
+        the watchdog timeout (the controller was stalled).
+        """
+        last = self.last_now
+        if not _isfinite(now):
+            return self.period, None, False   # _input_faults names the clock
+        if last == -math.inf:
+            return self.period, None, False
+        dt = now - last
+        if dt < 0.0:
+            return self.period, f'controller clock went backwards by {-dt * 1e3:.3f} ms', False
+        if dt > self.watchdog_timeout:
+            return self.period, (f'step interval {dt * 1e3:.1f} ms > {self.watchdog_timeout * 1e3:.1f} '
+                                 'ms (the controller was stalled)'), True
+        return dt, None, False
+
+    def _after_stall(self, now: float, inputs: ControlInputs) -> None:
+        """Continue from the current the actuator measures now, after a stall of the controller.
+
+        During a stall longer than the watchdog nobody knows what the drive did with the last
+        command: a drive with a command timeout has cut it to 0 A (the sim, issue 11), a dVRK
+        holds it. The measured current says which; with no fresh, valid one the command is
+        kept.
+        """
+        age = now - inputs.actuator_time
+        if inputs.actuator_fault is None and 0.0 <= age <= self.watchdog_timeout:
+            limit = self.current_limit
+            measured = inputs.measured_current
+            self.command = limit if measured > limit else (-limit if measured < -limit else measured)
+            self.filtered_current = self.command
+
+    def step(self, now: float, inputs: ControlInputs, interlock: str | None = None) -> ControlOutput:
+        """One control step, on the time measured since the previous one.
 
         Parameters
         ----------
@@ -225,15 +271,26 @@ class GripController:
             Controller clock (s), the clock of the inputs' receive times.
         inputs : ControlInputs
             Latest accepted samples.
+        interlock : str, optional
+            Why the instrument may not be driven now (e.g. the dVRK arm is not ENABLED and
+            homed): the step is safe with this reason. None: no interlock.
 
         Returns
         -------
         ControlOutput
         """
         self.steps += 1
+        dt, interval_fault, stalled = self._step_interval(now)
+        self.last_dt = dt
         faults = self._input_faults(now, inputs)
         if _isfinite(now):
             self.last_now = now
+        if interval_fault is not None:
+            faults = faults + (interval_fault,)
+        if stalled:
+            self._after_stall(now, inputs)
+        if interlock is not None:
+            faults = faults + (interlock,)
         if faults:
             return self._safe(faults, inputs)
 
@@ -247,7 +304,8 @@ class GripController:
         try:
             if hysteresis is not None:       # sensorless, direction-aware
                 measured = inputs.measured_current
-                self.filtered_current += self.stick_filter * (measured - self.filtered_current)
+                self.filtered_current += ((1.0 - _exp(-dt / STICK_FILTER_TIME))
+                                          * (measured - self.filtered_current))
                 estimate = hysteresis.update(self.filtered_current, wrist, jaw, obj)
                 if hysteresis.on_loading_edge:   # loading: the paper's model, unfiltered
                     estimate = self.model.grip_force_scalar(measured, wrist, jaw, obj)
@@ -274,7 +332,7 @@ class GripController:
             if previous_mode is _SAFE:           # resume: ramp up from the present force
                 self.resume_force = force if force > 0.0 else 0.0
             if self.resume_force < target_force:
-                self.resume_force += self.resume_ramp_step
+                self.resume_force += self.resume_ramp_rate * dt
                 if self.resume_force < target_force:
                     target_force = self.resume_force
                 else:
@@ -324,9 +382,9 @@ class GripController:
             target_jaw = target
         if mode is not previous_mode or branch_switch or retuned:   # bumpless: continue from the last command
             pid.preset(self.command - feedforward, setpoint, measurement)
-        unlimited = feedforward + pid.update(setpoint, measurement)
-        command, limits_hit = self.limiter.apply(unlimited, self.command)
-        pid.track(unlimited - feedforward, command - feedforward)
+        unlimited = feedforward + pid.update(setpoint, measurement, dt)
+        command, limits_hit = self.limiter.apply(unlimited, self.command, dt)
+        pid.track(unlimited - feedforward, command - feedforward, dt)
         self.command = command
         self.mode = mode
         self.safe_steps = 0
@@ -339,11 +397,13 @@ class GripController:
 
     def _safe(self, reasons: tuple, inputs: ControlInputs) -> ControlOutput:
         """Safe state: ramp the current to 0 A at the slew limit, keep the last estimate."""
-        command, limits_hit = self.limiter.apply(0.0, self.command)
+        dt = self.last_dt
+        command, limits_hit = self.limiter.apply(0.0, self.command, dt)
         self.command = command
         if self.hysteresis is not None:   # the measurement may be what failed: the current
             try:                          # loop follows the ramped command
-                self.filtered_current += self.stick_filter * (command - self.filtered_current)
+                self.filtered_current += ((1.0 - _exp(-dt / STICK_FILTER_TIME))
+                                          * (command - self.filtered_current))
                 self.hysteresis.drive_torque(self.filtered_current, self.last_wrist)
             except (ValueError, ArithmeticError):
                 self.hysteresis.reset()

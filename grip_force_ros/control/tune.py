@@ -15,8 +15,13 @@ Plant (continuous time, linearised around a grip at half the current limit):
 - output: grip force ``k_c*l*q`` (N) in grip; jaw closing angle q (rad) in free motion.
 
 The controller is the discrete PID of :class:`grip_force_ros.control.pid.PID` exactly
-(forward-Euler integrator, backward-Euler filtered derivative) at ``1/control_rate``, with
-one period of computation delay. Three loops are analysed:
+(forward-Euler integrator, backward-Euler filtered derivative), with one period of
+computation delay, at the period of the instrument states it steps on. The controller steps
+on the measured time between states, and the same gains must hold from
+``STATE_RATE_MIN`` to ``STATE_RATE_MAX`` (100 .. 1500 Hz; params/controller.py): the design
+runs at the slowest rate (:data:`DESIGN_RATE`, the hardest: the longest hold and delay), and
+:func:`analyse` checks every loop at both ends of the range and at the instrument's
+``expected_state_rate``. Three loops are analysed:
 
 - ``force_sensor``: force PID on the load-cell force (the mechanical plant above);
 - ``force_estimate``: force PID on the model estimate from the measured current (current
@@ -24,7 +29,9 @@ one period of computation delay. Three loops are analysed:
 - ``jaw``: jaw-angle PID in free motion.
 
 Gains are designed so that the WORST case over the plant set {nominal, cable stiffness
-x0.8 and x1.2, friction x0.8 and x1.2} keeps gain margin >= 6 dB and phase margin >= 45
+x0.8 and x1.2, friction x0.8 and x1.2, and for the force loops the pulleys' unloading edge
+(the stick band's other edge, where the force moves 1/lambda^2 times faster with the current
+than on the loading edge, docs/control.md)} keeps gain margin >= 6 dB and phase margin >= 45
 deg (design targets a little above: :data:`DESIGN_GM_DB`, :data:`DESIGN_PM_DEG`), and the
 force gains serve both force loops. Among those, the design with the highest nominal
 crossover frequency wins.
@@ -36,6 +43,8 @@ from dataclasses import dataclass, field
 from itertools import product
 
 import numpy as np
+
+from grip_force_ros.params.controller import STATE_RATE_MAX, STATE_RATE_MIN
 
 
 #: Margins claimed (and tested) for every loop and every plant variant.
@@ -50,6 +59,10 @@ DESIGN_MS = 2.0
 #: Rise time of the ramped target in the step figure (s): a master closing in 25 ms is fast.
 RAMP_TIME = 0.025
 
+#: The state rate the gains are designed at (Hz): the slowest of the range, the hardest.
+DESIGN_RATE = STATE_RATE_MIN
+#: Plant variants of the force loops only: name -> edge of the pulleys' stick band.
+EDGE_VARIANTS = {'unloading edge': 'unloading'}
 #: Plant variants: name -> (cable stiffness scale, friction coefficient scale).
 VARIANTS = {'nominal': (1.0, 1.0), 'stiffness x0.8': (0.8, 1.0), 'stiffness x1.2': (1.2, 1.0),
             'friction x0.8': (1.0, 0.8), 'friction x1.2': (1.0, 1.2)}
@@ -96,8 +109,14 @@ class PlantData:
 
 
 def plant_data(params, model=None, stiffness_scale: float = 1.0,
-               friction_scale: float = 1.0) -> PlantData:
-    """Linear plant numbers at the grip operating point (half the current limit)."""
+               friction_scale: float = 1.0, edge: str = 'loading') -> PlantData:
+    """Linear plant numbers at the grip operating point (half the current limit).
+
+    ``edge``: 'loading' (the paper's model), or 'unloading': the other edge of the pulleys'
+    stick band, where the cable slips back and the jaw-side tension moves with the drum
+    tension over the chain efficiency lambda instead of times it: the force per ampere
+    (and the estimate's) is 1/lambda^2 times the loading edge's.
+    """
     from grip_force_ros.model import GripForceModel
     p = params
     if friction_scale != 1.0:
@@ -120,6 +139,12 @@ def plant_data(params, model=None, stiffness_scale: float = 1.0,
     jaw_angle = 0.05                                                     # rad, near closed
     estimate = (m.grip_force_scalar(current + step, 0.0, jaw_angle, obj)
                 - m.grip_force_scalar(current - step, 0.0, jaw_angle, obj)) / (2 * step)
+    if edge == 'unloading':
+        lam = float(m.forward(current, 0.0, jaw_angle, obj).efficiency)
+        jaw_side_gain /= lam ** 2
+        estimate /= lam ** 2
+    elif edge != 'loading':
+        raise ValueError(f"edge must be 'loading' or 'unloading', got {edge!r}")
     return PlantData(
         torque_per_amp=p.gear_ratio * p.torque_constant, drum_radius=p.drum_radius,
         drive_radius=p.drive_pulley_radius, jaw_side_gain=max(jaw_side_gain, 1e-6),
@@ -256,6 +281,7 @@ class LoopReport:
 
     loop: str
     variant: str
+    rate_hz: float
     gain_margin_db: float
     phase_margin_deg: float
     crossover_hz: float
@@ -278,10 +304,11 @@ class TuneResult:
 
     def to_dict(self) -> dict:
         out = {'gains': self.gains, 'control_period_s': self.period,
+               'state_rates_hz': sorted({r.rate_hz for r in self.reports}),
                'claimed': {'gain_margin_db': CLAIM_GM_DB, 'phase_margin_deg': CLAIM_PM_DEG},
                'loops': {}}
         for r in self.reports:
-            out['loops'].setdefault(r.loop, {})[r.variant] = {
+            out['loops'].setdefault(r.loop, {})[f'{r.variant} @ {r.rate_hz:g} Hz'] = {
                 'gain_margin_db': _finite(r.gain_margin_db), 'phase_margin_deg': _finite(r.phase_margin_deg),
                 'crossover_hz': r.crossover_hz, 'bandwidth_hz': r.bandwidth_hz, 'stable': r.stable}
         return out
@@ -307,10 +334,26 @@ def _step_settling(cnum, cden, plant: "_Plant", feedforward: float, period: floa
     return float(t[outside[-1]] + period) if outside[-1] + 1 < n else math.inf
 
 
+def _meets(kp, ki, kd, tf, plants, w, period, gm_min, pm_min, ms_max) -> bool:
+    """Tell whether the PID meets the margins and is stable on every plant at ``period``."""
+    cnum, cden = _pid_polys(kp, ki, kd, tf, period)
+    z = np.exp(1j * w * period)
+    c = np.polyval(cnum, z) / np.polyval(cden, z)
+    for plant in plants:
+        gm, pm, _, ms = _margins_grid(c * plant.resp, w)
+        if not (gm >= gm_min and pm >= pm_min and ms <= ms_max):
+            return False
+    return all(_closed_loop_stable(cnum, cden, pl) for pl in plants)
+
+
 def _search(plants: list, w: np.ndarray, period: float, kp_grid, ki_grid,
             kd_grid, tf_grid, feedforward=(0.0,), gm_min=DESIGN_GM_DB,
-            pm_min=DESIGN_PM_DEG, ms_max=DESIGN_MS):
+            pm_min=DESIGN_PM_DEG, ms_max=DESIGN_MS, also=()):
     """Best (kp, ki, kd, tf) meeting the margins on every plant (``plants[0]`` nominal).
+
+    ``also``: further ``(plants, w, period)`` groups (the same plants at other state rates)
+    on which a candidate must meet the margins and be stable too; the ranking uses the
+    first group only.
 
     Best = shortest 5% settling (in 5 ms bins) of the nominal unit step, the worst over the
     ``feedforward`` values (A per unit target added to the PID output), then the highest
@@ -338,19 +381,21 @@ def _search(plants: list, w: np.ndarray, period: float, kp_grid, ki_grid,
             continue
         settle = max(_step_settling(cnum, cden, plants[0], ff, period) for ff in feedforward)
         score = (-(math.floor(settle / 0.005) if math.isfinite(settle) else 1e9), wc0)
-        if score > best_score and all(_closed_loop_stable(cnum, cden, pl) for pl in plants):
+        if score > best_score and all(_closed_loop_stable(cnum, cden, pl) for pl in plants) \
+                and all(_meets(kp, ki, kd, tf, pl, w2, p2, gm_min, pm_min, ms_max)
+                        for pl, w2, p2 in also):
             best, best_score = (float(kp), float(ki), float(kd), float(tf)), score
     return best
 
 
-def _refine(responses, w, period, start, rounds=2, feedforward=(0.0,)):
+def _refine(responses, w, period, start, rounds=2, feedforward=(0.0,), also=()):
     """Local refinement of a grid optimum on a finer multiplicative grid."""
     best = start
     for _ in range(rounds):
         kp, ki, kd, tf = best
         f = np.array([0.6, 0.8, 1.0, 1.25, 1.6])
         cand = _search(responses, w, period, kp * f if kp else [0.0], ki * f, kd * f if kd else [0.0],
-                       [tf], feedforward=feedforward)
+                       [tf], feedforward=feedforward, also=also)
         if cand is None:
             break
         best = cand
@@ -366,24 +411,35 @@ def design(params, model=None) -> TuneResult:
         ``gains`` holds the controller parameter names (force_kp, force_ki, force_kd,
         force_derivative_filter_time, jaw_kp, jaw_ki, jaw_kd, jaw_derivative_filter_time).
     """
-    period = 1.0 / params.control_rate
+    period = 1.0 / DESIGN_RATE
     w = _freq_grid(period, 500)
     variants = {name: plant_data(params, model, s, f) for name, (s, f) in VARIANTS.items()}
+    edges = {name: plant_data(params, model, edge=e) for name, e in EDGE_VARIANTS.items()}
     nominal = variants['nominal']
     gain = nominal.force_per_amp                                   # N/A
 
-    force_resp = [_Plant(discrete_plant(d, loop, period), w, period)
-                  for loop in ('force_sensor', 'force_estimate') for d in variants.values()]
+    force_plants = [(loop, d) for loop in ('force_sensor', 'force_estimate')
+                    for d in list(variants.values()) + list(edges.values())]
+    force_resp = [_Plant(discrete_plant(d, loop, period), w, period) for loop, d in force_plants]
+    # the same plants at the other state rates of the range: the margins must hold there too
+    others = [1.0 / r for r in analysis_rates(params) if r != DESIGN_RATE]
+    grids = {p2: _freq_grid(p2, 300) for p2 in others}
+    force_also = [([_Plant(discrete_plant(d, loop, p2), grids[p2], p2) for loop, d in force_plants],
+                   grids[p2], p2) for p2 in others]
+    jaw_also = [([_Plant(discrete_plant(d, 'jaw', p2), grids[p2], p2) for d in variants.values()],
+                 grids[p2], p2) for p2 in others]
     # gains are scaled by 1/gain so the grid fits any instrument
     inv = 1.0 / gain
     best = _search(force_resp, w, period,
                    kp_grid=inv * np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.4]),
                    ki_grid=inv * np.array([1.0, 2.0, 4.0, 8.0, 15.0, 30.0, 60.0, 120.0]),
                    kd_grid=inv * np.array([0.0, 1e-4, 3e-4, 1e-3, 2e-3, 4e-3]),
-                   tf_grid=[0.5e-3, 2e-3], feedforward=(0.7 * inv, 1.3 * inv))
+                   tf_grid=[0.5e-3, 2e-3], feedforward=(0.7 * inv, 1.3 * inv), also=force_also)
     if best is None:
-        raise ValueError('no force PID on the design grid meets the margins on every plant variant')
-    force = _refine(force_resp, w, period, best, feedforward=(0.7 * inv, 1.3 * inv))
+        raise ValueError('no force PID on the design grid meets the margins on every plant variant '
+                         'and state rate')
+    force = _refine(force_resp, w, period, best, feedforward=(0.7 * inv, 1.3 * inv),
+                    also=force_also)
 
     jaw_resp = [_Plant(discrete_plant(d, 'jaw', period), w, period) for d in variants.values()]
     jaw_gain = (nominal.torque_per_amp / nominal.drum_radius * nominal.drive_radius
@@ -393,10 +449,11 @@ def design(params, model=None) -> TuneResult:
                    kp_grid=inv_j * np.array([100.0, 300.0, 1e3, 3e3, 1e4, 3e4]),
                    ki_grid=inv_j * np.array([1e3, 1e4, 1e5, 3e5]),
                    kd_grid=inv_j * np.array([1.0, 3.0, 10.0, 30.0, 100.0]),
-                   tf_grid=[0.5e-3, 2e-3])
+                   tf_grid=[0.5e-3, 2e-3], also=jaw_also)
     if best is None:
-        raise ValueError('no jaw PID on the design grid meets the margins on every plant variant')
-    jaw = _refine(jaw_resp, w, period, best)
+        raise ValueError('no jaw PID on the design grid meets the margins on every plant variant '
+                         'and state rate')
+    jaw = _refine(jaw_resp, w, period, best, also=jaw_also)
 
     gains = {'force_kp': force[0], 'force_ki': force[1], 'force_kd': force[2],
              'force_derivative_filter_time': force[3],
@@ -408,11 +465,19 @@ def design(params, model=None) -> TuneResult:
 
 
 # ---------------------------------------------------------------------- analysis
-def loop_transfer(params, loop: str, variant: str = 'nominal', model=None):
-    """Discrete open loop L(z) = PID(z) * z^-1 * plant(z) with the gains in ``params``."""
-    period = 1.0 / params.control_rate
-    s, f = VARIANTS[variant]
-    d = plant_data(params, model, s, f)
+def loop_transfer(params, loop: str, variant: str = 'nominal', model=None,
+                  rate: float | None = None):
+    """Discrete open loop L(z) = PID(z) * z^-1 * plant(z) with the gains in ``params``.
+
+    ``rate``: the state rate (Hz) the PID steps at (default ``expected_state_rate``);
+    ``variant``: a key of :data:`VARIANTS` or (force loops) :data:`EDGE_VARIANTS`.
+    """
+    period = 1.0 / (rate or params.expected_state_rate)
+    if variant in EDGE_VARIANTS:
+        d = plant_data(params, model, edge=EDGE_VARIANTS[variant])
+    else:
+        s, f = VARIANTS[variant]
+        d = plant_data(params, model, s, f)
     if loop == 'jaw':
         c = pid_tf(params.jaw_kp, params.jaw_ki, params.jaw_kd, params.jaw_derivative_filter_time, period)
     else:
@@ -480,20 +545,36 @@ def _bandwidth_hz(closed, period) -> float:
     return float(w[below[0]] / (2 * math.pi)) if below.size else float(w[-1] / (2 * math.pi))
 
 
-def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw')) -> TuneResult:
-    """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant."""
+def analysis_rates(params) -> tuple[float, ...]:
+    """State rates (Hz) :func:`analyse` checks: both ends of the range and the expected rate."""
+    return tuple(sorted({STATE_RATE_MIN, float(params.expected_state_rate), STATE_RATE_MAX}))
+
+
+def loop_variants(loop: str) -> tuple[str, ...]:
+    """Plant variants of ``loop``: every :data:`VARIANTS`, for the force loops the edges too."""
+    return tuple(VARIANTS) + (tuple(EDGE_VARIANTS) if loop != 'jaw' else ())
+
+
+def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw'),
+            rates=None) -> TuneResult:
+    """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant.
+
+    At every state rate of ``rates`` (Hz; default :func:`analysis_rates`).
+    """
     import control
-    period = 1.0 / params.control_rate
     reports = []
-    for loop in loops:
-        for variant in VARIANTS:
-            lt = loop_transfer(params, loop, variant, model)
-            gm_db, pm, _, wp = margins(lt, period)
-            closed = control.feedback(lt, 1)
-            stable = bool(np.all(np.abs(control.poles(closed)) < 1.0))
-            reports.append(LoopReport(loop, variant, gm_db, pm,
-                                      wp / (2 * math.pi) if math.isfinite(wp) else 0.0,
-                                      _bandwidth_hz(closed, period), stable))
+    for rate in (rates or analysis_rates(params)):
+        period = 1.0 / rate
+        for loop in loops:
+            for variant in loop_variants(loop):
+                lt = loop_transfer(params, loop, variant, model, rate=rate)
+                gm_db, pm, _, wp = margins(lt, period)
+                closed = control.feedback(lt, 1)
+                stable = bool(np.all(np.abs(control.poles(closed)) < 1.0))
+                reports.append(LoopReport(loop, variant, rate, gm_db, pm,
+                                          wp / (2 * math.pi) if math.isfinite(wp) else 0.0,
+                                          _bandwidth_hz(closed, period), stable))
+    period = 1.0 / params.expected_state_rate
     gains = {k: params[k] for k in ('force_kp', 'force_ki', 'force_kd', 'force_derivative_filter_time',
                                     'jaw_kp', 'jaw_ki', 'jaw_kd', 'jaw_derivative_filter_time')}
     return TuneResult(gains=gains, reports=reports, period=period)
@@ -510,7 +591,7 @@ def step_responses(params, duration: float = 0.2, model=None) -> dict:
         'force_sensor (PID only)', and 'jaw' (PID only).
     """
     import control
-    period = 1.0 / params.control_rate
+    period = 1.0 / params.expected_state_rate
     d = plant_data(params, model)
     out = {}
     t = np.arange(0.0, duration, period)

@@ -87,6 +87,85 @@ def values_of(topic: str, msg: Any) -> dict[str, float]:
     raise KeyError(f'no value extractor for topic {topic!r}')
 
 
+class RecordedTopics:
+    """The recorded topics of one interface profile, their types and what they mean.
+
+    Parameters
+    ----------
+    names : TopicSet
+        The profile's topics (:func:`grip_force_ros.topics.topic_set`).
+    conversion : JawEffortConversion, optional
+        The dVRK's jaw effort <-> current conversion (``dvrk``: the jaw effort of
+        ``jaw/measured_js`` and ``jaw/servo_jf`` becomes the series ``current`` and
+        ``current_command``, A, as the controller sees them).
+
+    Notes
+    -----
+    ``crtk`` is :data:`TOPIC_TYPES`, :data:`FIELDS` and :func:`values_of`. In ``dvrk`` the
+    arm's ``measured_js`` gives the wrist and ``jaw/measured_js`` the jaw angle, velocity
+    and the current; the arm's ``operating_state`` (crtk_msgs) is not recorded: the
+    controller's /diagnostics carry it (``arm_state``), and the bag keeps standard types only.
+    """
+
+    def __init__(self, names: topics.TopicSet, conversion=None):
+        self.names = names
+        self.conversion = conversion
+        if names.interface == 'crtk':
+            self.fields = dict(FIELDS)
+            self.types = dict(TOPIC_TYPES)
+            return
+        if conversion is None:
+            raise ValueError('the dvrk profile needs the jaw effort conversion')
+        js, wrench = 'sensor_msgs/msg/JointState', 'geometry_msgs/msg/WrenchStamped'
+        self.fields = {names.master_js: ('master_angle',),                         # rad
+                       names.instrument_js: ('wrist_angle',),                      # rad
+                       names.actuator_js: ('jaw_angle', 'jaw_velocity', 'current'),  # rad, rad/s, A
+                       names.command: ('current_command',),                        # A
+                       names.estimated_force: ('estimated_force', 'pull_out_force'),  # N, N
+                       names.target_force: ('target_force',),                      # N
+                       names.measured_force: ('measured_force',)}                  # N
+        self.types = {names.master_js: js, names.instrument_js: js, names.actuator_js: js,
+                      names.command: js, names.estimated_force: wrench,
+                      names.target_force: wrench, names.measured_force: wrench,
+                      topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
+
+    def values(self, topic: str, msg: Any) -> dict[str, float]:
+        """Return the plain SI numbers a message of ``topic`` carries, named as in ``fields``."""
+        n = self.names
+        if n.interface == 'crtk':
+            return values_of(topic, msg)
+        if topic == n.master_js:
+            return values_of(topics.MASTER_JS, msg)
+        if topic == n.instrument_js:
+            names = list(msg.name)
+            joint = next((j for j in topics.DVRK_WRIST_JOINTS if j in names), None)
+            return {'wrist_angle': _joint(msg, joint, 'position') if joint else float('nan')}
+        if topic == n.actuator_js:
+            effort = _joint(msg, topics.JAW_JOINT, 'effort', 0)
+            return {'jaw_angle': _joint(msg, topics.JAW_JOINT, 'position', 0),
+                    'jaw_velocity': _joint(msg, topics.JAW_JOINT, 'velocity', 0),
+                    'current': self.conversion.current(effort)}
+        if topic == n.command:
+            return {'current_command': self.conversion.current(
+                _joint(msg, topics.JAW_JOINT, 'effort', 0))}
+        for crtk_topic, own in ((topics.ESTIMATED_FORCE, n.estimated_force),
+                                (topics.TARGET_FORCE, n.target_force),
+                                (topics.MEASURED_FORCE, n.measured_force)):
+            if topic == own:
+                return values_of(crtk_topic, msg)
+        raise KeyError(f'no value extractor for topic {topic!r}')
+
+
+def recorded_topics(params) -> RecordedTopics:
+    """Return the :class:`RecordedTopics` of an instrument ParamSet's ``interface`` profile."""
+    names = topics.topic_set(params.interface, params.arm, params.master)
+    conversion = None
+    if params.interface == 'dvrk':
+        from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+        conversion = JawEffortConversion.from_params(params)
+    return RecordedTopics(names, conversion)
+
+
 def diagnostic_summary(msg: Any) -> list[dict[str, Any]]:
     """One dict per DiagnosticStatus: name, level (0 OK .. 3 STALE), message, values."""
     out = []

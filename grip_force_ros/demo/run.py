@@ -2,7 +2,9 @@
 
 :func:`run_task` starts ``sim_instrument``, the controller (or the naive
 map) and ``master`` as separate processes on one ROS domain, records every
-topic of :data:`grip_force_ros.topics.RECORDED` to a rosbag2 (MCAP), shows
+topic of the interface profile (:class:`~grip_force_ros.demo.messages.RecordedTopics`:
+crtk, :data:`grip_force_ros.topics.RECORDED`; or dvrk, the sim playing a dVRK arm) to a
+rosbag2 (MCAP), shows
 live progress, stops every process (SIGINT, wait, SIGTERM, SIGKILL) whatever
 happens, then reads the bag back and computes the figures of
 :mod:`grip_force_ros.demo.analysis`.
@@ -20,10 +22,10 @@ import numpy as np
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.demo import analysis
-from grip_force_ros.demo.messages import values_of
+from grip_force_ros.demo.messages import RecordedTopics, recorded_topics
 from grip_force_ros.nodes.processes import (ProcessError, ProcessGroup, node_command, python_module,
-                                            ros_args, ros_environment)
-from grip_force_ros.params import read_params_yaml
+                                            ros_args, ros_environment, ros_tools_environment)
+from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
 
 #: Seconds the nodes get to start and be discovered before the run is abandoned.
@@ -67,6 +69,10 @@ class RunSpec:
         ``-p name:=value`` per process.
     label : str
         Name of the run (log files, progress lines).
+    interface, arm, master : str
+        The nodes' interface profile (``crtk``, or ``dvrk`` with the dVRK arm and master
+        names): the sim plays the arm, the master is the dVRK master, the controller asks
+        the arm to enable and home (``request_enable``: no console here).
     """
 
     config: Path
@@ -77,6 +83,17 @@ class RunSpec:
     sim_overrides: dict = field(default_factory=dict)
     master_overrides: dict = field(default_factory=dict)
     label: str = 'demo'
+    interface: str = 'crtk'
+    arm: str = 'PSM1'
+    master: str = 'MTML'
+
+    def profile(self) -> dict[str, Any]:
+        """Return the interface parameters every node gets (``-p``)."""
+        return {'interface': self.interface, 'arm': self.arm, 'master': self.master}
+
+    def recorded(self) -> RecordedTopics:
+        """Return the recorded topics of this run's profile (with the instrument's conversion)."""
+        return recorded_topics(load_params_file(self.config, **self.profile()))
 
     def master_values(self) -> dict[str, Any]:
         """Return the master parameters: schema defaults, then the YAML, then overrides."""
@@ -122,7 +139,9 @@ class RunResult:
         return {
             'label': self.spec.label, 'config': str(self.spec.config),
             'sim_config': str(self.spec.sim_config or self.spec.config),
-            'controller': self.spec.controller,
+            'controller': self.spec.controller, 'interface': self.spec.interface,
+            'arm': self.spec.arm if self.spec.interface == 'dvrk' else None,
+            'master': self.spec.master if self.spec.interface == 'dvrk' else None,
             'controller_overrides': self.spec.controller_overrides,
             'sim_overrides': self.spec.sim_overrides,
             'duration': self.trajectory.duration, 'domain_id': self.domain_id,
@@ -136,16 +155,21 @@ class RunResult:
 
 
 def _node_argv(name: str, spec: RunSpec) -> list[str]:
+    profile = spec.profile()
     if name == 'master':
         overrides = dict(spec.master_values())
-        overrides.update(HOLD_MASTER, exit_when_done=True)
+        overrides.update(HOLD_MASTER, exit_when_done=True, **profile)
         return node_command('master', spec.config, overrides)
     if name == 'sim_instrument':
-        return node_command('sim_instrument', spec.sim_config or spec.config, spec.sim_overrides)
+        return node_command('sim_instrument', spec.sim_config or spec.config,
+                            {**profile, **spec.sim_overrides})
     if spec.controller == 'naive':
+        if spec.interface != 'crtk':
+            raise ValueError('the naive baseline speaks the crtk profile only')
         return (python_module('grip_force_ros.demo.naive_node')
                 + ros_args(spec.config, spec.controller_overrides, node_name='controller'))
-    return node_command('controller', spec.config, spec.controller_overrides)
+    own = {'request_enable': True} if spec.interface == 'dvrk' else {}
+    return node_command('controller', spec.config, {**profile, **own, **spec.controller_overrides})
 
 
 def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float,
@@ -223,16 +247,18 @@ class TaskClock:
         return (time.monotonic() if now is None else now) - self.started
 
 
-def live_status(recorder, trajectory: Trajectory, elapsed: float) -> dict[str, Any]:
+def live_status(recorder, trajectory: Trajectory, elapsed: float,
+                recorded: RecordedTopics | None = None) -> dict[str, Any]:
     """Return the newest values of the force and state topics, and the task phase."""
+    recorded = recorded or RecordedTopics(topics.topic_set('crtk'))
+    n = recorded.names
     phase = trajectory.phase(elapsed) if elapsed >= 0 else 'lead-in'
     status: dict[str, Any] = {'t': elapsed, 'phase': phase,
                               'duration': trajectory.duration}
-    for topic in (topics.MASTER_JS, topics.TARGET_FORCE, topics.ESTIMATED_FORCE,
-                  topics.MEASURED_FORCE, topics.SERVO_CURRENT):
+    for topic in (n.master_js, n.target_force, n.estimated_force, n.measured_force, n.command):
         item = recorder.latest(topic)
         if item is not None:
-            status.update(values_of(topic, item[1]))
+            status.update(recorded.values(topic, item[1]))
     return status
 
 
@@ -318,15 +344,19 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path = out_dir / 'bag'
     trajectory = spec.trajectory()
+    recorded = spec.recorded()
+    names = recorded.names
     timing: dict[str, float] = {}
     t_begin = time.monotonic()
-    env = ros_environment(domain_id)
+    # dvrk: the nodes need crtk_msgs, which the sourced ROS tools environment provides
+    env = ros_environment(domain_id, base=ros_tools_environment() if spec.interface == 'dvrk'
+                          else None)
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)
     recorder = spinner = None
     group = ProcessGroup(env, log_dir=out_dir / 'logs')
     try:
-        recorder = RecorderNode(bag_path, context=context)
+        recorder = RecorderNode(bag_path, topic_types=recorded.types, context=context)
         recorder.subscribe_all()
         spinner = SpinThread(recorder).start()
         with group:
@@ -334,8 +364,8 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             group.start('sim_instrument', _node_argv('sim_instrument', spec))
             group.start('controller', _node_argv('controller', spec))
             master = group.start('master', _node_argv('master', spec))
-            needed = [topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.SERVO_CURRENT,
-                      topics.MASTER_JS]
+            # (dvrk: the controller sends its first command once it has enabled the arm)
+            needed = [names.actuator_js, names.instrument_js, names.command, names.master_js]
             _wait_for(lambda: all(recorder.count(t) > 0 for t in needed),
                       group, startup_timeout, 'the master, the simulated instrument and the '
                       'controller')
@@ -347,11 +377,11 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             # the master exits (exit_when_done) shortly after its task: that ends the run
             deadline = clock.started + trajectory.duration + TAIL + startup_timeout
             while master.alive() and time.monotonic() < deadline:
-                item = recorder.latest(topics.MASTER_JS)
+                item = recorder.latest(names.master_js)
                 if item is not None:
-                    clock.observe(values_of(topics.MASTER_JS, item[1])['master_angle'])
+                    clock.observe(recorded.values(names.master_js, item[1])['master_angle'])
                 if progress is not None:
-                    progress(live_status(recorder, trajectory, clock.elapsed()))
+                    progress(live_status(recorder, trajectory, clock.elapsed(), recorded))
                 group.check_alive(may_finish=('master',))
                 time.sleep(0.05)
             timing['task_end'] = time.monotonic() - t_begin
@@ -362,7 +392,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             spinner.stop()
         counts = {}
         if recorder is not None:
-            counts = {t: recorder.count(t) for t in topics.RECORDED}
+            counts = {t: recorder.count(t) for t in recorded.types}
             recorder.close()
             recorder.destroy_node()
         rclpy.shutdown(context=context)
@@ -378,7 +408,9 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     """Read the run's bag back; phases, figures and (optionally) the summary plot."""
     from grip_force_ros.demo.series import read_bag_series, resample
 
-    series, diagnostics = read_bag_series(result.bag)
+    recorded = result.spec.recorded()
+    names = recorded.names
+    series, diagnostics = read_bag_series(result.bag, recorded)
     raw = resample(series, rate=500.0, t0=0.0)
     try:
         start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
@@ -399,11 +431,13 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
         hold = windows['hold']
         result.metrics['largest_gap_hold'] = max(
             analysis.largest_gap(series[t]['t'] - start, hold)
-            for t in (topics.TARGET_FORCE, topics.MEASURED_FORCE, topics.INSTRUMENT_JS,
-                      topics.ACTUATOR_JS))
+            for t in (names.target_force, names.measured_force, names.instrument_js,
+                      names.actuator_js))
     result.problems = analysis.run_problems({**result.metrics, 'safe_events': events}, windows)
     if plot:
         from grip_force_ros.demo.plot import summary_plot
+        where = (f', dvrk {result.spec.arm}/{result.spec.master}' if result.spec.interface == 'dvrk'
+                 else '')
         result.plot = summary_plot(data, windows, result.metrics, result.out_dir / 'summary.png',
-                                   title=f'grip-force demo: needle grasp ({result.spec.label})')
+                                   title=f'grip-force demo: needle grasp ({result.spec.label}{where})')
     return result

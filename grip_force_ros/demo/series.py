@@ -12,7 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from grip_force_ros import topics
-from grip_force_ros.demo.messages import FIELDS, diagnostic_summary, stamp_seconds, values_of
+from grip_force_ros.demo.messages import RecordedTopics, diagnostic_summary, stamp_seconds
 
 
 #: Largest median |header stamp - receive time| (s) for which the stamps are trusted.
@@ -23,8 +23,16 @@ class BagError(ValueError):
     """The bag cannot be read or lacks a topic the analysis needs."""
 
 
-def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]], list]:
+def read_bag_series(path: str | Path, recorded: RecordedTopics | None = None
+                    ) -> tuple[dict[str, dict[str, np.ndarray]], list]:
     """Read a demo bag.
+
+    Parameters
+    ----------
+    path : path
+        The bag (directory or file).
+    recorded : RecordedTopics, optional
+        The interface profile the run used (default: crtk).
 
     Returns
     -------
@@ -41,9 +49,11 @@ def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]],
     from rosbags.typesys import Stores, get_typestore
 
     path = Path(path)
-    wanted = {('/' + t.lstrip('/')): t for t in FIELDS}
-    rows: dict[str, dict[str, list]] = {t: {'t': [], 'stamp': [], **{f: [] for f in FIELDS[t]}}
-                                        for t in FIELDS}
+    recorded = recorded or RecordedTopics(topics.topic_set('crtk'))
+    fields = recorded.fields
+    wanted = {('/' + t.lstrip('/')): t for t in fields}
+    rows: dict[str, dict[str, list]] = {t: {'t': [], 'stamp': [], **{f: [] for f in fields[t]}}
+                                        for t in fields}
     diagnostics = []
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
@@ -59,7 +69,7 @@ def read_bag_series(path: str | Path) -> tuple[dict[str, dict[str, np.ndarray]],
                 row = rows[short]
                 row['t'].append(t)
                 row['stamp'].append(stamp_seconds(msg))
-                for name, value in values_of(short, msg).items():
+                for name, value in recorded.values(short, msg).items():
                     row[name].append(value)
     except Exception as exc:  # rosbags raises several types for unreadable bags
         raise BagError(f'{path}: cannot read rosbag2: {exc}') from exc

@@ -55,6 +55,13 @@ OUTCOMES = {
     'refuse_set': 'runtime parameter set refused with the reason, old value kept',
     'bounded': 'runtime parameter set accepted, hardware limits still bound the output',
     'refuse_start': 'node exits non-zero with the offending key on stderr',
+    # the dVRK interface and the drive, on real node processes (faults/dvrk.py)
+    'drive_cut': "the controller process dies mid-grasp: the sim's drive cuts the current to 0 A "
+                 'within 35 ms (its 30 ms command timeout), reported',
+    'arm_interlock': 'the arm leaves ENABLED: the controller goes safe naming the arm state, sends '
+                     'no more jaw effort and does not enable the arm again; no current',
+    'effort_refused': "a jaw effort beyond the tool's limit is refused with a warning; the current "
+                      'stays',
 }
 
 
@@ -119,6 +126,8 @@ class FaultCase:
             return 'param_set'
         if self.category == 'sim restart':
             return 'restart'
+        if self.category in ('process', 'dvrk interface'):
+            return 'process'
         return 'message'
 
 
@@ -404,7 +413,8 @@ def _param_file_cases() -> list[FaultCase]:
 
 def catalogue() -> list[FaultCase]:
     """Every fault case, message faults first."""
-    cases = _message_cases() + _param_set_cases() + _param_file_cases()
+    from grip_force_ros.faults.dvrk import dvrk_cases   # its cases run node processes
+    cases = _message_cases() + _param_set_cases() + _param_file_cases() + dvrk_cases()
     names = [c.name for c in cases]
     if len(set(names)) != len(names):  # pragma: no cover - a programming error
         raise RuntimeError('duplicate fault case name')

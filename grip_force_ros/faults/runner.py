@@ -495,7 +495,7 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
     crashes = 0
     violations = 0
     for sensor in (False, True):
-        group = [c for c in cases if c.kind != 'param_file' and c.sensor == sensor]
+        group = [c for c in cases if c.kind not in ('param_file', 'process') and c.sensor == sensor]
         if not group:
             continue
         session = None
@@ -525,6 +525,12 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         if session is not None:
             violations += session.violation_count()
             session.close()
+    process_cases = [c for c in cases if c.kind == 'process']
+    if process_cases:   # the dVRK interface and the drive, each on its own processes
+        from grip_force_ros.faults.dvrk import run_process_cases
+        process_details = run_process_cases(process_cases, config, progress)
+        details += process_details
+        crashes += sum(1 for d in process_details if d.get('crash'))
     if file_thread is not None:
         file_thread.join()
         for detail in file_thread_result:

@@ -87,7 +87,8 @@ def joint_state(stamp, names: Sequence[str], position: Sequence[float] = (),
     return msg
 
 
-def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -> dict[str, tuple]:
+def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str],
+                others: bool = False) -> dict[str, tuple]:
     """Extract ``fields`` of ``joints`` from a JointState, checking everything.
 
     Parameters
@@ -98,7 +99,11 @@ def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -
         Joint names that must all be present (other names are an error too:
         a message for another device on the wrong topic must not be used).
     fields : sequence of str
-        Any of 'position', 'velocity', 'effort' that must be present and finite.
+        Any of 'position', 'velocity', 'effort' that must be present and finite
+        (for the wanted joints).
+    others : bool
+        Other joints are normal (a dVRK arm's ``measured_js`` holds all its joints): they
+        are not an error and their values are not checked.
 
     Returns
     -------
@@ -114,7 +119,7 @@ def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -
     if len(set(names)) != len(names):
         raise InputRejected(f'duplicate joint names {names}')
     unknown = [n for n in names if n not in joints]
-    if unknown:
+    if unknown and not others:
         raise InputRejected(f'unknown joint name(s) {unknown}, expected {list(joints)}')
     missing = [n for n in joints if n not in names]
     if missing:
@@ -127,6 +132,8 @@ def read_joints(msg: JointState, joints: Sequence[str], fields: Sequence[str]) -
         arrays[field] = values
     out = {}
     for i, name in enumerate(names):
+        if others and name not in joints:
+            continue
         row = []
         for field in fields:
             v = float(arrays[field][i])

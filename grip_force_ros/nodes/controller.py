@@ -1,12 +1,17 @@
 """Grip-force controller node (``controller``): a thin shell around ``GripController``.
 
+Its topics depend on the ``interface`` parameter: ``crtk`` (this package's topics, the
+current in A) or ``dvrk`` (a da Vinci Research Kit PSM's and MTM's topics, the jaw effort
+in N*m, the arm's operating state); the wiring of each profile is
+:mod:`grip_force_ros.nodes.controller_io`. In ``crtk``:
+
 Subscribes (KEEP_LAST 1; only the newest sample matters):
     master/gripper/measured_js        gripper: position (rad)
     instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s, optional)
     instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
                                       effort = measured current (A)
     grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
-Publishes, every control step (one per control period, ``control_rate``, 1 kHz):
+Publishes, every control step (one per instrument state, ``expected_state_rate``):
     instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
         at once;
     grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
@@ -19,20 +24,16 @@ Publishes, every control step (one per control period, ``control_rate``, 1 kHz):
 and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
 
 Loop timing, as hardware interfaces do it: the control step runs when a fresh
-actuator state arrives (in its subscription callback), so each command answers
-the newest state without waiting for a free-running timer (two unsynchronised
-1 kHz timers, the sim's and the controller's, would add a 0-1 ms wait whose
-phase is fixed for a whole run). The ``control_rate`` timer stays as the
-watchdog and fallback: it steps when no state came for
-:data:`FALLBACK_AFTER_PERIODS` periods (a lost state, or silence: then it steps
-every period, and the safe state still comes within two periods of
-``watchdog_timeout``), never within half a period of the previous step. A state
-that is merely late (jitter under half a period) gets no extra step: an extra
-step would repeat the same measurement and cost both processes a callback.
-Every actuator state is stepped on: the PID assumes one step per period, so
-the actuator state is expected at ``control_rate`` (the sim publishes at
-``publish_rate`` = 1 kHz). Cancelling the timer stops the loop altogether (no
-step on states either).
+instrument state arrives (the actuator state; dvrk: the jaw's ``measured_js``, in its
+subscription callback), so each command answers the newest state without waiting for a
+free-running timer. The step integrates over the time measured since the previous step
+(:class:`~grip_force_ros.control.GripController`), so the loop is the same at any state
+rate from 100 to 1500 Hz (``expected_state_rate``; the dVRK publishes at 100 Hz). The
+``control_rate`` timer (1 kHz) is the watchdog and fallback: it steps when no state came
+for :data:`FALLBACK_AFTER_PERIODS` state periods (a lost state, or silence: then it steps
+every half state period at most, and the safe state still comes within a timer period or
+two of ``watchdog_timeout``), never within :data:`MIN_STEP_SPACING_PERIODS` of the previous
+step. Cancelling the timer stops the loop altogether (no step on states either).
 
 Stamps: the current command of a step on a fresh actuator state (accepted,
 with a non-zero stamp) carries that state's header stamp, a reply stamp in the
@@ -54,29 +55,24 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.task import Future
-from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
-from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
-                                         InputRejected, read_joints, run_node, stamp_seconds)
+from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, InputRejected, run_node
+from grip_force_ros.nodes.controller_io import controller_io
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 
-GROUPS = ('instrument', 'limits', 'controller')
+GROUPS = ('instrument', 'limits', 'controller', 'interface')
 #: Periodic /diagnostics rate (Hz); changes are published sooner, at most this often:
 DIAGNOSTICS_RATE = 10.0
 DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
-#: The timer does not step sooner than this many periods after the previous step:
+#: The timer does not step sooner than this many state periods after the previous step:
 MIN_STEP_SPACING_PERIODS = 0.5
-#: The timer steps only when no actuator state came for this many periods:
+#: The timer steps only when no instrument state came for this many state periods:
 FALLBACK_AFTER_PERIODS = 1.5
 
-_MASTER_JOINTS = (topics.MASTER_JOINT,)
-_INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
-_ACTUATOR_JOINTS = (topics.DRUM_JOINT,)
 #: The plausibility ranges of ControlInputs (copied on a runtime parameter change).
 _INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance',
                  'jaw_angle_min', 'jaw_angle_max', 'wrist_angle_limit', 'current_limit',
@@ -95,37 +91,14 @@ class ControllerNode(Node):
         self.inputs: ControlInputs = self.controller.new_inputs()
         self.last_output = None
         self._now_ns = self.get_clock().now
-        self._sub_qos = STATE_SUB_QOS
-
-        self.create_subscription(JointState, topics.MASTER_JS, self._on_master, STATE_SUB_QOS)
-        self.create_subscription(JointState, topics.INSTRUMENT_JS, self._on_instrument,
-                                 STATE_SUB_QOS)
-        self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_actuator,
-                                 STATE_SUB_QOS)
-        self._force_sub = None
-        self._update_force_subscription(params.force_sensor_enabled)
-
-        self._servo_pub = self.create_publisher(JointState, topics.SERVO_CURRENT, STATE_PUB_QOS)
-        self._estimate_pub = self.create_publisher(WrenchStamped, topics.ESTIMATED_FORCE,
-                                                   STATE_PUB_QOS)
-        self._target_pub = self.create_publisher(WrenchStamped, topics.TARGET_FORCE,
-                                                 STATE_PUB_QOS)
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                DIAGNOSTICS_QOS)
-        # Messages reused every period (1 kHz): fill, do not rebuild.
-        self._servo_msg = JointState(name=[topics.DRUM_JOINT], effort=[0.0])
-        self._estimate_msg = WrenchStamped()
-        self._estimate_msg.header.frame_id = topics.JAW_FRAME
-        self._target_msg = WrenchStamped()
-        self._target_msg.header.frame_id = topics.JAW_FRAME
-
-        self._forces_pending = False   # estimated/target force of the last step not sent yet
         self._diag_key = None          # (mode, limits_hit, reasons, rejected count) last published
         self._diag_time = -math.inf    # s, when /diagnostics was last published
         self._limits_seen: set = set()  # limits hit since the last /diagnostics
         self._new_rejections: list = []  # rejection reasons since the last /diagnostics
         # Loop timing (perf_counter s): for /diagnostics and the loop benchmark.
-        self._period = 1.0 / params.control_rate
+        self._period = 1.0 / params.expected_state_rate     # s, nominal time between states
         self.timing = {'ticks': 0, 'late': 0, 'period_sum': 0.0, 'period_max': 0.0,
                        'busy_sum': 0.0, 'busy_max': 0.0}
         self._last_tick = None
@@ -133,21 +106,31 @@ class ControllerNode(Node):
         self._min_spacing = MIN_STEP_SPACING_PERIODS * self._period
         self._fallback_after = FALLBACK_AFTER_PERIODS * self._period
         self._last_step = -math.inf        # when the last control step started
-        self._last_state_step = -math.inf  # when the last step on an actuator state started
+        self._last_state_step = -math.inf  # when the last step on an instrument state started
         self.steps = {'on_state': 0, 'on_timer': 0}   # control steps by trigger
         self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
+        try:                               # the profile's topics (dvrk: needs crtk_msgs)
+            self.io = controller_io(self, params)
+        except ValueError:
+            self.destroy_node()            # refuse to start: leave nothing in the ROS graph
+            raise
+        where = (f'arm {params.arm}, master {params.master}' if params.interface == 'dvrk'
+                 else 'crtk topics')
         self.get_logger().info(
-            f'{params.instrument_name}: control at {params.control_rate:.0f} Hz, '
-            f"feedback {'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
+            f'{params.instrument_name}: {params.interface} interface ({where}), stepping on '
+            f'instrument states (expected {params.expected_state_rate:g} Hz), watchdog timer '
+            f'{params.control_rate:.0f} Hz, feedback '
+            f"{'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
             f'object {params.object_kind}')
 
     # ------------------------------------------------------------------ time
-    def _now(self) -> float:
+    def now(self) -> float:
         """Return the controller clock (s), the clock of receive times and of the watchdog."""
         return self._now_ns().nanoseconds * 1e-9
 
-    # ------------------------------------------------------------------ inputs
-    def _reject(self, source: str, now: float, exc: InputRejected) -> None:
+    # ------------------------------------------------------------------ inputs (the profile's)
+    def reject(self, source: str, now: float, exc: InputRejected) -> None:
+        """Count a malformed message of ``source``: the input is faulted until a good one."""
         reason = self.inputs.reject(source, now, f'malformed message: {exc}')
         self._note_rejection(reason)
         self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
@@ -157,68 +140,23 @@ class ControllerNode(Node):
         if reason not in self._new_rejections and len(self._new_rejections) < 5:
             self._new_rejections.append(reason)
 
-    def _report(self, reason) -> None:
+    def report(self, reason) -> None:
+        """Note the result of a ``set_*`` of the inputs (None, or why the sample was rejected)."""
         if reason is not None:
             self._note_rejection(reason)
             self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
 
-    def _on_master(self, msg: JointState) -> None:
-        now = self._now()
-        try:
-            (angle,), = read_joints(msg, _MASTER_JOINTS, ('position',)).values()
-        except InputRejected as exc:
-            return self._reject('master', now, exc)
-        self._report(self.inputs.set_master(now, angle, stamp_seconds(msg.header.stamp)))
+    def on_state(self, answered_stamp=None) -> None:
+        """Run a control step on an instrument state (event-driven loop).
 
-    def _on_instrument(self, msg: JointState) -> None:
-        now = self._now()
-        fields = ('position', 'velocity') if len(msg.velocity) else ('position',)
-        try:
-            joints = read_joints(msg, _INSTRUMENT_JOINTS, fields)
-        except InputRejected as exc:
-            return self._reject('instrument', now, exc)
-        if self._forces_pending:        # the loop has closed (the instrument sent its joints)
-            self._publish_forces()
-        wrist, jaw = joints[topics.WRIST_JOINT], joints[topics.JAW_JOINT]
-        jaw_velocity = jaw[1] if len(jaw) > 1 else 0.0
-        self._report(self.inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity,
-                                                stamp_seconds(msg.header.stamp)))
-
-    def _on_actuator(self, msg: JointState) -> None:
-        """Actuator state: store it and run the control step on it (event-driven loop)."""
-        fresh = self._read_actuator(msg)
+        ``answered_stamp``: the state's header stamp when it was accepted fresh (the command
+        carries it), else None.
+        """
         if not self._timer.is_canceled():  # cancelled: the loop is stopped
             self.steps['on_state'] += 1
             started = time.perf_counter()
             self._last_state_step = started
-            self._step(started, msg.header.stamp if fresh else None)
-
-    def _read_actuator(self, msg: JointState) -> bool:
-        """Store the actuator state; True if it was accepted as a new, stamped sample."""
-        now = self._now()
-        fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
-        try:
-            (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
-        except InputRejected as exc:
-            self._reject('actuator', now, exc)
-            return False
-        velocity = drum[2] if len(drum) > 2 else 0.0
-        stamp = stamp_seconds(msg.header.stamp)
-        self._report(self.inputs.set_actuator(now, drum[0], drum[1], velocity, stamp))
-        # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
-        return self.inputs.actuator_time == now and stamp != 0.0
-
-    def _on_force(self, msg: WrenchStamped) -> None:
-        self._report(self.inputs.set_force(self._now(), msg.wrench.force.z,
-                                           stamp_seconds(msg.header.stamp)))
-
-    def _update_force_subscription(self, enabled: bool) -> None:
-        if enabled and self._force_sub is None:
-            self._force_sub = self.create_subscription(WrenchStamped, topics.MEASURED_FORCE,
-                                                       self._on_force, STATE_SUB_QOS)
-        elif not enabled and self._force_sub is not None:
-            self.destroy_subscription(self._force_sub)
-            self._force_sub = None
+            self._step(started, answered_stamp)
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, params, changed) -> None:
@@ -227,17 +165,20 @@ class ControllerNode(Node):
         fresh = self.controller.new_inputs()
         for name in _INPUT_RANGES:
             setattr(self.inputs, name, getattr(fresh, name))
-        self._update_force_subscription(params.force_sensor_enabled)
+        self.io.update_params(params)
+        if 'request_enable' in changed and params.request_enable and hasattr(self.io,
+                                                                             'request_enable'):
+            self.io.request_enable()
         self.get_logger().info(f'parameters changed: {sorted(changed)}')
 
     # ------------------------------------------------------------------ loop
     def _tick(self) -> None:
         """Run the ``control_rate`` timer: watchdog and fallback of the event-driven loop.
 
-        Steps when no actuator state came for :data:`FALLBACK_AFTER_PERIODS`
-        periods (a lost state; when they stop, every period, so the watchdog acts
-        on the stale inputs), never within :data:`MIN_STEP_SPACING_PERIODS` of
-        the previous step.
+        Steps when no instrument state came for :data:`FALLBACK_AFTER_PERIODS` state
+        periods (a lost state; when they stop, every half state period at most, so the
+        watchdog acts on the stale inputs), never within :data:`MIN_STEP_SPACING_PERIODS`
+        state periods of the previous step.
         """
         started = time.perf_counter()
         if (started - self._last_state_step >= self._fallback_after
@@ -268,34 +209,13 @@ class ControllerNode(Node):
                 timing['late'] += 1
         self._last_tick = started
 
-    def _publish_forces(self) -> None:
-        """Estimated and target force of the last step (stamped with its time)."""
-        self._forces_pending = False
-        self._estimate_pub.publish(self._estimate_msg)
-        self._target_pub.publish(self._target_msg)
-
     def _control(self, answered_stamp=None) -> None:
-        if self._forces_pending:        # the previous step's, not sent yet: first
-            self._publish_forces()
         stamp = self._now_ns()
         now = stamp.nanoseconds * 1e-9
-        out = self.controller.step(now, self.inputs)
+        out = self.controller.step(now, self.inputs, self.io.interlock())
         self.last_output = out
         stamp_msg = stamp.to_msg()
-
-        servo = self._servo_msg
-        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
-        servo.effort[0] = out.current_command
-        self._servo_pub.publish(servo)
-
-        est = self._estimate_msg
-        est.header.stamp = stamp_msg
-        est.wrench.force.z = out.estimated_force
-        est.wrench.force.x = out.pull_out_force
-        target = self._target_msg
-        target.header.stamp = stamp_msg
-        target.wrench.force.z = out.target_force
-        self._forces_pending = True     # sent once the loop has closed, see _on_instrument
+        self.io.publish(out, stamp_msg, answered_stamp)
 
         if out.limits_hit:
             self._limits_seen.update(out.limits_hit)
@@ -333,8 +253,9 @@ class ControllerNode(Node):
             values['late_periods'] = str(timing['late'])   # longer than 1.5 periods
             values['tick_mean_us'] = f"{timing['busy_sum'] / timing['ticks'] * 1e6:.1f}"
             values['tick_max_us'] = f"{timing['busy_max'] * 1e6:.1f}"
-        values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an actuator state
+        values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an instrument state
         values['steps_on_timer'] = str(self.steps['on_timer'])   # fallback: no fresh state
+        values.update(self.io.status())
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'

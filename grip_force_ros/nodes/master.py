@@ -1,8 +1,9 @@
 """Master source node: publishes the master gripper opening (``master``).
 
-Publishes ``master/gripper/measured_js`` (JointState, joint ``gripper``:
-position = opening (rad), velocity (rad/s)) at ``master_rate`` from a scripted
-trajectory or a replay (:mod:`grip_force_ros.trajectories`). The trajectory
+Publishes ``master/gripper/measured_js`` (``interface`` crtk; dvrk: the dVRK master's
+``<master>/gripper/measured_js``, e.g. ``MTML/gripper/measured_js``, 100 Hz by default)
+(JointState, joint ``gripper``: position = opening (rad), velocity (rad/s)) at
+``master_rate`` from a scripted trajectory or a replay (:mod:`grip_force_ros.trajectories`). The trajectory
 clock starts when a subscriber is matched (``start_when_subscribed``). After a
 non-repeating trajectory ends it keeps publishing the last angle (a silent
 master would trip the controller's watchdog), or exits when
@@ -31,17 +32,19 @@ class MasterNode(Node):
     def __init__(self, **kwargs):
         super().__init__('master', **kwargs)
         self.finished = Future()
-        self._param = declare_node_parameters(self, groups=(), extra_specs=MASTER_SPECS,
+        self._param = declare_node_parameters(self, groups=('interface',), extra_specs=MASTER_SPECS,
                                               on_update=self._on_params, check=self._check)
         self.trajectory: Trajectory = self._build(self._values())
-        self._pub = self.create_publisher(JointState, topics.MASTER_JS, STATE_PUB_QOS)
+        params = self._param.params
+        self.topic = topics.topic_set(params.interface, params.arm, params.master).master_js
+        self._pub = self.create_publisher(JointState, self.topic, STATE_PUB_QOS)
         self._start = time.monotonic()
         self._started = False            # trajectory clock running (see start_when_subscribed)
         self._last_phase = None
         self._timer = self.create_timer(1.0 / self._param.value('master_rate'), self._tick)
         self.get_logger().info(
             f"publishing {self._param.value('trajectory')} ({self.trajectory.duration:.2f} s) "
-            f"at {self._param.value('master_rate'):.0f} Hz on {topics.MASTER_JS}")
+            f"at {self._param.value('master_rate'):.0f} Hz on {self.topic}")
 
     def _values(self, values=None) -> dict:
         if values is None:

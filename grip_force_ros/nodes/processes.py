@@ -98,6 +98,49 @@ def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | Non
     return env
 
 
+#: The set-up's ROS environment file (tools/ros_tools.sh): crtk_msgs, the dVRK client, ros2.
+ROS_SETUP_FILE = 'ros_setup.bash'
+
+
+def ros_tools_environment(base: Mapping[str, str] | None = None,
+                          setup_file: str | os.PathLike | None = None) -> dict[str, str]:
+    """Return the environment of ``source .venv/ros_setup.bash`` (crtk_msgs, dVRK client, ros2).
+
+    What a node of the ``dvrk`` profile needs: crtk_msgs' typesupport libraries on the
+    library path (``PYTHONPATH`` alone is not enough). On a ROS machine with crtk_msgs
+    installed the caller's own environment already has it.
+
+    Parameters
+    ----------
+    base : mapping, optional
+        Environment to source the file in (default ``os.environ``).
+    setup_file : path, optional
+        Default: ``ros_setup.bash`` beside this interpreter's virtual environment.
+
+    Raises
+    ------
+    ProcessError
+        The set-up has not built the ROS tools (with the reason it recorded).
+    """
+    setup = Path(setup_file) if setup_file else Path(sys.prefix) / ROS_SETUP_FILE
+    if not setup.is_file():
+        status = Path(sys.prefix) / 'ros_tools.status'
+        why = status.read_text().strip() if status.is_file() else 'never set up'
+        raise ProcessError(f'the dvrk profile needs crtk_msgs from the ROS tools of the set-up '
+                           f'({setup} missing: {why}); run ./dev setup')
+    done = subprocess.run(['bash', '-c', 'source "$0" >/dev/null 2>&1 && env -0', str(setup)],
+                          env=dict(os.environ if base is None else base), capture_output=True,
+                          timeout=60)
+    if done.returncode != 0:
+        raise ProcessError(f'sourcing {setup} failed: {done.stderr.decode(errors="replace")[-500:]}')
+    env = {}
+    for item in done.stdout.split(b'\0'):
+        key, sep, value = item.decode(errors='replace').partition('=')
+        if sep and key:
+            env[key] = value
+    return env
+
+
 # ---------------------------------------------------------------- command line
 def ros_arg_value(value: Any) -> str:
     """Format a Python value as the YAML literal of ``-p name:=value`` on a ROS command line.

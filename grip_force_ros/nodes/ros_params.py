@@ -30,6 +30,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from grip_force_ros.params import SCHEMA, SPECS, ParameterError, ParamSet, ParamSpec, make_params
+from grip_force_ros.params.interface import with_profile_defaults
 
 #: Parameters every rclpy node may carry that are not ours.
 ROS_BUILTIN = ('use_sim_time', 'start_type_description_service')
@@ -128,6 +129,8 @@ class NodeParameters:
         known = set(SPECS) | set(self._specs) | set(known_elsewhere) | set(ROS_BUILTIN)
 
         overrides = {name: plain(p.value) for name, p in node._parameter_overrides.items()}
+        # what the file does not give takes its interface profile's default (dvrk: 100 Hz)
+        overrides = with_profile_defaults(overrides, self._specs)
         unknown = sorted(n for n in overrides
                          if n not in known and not n.startswith('qos_overrides.'))
         if unknown:

@@ -1,10 +1,16 @@
 """Simulated instrument node (``sim_instrument``): a thin shell around ``InstrumentSim``.
 
+Its topics depend on the ``interface`` parameter: ``crtk`` (this package's topics, the
+current in A) or ``dvrk`` (the sim plays a dVRK PSM named ``arm``: its jaw and arm joint
+states, the jaw effort in N*m on ``<arm>/jaw/servo_jf``, the operating state machine
+DISABLED -> ENABLED -> homed, 100 Hz by default); the wiring of each profile is
+:mod:`grip_force_ros.nodes.sim_io`. In ``crtk``:
+
 Subscribes (KEEP_LAST 1):
     instrument/actuator/servo_jf      jaw_drum: effort = motor current command (A)
-Steps the plant in real time: a timer at ``publish_rate`` (1 kHz) advances the
+Steps the plant in real time: a timer at ``publish_rate`` (1 kHz; dvrk 100 Hz) advances the
 simulation by the time actually elapsed since the last step (capped at
-:data:`MAX_STEP`, so a stalled process slows the simulation instead of
+:data:`MAX_STEP` or 2.5 periods, so a stalled process slows the simulation instead of
 integrating one huge step), with the last accepted current command held.
 Publishes each step's measurements, all with the same stamp (the time of the
 measurement), in this order:
@@ -22,6 +28,12 @@ last second: a command that carries the stamp of an actuator state it answers
 (the controller's convention) took arrival minus stamp, both on this node's clock
 (:class:`~grip_force_ros.sim.loop_latency.LoopLatency`).
 
+The drive side, in both profiles: with no accepted command for ``command_timeout``
+(30 ms, the dVRK's) the current command becomes 0 A, as a real drive cuts its power
+when its master stops talking (a controller killed mid-grasp); reported in the log and on
+/diagnostics (``drive_timeouts``), re-armed by the next command
+(:class:`~grip_force_ros.sim.drive.CommandTimeout`).
+
 The plant's parameters are the 'instrument', 'sim' and 'effects' groups of the
 schema (``friction_scale`` and ``stiffness_scale`` make the plant differ from
 the instrument file; the controller is not told). A malformed command
@@ -32,24 +44,30 @@ from __future__ import annotations
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.task import Future
-from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import (DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS,
-                                         InputRejected, read_joints, run_node, stamp_nanoseconds)
+from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, run_node
 from grip_force_ros.nodes.ros_params import declare_node_parameters
+from grip_force_ros.nodes.sim_io import sim_io
 from grip_force_ros.sim import InstrumentSim
+from grip_force_ros.sim.drive import CommandTimeout
 from grip_force_ros.sim.loop_latency import LoopLatency
 
-GROUPS = ('instrument', 'sim', 'effects')
-#: Largest simulated step per timer period (s); longer stalls slow the simulation down.
+GROUPS = ('instrument', 'limits', 'sim', 'effects', 'interface')
+#: Largest simulated step per timer period (s), at least :data:`MAX_STEP_PERIODS` publish
+#: periods; longer stalls slow the simulation down.
 MAX_STEP = 0.01
+MAX_STEP_PERIODS = 2.5
+#: Period of the drive's own command-timeout check (s), as a drive's watchdog runs beside its
+#: current loop: independent of the rate the sensors are published at (dvrk: 100 Hz).
+DRIVE_CHECK_PERIOD = 1e-3
+#: A check this much later than the previous one means this process was starved: commands
+#: may be queued unprocessed, so the timeout is judged at the next check, not now (a real
+#: drive's watchdog is hardware and never starved; the sim's is a Python callback).
+DRIVE_CHECK_LATE = 5e-3
 DIAGNOSTICS_PERIOD = 1.0  # s
-
-_COMMAND_JOINTS = (topics.DRUM_JOINT,)
 
 
 class SimInstrumentNode(Node):
@@ -62,53 +80,53 @@ class SimInstrumentNode(Node):
         params = self._param.params
         self.sim = InstrumentSim(params, obj=None, seed=params.sim_seed)
         self.current_command = 0.0       # A, last accepted command
-        self.rejected = 0                # malformed commands
+        self.rejected = 0                # refused commands (malformed; dvrk: not ready, too large)
         self.last_rejection = ''
         self.commands = 0                # accepted commands
         self.capped_steps = 0            # periods whose elapsed time exceeded MAX_STEP
+        self.drive = CommandTimeout(params.command_timeout)
+        self._last_drive_check = time.monotonic()
         self.loop = LoopLatency(capacity=int(2 * params.publish_rate * DIAGNOSTICS_PERIOD) + 16)
-
-        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command,
-                                 STATE_SUB_QOS)
-        self._joint_pub = self.create_publisher(JointState, topics.INSTRUMENT_JS, STATE_PUB_QOS)
-        self._actuator_pub = self.create_publisher(JointState, topics.ACTUATOR_JS, STATE_PUB_QOS)
-        self._force_pub = self.create_publisher(WrenchStamped, topics.MEASURED_FORCE,
-                                                STATE_PUB_QOS)
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                DIAGNOSTICS_QOS)
-        self._joint_msg = JointState(name=[topics.WRIST_JOINT, topics.JAW_JOINT],
-                                     position=[0.0, 0.0], velocity=[0.0, 0.0])
-        self._actuator_msg = JointState(name=[topics.DRUM_JOINT], position=[0.0],
-                                        velocity=[0.0], effort=[0.0])
-        self._force_msg = WrenchStamped()
-        self._force_msg.header.frame_id = topics.JAW_FRAME
-        self._sensors_pending = False    # joint state and force of the last step not yet sent
-
+        try:                               # the profile's topics (dvrk: needs crtk_msgs)
+            self.io = sim_io(self, params)
+        except ValueError:
+            self.destroy_node()            # refuse to start: leave nothing in the ROS graph
+            raise
         self._last = time.monotonic()
         self._started = self._last
+        self._max_step = max(MAX_STEP, MAX_STEP_PERIODS / params.publish_rate)
         self._timer = self.create_timer(1.0 / params.publish_rate, self._tick)
+        # at 1 kHz and above the step checks the drive; slower, its own timer does
+        self._drive_timer = (self.create_timer(DRIVE_CHECK_PERIOD, self._check_drive)
+                             if params.publish_rate * DRIVE_CHECK_PERIOD < 1.0 else None)
         self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
+        where = f' as arm {params.arm}' if params.interface == 'dvrk' else ''
         self.get_logger().info(
-            f'{params.instrument_name}: object {self.sim.obj}, '
+            f'{params.instrument_name}: {params.interface} interface{where}, object {self.sim.obj}, '
             f'friction x{params.friction_scale:g}, '
-            f'stiffness x{params.stiffness_scale:g}, stepping at {params.publish_rate:.0f} Hz')
+            f'stiffness x{params.stiffness_scale:g}, stepping at {params.publish_rate:.0f} Hz, '
+            f'drive command timeout {params.command_timeout * 1e3:g} ms')
 
-    # ------------------------------------------------------------------ input
-    def _on_command(self, msg: JointState) -> None:
-        arrival = self.get_clock().now().nanoseconds
-        self.loop.command_received(stamp_nanoseconds(msg.header.stamp), arrival)
-        try:
-            (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
-        except InputRejected as exc:
-            self.rejected += 1
-            self.last_rejection = str(exc)
-            self.get_logger().warning(f'rejected current command: {exc}',
-                                      throttle_duration_sec=1.0)
-            return
+    def now(self) -> float:
+        """Return the node's monotonic clock (s), the clock of the drive and the arm."""
+        return time.monotonic()
+
+    # ------------------------------------------------------------------ input (the profile's)
+    def accept(self, current: float, stamp_ns: int) -> None:
+        """Hold ``current`` (A), a command accepted by the profile; re-arm the drive timeout."""
+        self.loop.command_received(stamp_ns, self.get_clock().now().nanoseconds)
         self.current_command = current
         self.commands += 1
-        if self._sensors_pending:
-            self._publish_sensors()
+        self.drive.command(self.now())
+
+    def refuse(self, reason: str, stamp_ns: int) -> None:
+        """Count a refused command (the last good one stays held), with a warning."""
+        self.loop.command_received(stamp_ns, self.get_clock().now().nanoseconds)
+        self.rejected += 1
+        self.last_rejection = reason
+        self.get_logger().warning(reason, throttle_duration_sec=1.0)
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, params, changed) -> None:
@@ -117,7 +135,13 @@ class SimInstrumentNode(Node):
             self.sim.set_object(params.sim_object)
         if 'publish_rate' in changed:
             self.destroy_timer(self._timer)
+            self._max_step = max(MAX_STEP, MAX_STEP_PERIODS / params.publish_rate)
             self._timer = self.create_timer(1.0 / params.publish_rate, self._tick)
+        if 'publish_rate' in changed and self._drive_timer is None \
+                and params.publish_rate * DRIVE_CHECK_PERIOD < 1.0:
+            self._drive_timer = self.create_timer(DRIVE_CHECK_PERIOD, self._check_drive)
+        if 'command_timeout' in changed:
+            self.drive.timeout = params.command_timeout
         self.get_logger().info(f'parameters changed: {sorted(changed)}')
 
     # ------------------------------------------------------------------ loop
@@ -127,41 +151,52 @@ class SimInstrumentNode(Node):
         self._last = now
         if dt <= 0.0:
             return
-        if dt > MAX_STEP:
-            dt = MAX_STEP
+        if dt > self._max_step:
+            dt = self._max_step
             self.capped_steps += 1
-        if self._sensors_pending:      # no answer to the previous state came: publish them now
-            self._publish_sensors()
+        if self._drive_expired(now):
+            self._cut()
+        self.io.update(now)
+        if not self.io.powered():        # dvrk: a disabled arm's drives carry no current
+            self.current_command = 0.0
         self.sim.step(self.current_command, dt)
-        m = self.sim.measure()
-        now = self.get_clock().now()
-        stamp = now.to_msg()
+        stamp = self.get_clock().now()
+        self.io.publish_state(self.sim.measure(), stamp.to_msg())
+        self.loop.state_published(stamp.nanoseconds)
 
-        act = self._actuator_msg
-        act.header.stamp = stamp
-        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
-        self._actuator_pub.publish(act)
-        self.loop.state_published(now.nanoseconds)
+    def _check_drive(self) -> None:
+        """Check the drive's command timeout between sensor steps (publish rate < 1 kHz).
 
-        js = self._joint_msg
-        js.header.stamp = stamp
-        js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
-        js.velocity[1] = m.jaw_velocity
-        force = self._force_msg
-        force.header.stamp = stamp
-        force.wrench.force.z = m.grip_force
-        self._sensors_pending = True   # sent once the command answering this state is in
+        On a cut the plant is first advanced to now with the held command, so the current
+        falls from the moment of the cut, not from the next sensor step.
+        """
+        now = time.monotonic()
+        if not self._drive_expired(now):
+            return
+        dt = min(now - self._last, self._max_step)
+        if dt > 0.0:
+            self.sim.step(self.current_command, dt)
+            self._last = now
+        self._cut()
 
-    def _publish_sensors(self) -> None:
-        """Joint state and load cell of the last step (stamped with the actuator state's time)."""
-        self._sensors_pending = False
-        self._joint_pub.publish(self._joint_msg)
-        self._force_pub.publish(self._force_msg)
+    def _drive_expired(self, now: float) -> bool:
+        """Tell whether the command timeout expired, unless this process was just starved."""
+        late = now - self._last_drive_check > DRIVE_CHECK_LATE
+        self._last_drive_check = now
+        return not late and self.drive.expired(now)
+
+    def _cut(self) -> None:
+        """Cut the drive current (the command timeout expired) and say so."""
+        self.get_logger().warning(
+            f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
+            f'{self.drive.timeout * 1e3:g} ms): drive current cut from {self.current_command:.4f} A '
+            'to 0 A')
+        self.current_command = 0.0
 
     def _publish_diagnostics(self) -> None:
         params = self._param.params
         wall = time.monotonic() - self._started
-        warn = self.rejected or self.capped_steps
+        warn = self.rejected or self.capped_steps or self.drive.expiries
         loop = self.loop.summary()
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
@@ -177,6 +212,8 @@ class SimInstrumentNode(Node):
                 'commands_accepted': str(self.commands),
                 'commands_rejected': str(self.rejected),
                 'last_rejection': self.last_rejection or 'none',
+                'drive_timeouts': str(self.drive.expiries),   # current cut: no command in time
+                'drive': 'holding command' if self.drive.armed else 'no command (0 A)',
                 'capped_steps': str(self.capped_steps),
                 # the last second: actuator state -> command answering it, this node's clock
                 'loop_round_trip_p50_ms': f"{loop['p50_ms']:.3f}",
@@ -185,6 +222,7 @@ class SimInstrumentNode(Node):
                 'loop_states_unanswered': str(loop['unanswered']),
                 'friction_scale': f'{params.friction_scale:g}',
                 'stiffness_scale': f'{params.stiffness_scale:g}',
+                **self.io.status(),
             }.items()])
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()

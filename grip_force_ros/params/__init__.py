@@ -5,9 +5,11 @@
 >>> p.drum_radius                                              # doctest: +SKIP
 0.004
 
-Groups: 'instrument' (model geometry and materials), 'limits' (hardware
-limits, read-only), 'controller', 'sim', 'effects' (optional unmodelled effects
-of the simulated instrument, all off by default). Where the instrument files
+Groups: 'instrument' (model geometry and materials, the dVRK's jaw conversion), 'limits'
+(hardware limits, read-only), 'controller', 'sim', 'effects' (optional unmodelled effects
+of the simulated instrument, all off by default), 'interface' (the topic profile, crtk or
+dvrk, and the dVRK arm and master names; params/interface.py, which also holds the
+defaults a profile changes). Where the instrument files
 are: :mod:`grip_force_ros.params.files` (``instrument_path``, ``list_instruments``).
 """
 from __future__ import annotations
@@ -20,10 +22,13 @@ import yaml
 from grip_force_ros.params.controller import CONTROLLER, check_controller
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path, list_instruments
 from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
+from grip_force_ros.params.interface import (DVRK_CONTROLLER, INTERFACE, check_interface,
+                                             with_profile_defaults)
 from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, markdown_table, validate
-from grip_force_ros.params.sim import EFFECTS, SIM
+from grip_force_ros.params.sim import EFFECTS, SIM, check_sim
 
-SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + SIM + EFFECTS)
+SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + DVRK_CONTROLLER + SIM
+                                      + EFFECTS + INTERFACE)
 SPECS: dict[str, ParamSpec] = {s.name: s for s in SCHEMA}
 if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
     raise RuntimeError('duplicate parameter name in the schema')
@@ -42,12 +47,18 @@ def make_params(values: Mapping[str, Any] | None = None, *,
                 allow_unknown: bool = False) -> ParamSet:
     """Validate ``values`` (defaults for what is missing) into a :class:`ParamSet`.
 
+    What is missing takes the default of the values' ``interface`` profile where it has
+    one (:data:`~grip_force_ros.params.interface.PROFILE_DEFAULTS`), else the schema's.
+
     Raises
     ------
     ParameterError
         Naming the key, the value and the allowed range.
     """
-    checked = validate(SCHEMA, values or {}, allow_unknown=allow_unknown)
+    values = dict(values or {})
+    if isinstance(values.get('interface'), str):
+        values = with_profile_defaults(values, SPECS)
+    checked = validate(SCHEMA, values, allow_unknown=allow_unknown)
     check_consistency(checked)
     return ParamSet(checked)
 
@@ -73,6 +84,8 @@ def check_consistency(values: Mapping[str, Any]) -> None:
         raise ParameterError(f"'jaw_angle_min' {values['jaw_angle_min']} rad must be below "
                              f"'jaw_angle_max' {values['jaw_angle_max']} rad")
     check_controller(values)
+    check_sim(values)
+    check_interface(values)
 
 
 def read_params_yaml(path: str | Path) -> dict[str, Any]:

@@ -10,14 +10,32 @@ from grip_force_ros.params.schema import ParamSpec
 _P = ParamSpec
 _G = 'controller'
 
+#: State rates (Hz) over which the gains are shown stable (docs/control.md, "Rate
+#: independence": hold error, overshoot and settling measured at 100..1500 Hz); the
+#: controller refuses to start outside them.
+STATE_RATE_MIN = 100.0
+STATE_RATE_MAX = 1500.0
+#: The watchdog timeout must cover this many state periods (a state may come late by one).
+WATCHDOG_STATE_PERIODS = 2.0
+
 CONTROLLER = [
     # --- loop timing and watchdog -------------------------------------------------------
     _P('control_rate', 'double', 1000.0, 'Hz',
-       'Control loop rate. The gains are designed for it, so it is fixed.',
+       'Rate of the watchdog timer: it checks the inputs this often and steps the controller '
+       'when no state came (a lost state, or silence). The control steps themselves run on the '
+       'instrument states, on the measured time between them (expected_state_rate).',
        min=100.0, max=10000.0, read_only=True, group=_G),
+    _P('expected_state_rate', 'double', 1000.0, 'Hz',
+       'Rate of the instrument state the controller steps on (instrument/actuator/measured_js; '
+       'dvrk: <arm>/jaw/measured_js, 100 Hz by default). The PID, filters and slew limit step '
+       'on the measured time between states; the gains are shown stable from '
+       f'{STATE_RATE_MIN:g} to {STATE_RATE_MAX:g} Hz (docs/control.md), and the node refuses '
+       'to start outside that range. A step interval longer than watchdog_timeout is a fault.',
+       min=STATE_RATE_MIN, max=STATE_RATE_MAX, read_only=True, group=_G),
     _P('watchdog_timeout', 'double', 0.03, 's',
        'An input older than this (by its receive time) is stale and puts the output in the safe '
-       'state (current ramps to 0 at the slew limit). 30 ms as the dVRK uses.',
+       'state (current ramps to 0 at the slew limit). 30 ms as the dVRK uses. Must cover two '
+       'state periods (expected_state_rate).',
        min=0.002, max=1.0, group=_G),
     _P('stamp_future_tolerance', 'double', 0.1, 's',
        'A message stamped more than this ahead of the controller clock is rejected as invalid.',
@@ -66,9 +84,9 @@ CONTROLLER = [
        'The master must open this far past the contact angle to leave grip for free motion.',
        min=0.0, max=0.5, group=_G),
     # --- force loop (grip) -----------------------------------------------------------------
-    _P('force_kp', 'double', 0.0118, 'A/N',
+    _P('force_kp', 'double', 0.00589, 'A/N',
        'Proportional gain of the force loop.', min=0.0, max=10.0, group=_G),
-    _P('force_ki', 'double', 8.83, 'A/(N*s)',
+    _P('force_ki', 'double', 1.1, 'A/(N*s)',
        'Integral gain of the force loop.', min=0.0, max=1000.0, group=_G),
     _P('force_kd', 'double', 0.0, 'A*s/N',
        'Derivative gain of the force loop (on the filtered measurement).',
@@ -77,11 +95,11 @@ CONTROLLER = [
        'Time constant of the first-order filter of the force derivative.',
        min=1e-4, max=1.0, group=_G),
     # --- jaw angle loop (free motion) ------------------------------------------------------
-    _P('jaw_kp', 'double', 0.369, 'A/rad',
+    _P('jaw_kp', 'double', 0.0755, 'A/rad',
        'Proportional gain of the jaw angle loop in free motion.', min=0.0, max=100.0, group=_G),
     _P('jaw_ki', 'double', 0.0354, 'A/(rad*s)',
        'Integral gain of the jaw angle loop.', min=0.0, max=10000.0, group=_G),
-    _P('jaw_kd', 'double', 0.00059, 'A*s/rad',
+    _P('jaw_kd', 'double', 0.000472, 'A*s/rad',
        'Derivative gain of the jaw angle loop (on the filtered measurement).',
        min=0.0, max=10.0, group=_G),
     _P('jaw_derivative_filter_time', 'double', 0.002, 's',
@@ -114,3 +132,9 @@ def check_controller(values) -> None:
         raise ParameterError(
             f"'watchdog_timeout' {values['watchdog_timeout']} s is less than two control periods "
             f"at 'control_rate' {values['control_rate']} Hz: every input would be stale")
+    rate = values['expected_state_rate']
+    if values['watchdog_timeout'] * rate < WATCHDOG_STATE_PERIODS:
+        raise ParameterError(
+            f"'watchdog_timeout' {values['watchdog_timeout']} s is less than "
+            f"{WATCHDOG_STATE_PERIODS:g} state periods at 'expected_state_rate' {rate:g} Hz "
+            f'({WATCHDOG_STATE_PERIODS / rate * 1e3:g} ms): every state would arrive stale')

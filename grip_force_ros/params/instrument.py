@@ -73,6 +73,18 @@ INSTRUMENT = [
        min=0.0, max=1.0, read_only=True),
     _P('jaw_mass', 'double', 0.001, 'kg', 'End effector (jaw) mass m_n (Table 1: m4 = 1 g).',
        min=0.0, max=1.0, read_only=True),
+    # --- the dVRK's jaw effort <-> current conversion (model/dvrk_jaw.py, docs/dvrk.md) ---------
+    _P('dvrk_jaw_coupling', 'double', 1.2177, 'rad/rad',
+       "Jaw coupling c of the dVRK tool file: the jaw row's last entry of "
+       'coupling.ActuatorToJointPosition (jaw angle per rad of a jaw disk). The dVRK turns a jaw '
+       'effort E into c*E N*m on each jaw actuator. Default: the Classic large needle driver '
+       '(LARGE_NEEDLE_DRIVER_400006.json: 1.2177).',
+       min=0.05, max=10.0, read_only=True),
+    _P('dvrk_actuator_nm_to_amps', 'double', 1.949705, 'A/(N*m)',
+       "NmToAmps of the PSM's jaw actuators in the dVRK's IO configuration (motor current per "
+       'actuator torque, 1/(K_t*gear)). Default: the Classic PSM, 1/(0.0438 N*m/A * 11.71) = '
+       '1.949705 (sawIntuitiveResearchKit @ 95a7e92, share/jhu-dVRK/sawRobotIO1394-PSM1-28007.xml).',
+       min=0.01, max=100.0, read_only=True),
 ]
 
 LIMITS = [
@@ -95,4 +107,10 @@ LIMITS = [
     _P('wrist_angle_limit', 'double', math.pi / 2, 'rad',
        'Largest plausible |wrist pitch|; beyond it the input is rejected.', min=0.0, max=math.pi,
        read_only=True, group='limits'),
+    _P('dvrk_jaw_effort_max', 'double', 0.16, 'N*m',
+       "The tool's jaw effort limit (dVRK tool file jaw.ftmax). In the dvrk interface the "
+       'controller never commands more (its current limit becomes min(max_current, the current '
+       'of this effort)) and the simulated PSM refuses a larger jaw/servo_jf. Default: the Classic '
+       'large needle driver (LARGE_NEEDLE_DRIVER_400006.json: 0.16).',
+       min=0.0, max=5.0, read_only=True, group='limits'),
 ]

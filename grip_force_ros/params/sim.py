@@ -30,8 +30,17 @@ SIM = [
          'Internal integration rate of the plant; step(dt) is split into sub-steps of at most '
          '1/sim_rate.', min=1000.0, max=200000.0),
     _sim('publish_rate', 'double', 1000.0, 'Hz',
-         'Rate at which the simulated instrument node steps and publishes its sensors.',
+         'Rate at which the simulated instrument node steps and publishes its sensors '
+         '(dvrk profile: 100 Hz by default, the dVRK\'s ROS rate).',
          min=1.0, max=10000.0),
+    _sim('command_timeout', 'double', 0.03, 's',
+         'Drive-side command timeout: with no current command (crtk) or jaw effort (dvrk) for '
+         'this long, the drive sets the current to 0 A and reports it (/diagnostics, a log '
+         "warning), as a real drive does when its master stops talking (the dVRK's: 30 ms). "
+         'Armed by the first command; the next command re-arms it.', min=0.001, max=10.0),
+    _sim('homing_time', 'double', 0.5, 's',
+         'dvrk profile: how long the simulated arm stays busy homing (state_command "home") '
+         'before it reports is_homed.', min=0.0, max=60.0),
     _sim('cable_length', 'double', 0.09, 'm',
          'Effective free length L of the jaw cable (stiffness k = E*A/L). Assumed: 90 mm makes the '
          "elastic jaw-angle loss ~1 rad/A, the paper's creep term (1.046 rad/A).",
@@ -131,3 +140,19 @@ def _effect_specs() -> list:
 
 
 EFFECTS = _effect_specs()
+
+
+def check_sim(values) -> None:
+    """Cross-parameter checks of the 'sim' group (called by ``check_consistency``).
+
+    Raises
+    ------
+    ParameterError
+        A command timeout shorter than two state periods (every command would time out).
+    """
+    from grip_force_ros.params.schema import ParameterError
+    rate, timeout = values['publish_rate'], values['command_timeout']
+    if timeout * rate < 2.0:
+        raise ParameterError(
+            f"'command_timeout' {timeout} s is less than two state periods at 'publish_rate' "
+            f'{rate:g} Hz: the drive would cut every command')

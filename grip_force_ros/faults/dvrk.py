@@ -1,0 +1,375 @@
+"""Fault cases of the dVRK interface and the drive, on real node processes (issue 11.8).
+
+Each case starts ``sim_instrument``, ``controller`` and ``master`` as processes
+(:class:`~grip_force_ros.nodes.processes.NodeProcess`; the dvrk profile in the sourced ROS
+tools environment, for crtk_msgs) on a free ROS domain, brings the loop into a grasp (the
+master held closed), injects the fault and watches the sim's published states and the
+nodes' /diagnostics from a probe node in this process:
+
+``controller_sigkill_crtk`` / ``controller_sigkill_dvrk``
+    the controller process is killed (SIGKILL) mid-grasp: every state the sim measured from
+    35 ms after the kill on carries no current (|I| below 5 std of its noise), the sim's
+    drive having cut it after its 30 ms command timeout.
+``arm_disabled_mid_grasp``
+    the arm is disabled (``state_command`` 'disable', as the dVRK console does): the
+    controller goes safe naming the arm's state, sends no more ``jaw/servo_jf``, the
+    disabled arm carries no current, and the controller does not enable it again.
+``current_on_effort_topic``
+    a current-sized number (0.3, a grip current in A) on ``jaw/servo_jf`` of an enabled arm:
+    refused by the tool's effort limit (0.16 N*m here), the current stays 0.
+``dvrk_master_silent``
+    the master (``MTML/gripper/measured_js``) stops (SIGSTOP) mid-grasp: the controller goes
+    safe with the stale master within the watchdog timeout plus two state periods, the
+    command ramps to 0, and the grasp resumes when the master comes back.
+"""
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+from grip_force_ros import topics
+from grip_force_ros.faults.catalogue import FaultCase
+from grip_force_ros.nodes.processes import (NodeProcess, ProcessError, node_command,
+                                            pick_domain_ids, ros_environment,
+                                            ros_tools_environment)
+from grip_force_ros.params import load_params_file
+
+#: How long after a SIGKILL of the controller the sim's current must be 0 (s): the drive's
+#: 30 ms command timeout, its 1 ms check, the 0.2 ms current loop, and 3.8 ms of slack.
+KILL_TO_ZERO = 0.035
+#: |current| below this many standard deviations of the sim's current noise counts as 0 A.
+ZERO_NOISE_STD = 5.0
+#: Longest wait for the loop to grip before a case starts (s; process start and discovery).
+READY_TIMEOUT = 40.0
+#: Slack on a controller's reaction for DDS delivery and scheduling on a loaded machine (s).
+REACTION_SLACK = 0.05
+
+
+def dvrk_cases() -> list[FaultCase]:
+    """Return the fault cases of the dVRK interface and the drive (kind 'process')."""
+    C = FaultCase
+    return [
+        C('controller_sigkill_crtk', 'process', 'the controller process is killed (SIGKILL) '
+          'mid-grasp, crtk profile', 'drive_cut', reason=r'command timeout'),
+        C('controller_sigkill_dvrk', 'dvrk interface', 'the controller process is killed (SIGKILL) '
+          'mid-grasp, dvrk profile', 'drive_cut', reason=r'command timeout'),
+        C('arm_disabled_mid_grasp', 'dvrk interface', "state_command 'disable' to the arm "
+          'mid-grasp', 'arm_interlock', reason=r'is DISABLED, not ENABLED'),
+        C('current_on_effort_topic', 'dvrk interface', 'a current-sized number (0.3) on '
+          'jaw/servo_jf, wrong units', 'effort_refused', reason=r'beyond the tool limit'),
+        C('dvrk_master_silent', 'dvrk interface', 'the master MTML stops publishing (SIGSTOP) '
+          'mid-grasp, dvrk profile', 'stale_safe', reason=r'stale master'),
+    ]
+
+
+class _Probe:
+    """Records the sim's states, the commands and /diagnostics in this process (rclpy)."""
+
+    def __init__(self, names: topics.TopicSet, conversion, domain_id: int):
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import JointState
+
+        from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node('fault_probe', context=self.context)
+        self.lock = threading.Lock()
+        self.states: list[tuple[float, float]] = []       # (stamp s, measured current A)
+        self.commands: list[float] = []                    # receive times (s)
+        self.diagnostics: list[tuple[float, dict]] = []    # (receive s, status)
+        effort = names.interface == 'dvrk'
+        joint = topics.JAW_JOINT if effort else topics.DRUM_JOINT
+
+        def on_state(msg):
+            if joint in msg.name:
+                value = msg.effort[list(msg.name).index(joint)]
+                current = conversion.current(value) if effort else value
+                with self.lock:
+                    self.states.append((stamp_seconds(msg.header.stamp), current))
+
+        def on_command(_msg):
+            with self.lock:
+                self.commands.append(time.time())
+
+        def on_diag(msg):
+            now = time.time()
+            statuses = [{'name': s.name, 'values': {kv.key: kv.value for kv in s.values}}
+                        for s in msg.status]
+            with self.lock:
+                self.diagnostics += [(now, s) for s in statuses]
+
+        self.node.create_subscription(JointState, names.actuator_js, on_state, RECORD_QOS)
+        self.node.create_subscription(JointState, names.command, on_command, RECORD_QOS)
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, RECORD_QOS)
+        self.publisher = self.node.create_publisher(JointState, names.command, RECORD_QOS)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._stop = False
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while not self._stop and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def latest(self, name_part: str) -> dict | None:
+        """Return the newest diagnostic status whose name contains ``name_part``."""
+        with self.lock:
+            for _, status in reversed(self.diagnostics):
+                if name_part in status['name']:
+                    return status
+        return None
+
+    def wait(self, predicate, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            time.sleep(0.02)
+        return False
+
+    def close(self):
+        import rclpy
+        self._stop = True
+        self._thread.join(timeout=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+#: The sim's measured current (A) that counts as holding a grip (the hold needs ~0.12-0.3 A).
+GRIP_CURRENT = 0.05
+
+
+def _gripping(probe: _Probe) -> bool:
+    """Tell whether the controller grips and the sim's last states carry the grip current."""
+    status = probe.latest('controller')
+    with probe.lock:
+        recent = [i for _, i in probe.states[-5:]]
+    return status is not None and status['values'].get('mode') == 'grip' and \
+        float(status['values'].get('current_command_A', 0.0)) > GRIP_CURRENT and \
+        len(recent) == 5 and min(recent) > GRIP_CURRENT
+
+
+class _Loop:
+    """sim + controller + master processes of one profile, the probe, a log directory."""
+
+    def __init__(self, config: Path, interface: str, log_dir: Path):
+        self.interface = interface
+        params = load_params_file(config, interface=interface)
+        self.params = params
+        self.names = topics.topic_set(interface, params.arm, params.master)
+        from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+        self.conversion = JawEffortConversion.from_params(params)
+        self.domain = pick_domain_ids(1)[0]
+        base = ros_tools_environment() if interface == 'dvrk' else None
+        self.env = ros_environment(self.domain, base=base)
+        self.log_dir = log_dir
+        log_dir.mkdir(parents=True, exist_ok=True)
+        profile = {'interface': interface}
+        held = {'master_open_angle': 0.0, 'master_closed_angle': 0.0, **profile}   # closed: grip
+        self.procs = {}
+        self.probe = _Probe(self.names, self.conversion, self.domain)
+        try:
+            for name, extra in (('sim_instrument', profile),
+                                ('controller', {**profile, 'request_enable': interface == 'dvrk'}),
+                                ('master', held)):
+                self.procs[name] = NodeProcess(name, command=node_command(name, config, extra),
+                                               env=self.env, log_path=log_dir / f'{name}.log')
+        except ProcessError:
+            self.close()
+            raise
+
+    def log(self, name: str) -> str:
+        return (self.log_dir / f'{name}.log').read_text(errors='replace')
+
+    def state_command(self, command: str) -> bool:
+        """Send a crtk state command to the arm with the ros2 CLI (crtk_msgs, sourced env)."""
+        ros2 = shutil.which('ros2', path=self.env.get('PATH')) or 'ros2'
+        done = subprocess.run([ros2, 'topic', 'pub', '--once', '-w', '1',
+                               '/' + self.names.state_command, 'crtk_msgs/msg/StringStamped',
+                               f'{{string: {command}}}'],
+                              env=self.env, capture_output=True, text=True, timeout=60)
+        return done.returncode == 0
+
+    def close(self):
+        for proc in reversed(list(self.procs.values())):
+            proc.stop()
+        self.probe.close()
+
+
+def _zero_current(loop: _Loop) -> float:
+    return ZERO_NOISE_STD * loop.params.current_noise_std
+
+
+def _kill_case(loop: _Loop, detail: dict) -> list[str]:
+    problems = []
+    if not loop.probe.wait(lambda: _gripping(loop.probe), 5.0):
+        return ['not gripping before the kill']
+    kill = time.time()
+    loop.procs['controller'].signal(signal.SIGKILL)
+    time.sleep(0.5)
+    zero = _zero_current(loop)
+    with loop.probe.lock:
+        after = [(t, i) for t, i in loop.probe.states if t >= kill]
+    late = [(t, i) for t, i in after if t >= kill + KILL_TO_ZERO]
+    if not late:
+        return ['no sim state after the kill']
+    first_zero = next((t for t, i in after if abs(i) < zero), math.nan)
+    detail['current_at_kill_A'] = round(after[0][1], 4) if after else None
+    if not after or after[0][1] < GRIP_CURRENT:
+        problems.append('the sim carried no grip current at the kill')
+    detail['current_zero_after_ms'] = round((first_zero - kill) * 1e3, 1)
+    detail['largest_current_35ms_after_A'] = round(max(abs(i) for _, i in late), 4)
+    if max(abs(i) for _, i in late) >= zero:
+        problems.append(f'current {max(abs(i) for _, i in late):.4f} A at or after '
+                        f'{KILL_TO_ZERO * 1e3:g} ms from the kill')
+    if not re.search(r'command timeout', loop.log('sim_instrument')):
+        problems.append('the sim did not report the command timeout')
+    return problems
+
+
+def _disable_case(loop: _Loop, detail: dict) -> list[str]:
+    problems = []
+    if not loop.state_command('disable'):
+        return ['ros2 topic pub of the disable failed']
+    sent = time.time()
+    safe = loop.probe.wait(lambda: (lambda s: s is not None and s['values'].get('mode') == 'safe'
+                                    and 'DISABLED' in s['values'].get('reasons', ''))(
+        loop.probe.latest('controller')), 5.0)
+    if not safe:
+        problems.append('the controller did not go safe naming the DISABLED arm')
+    time.sleep(1.5)
+    with loop.probe.lock:
+        late_commands = [t for t in loop.probe.commands if t > sent + 0.2]
+        late_states = [i for t, i in loop.probe.states if t > sent + 0.2]
+    detail['servo_jf_after_disable'] = len(late_commands)
+    detail['largest_current_after_disable_A'] = round(max(map(abs, late_states)), 4) \
+        if late_states else None
+    if late_commands:
+        problems.append(f'{len(late_commands)} jaw/servo_jf sent to the disabled arm')
+    if not late_states or max(map(abs, late_states)) >= _zero_current(loop):
+        problems.append('the disabled arm carries current')
+    status = loop.probe.latest('controller')
+    if status is None or status['values'].get('arm_state') != 'DISABLED':
+        problems.append('the controller enabled the arm again (or lost its state)')
+    detail['reason'] = status['values'].get('reasons') if status else None
+    return problems
+
+
+def _units_case(loop: _Loop, detail: dict) -> list[str]:
+    from sensor_msgs.msg import JointState
+    problems = []
+    loop.procs['controller'].stop()          # nobody else commands the jaw
+    time.sleep(0.3)
+    before = len(loop.probe.states)
+    msg = JointState(name=[topics.JAW_JOINT], effort=[0.3])
+    start = time.time()
+    for _ in range(50):                      # 0.5 s at the dVRK's 100 Hz
+        msg.header.stamp = loop.probe.node.get_clock().now().to_msg()
+        loop.probe.publisher.publish(msg)
+        time.sleep(0.01)
+    time.sleep(1.2)                          # the sim's diagnostics (1 Hz)
+    with loop.probe.lock:
+        currents = [i for t, i in loop.probe.states[before:] if t > start]
+    sim = loop.probe.latest('sim_instrument')
+    refused = int(sim['values'].get('servo_jf_refused_effort_limit', 0)) if sim else 0
+    detail['refused_by_effort_limit'] = refused
+    detail['largest_current_A'] = round(max(map(abs, currents)), 4) if currents else None
+    if refused < 40:
+        problems.append(f'only {refused} of 50 refused by the effort limit')
+    if not currents or max(map(abs, currents)) >= _zero_current(loop):
+        problems.append('the current-sized effort drove the jaw')
+    if not re.search(r'beyond the tool limit', loop.log('sim_instrument')):
+        problems.append('no warning in the sim log')
+    return problems
+
+
+def _master_case(loop: _Loop, detail: dict) -> list[str]:
+    problems = []
+    master = loop.procs['master']
+    stopped = time.time()
+    master.pause()
+    safe = loop.probe.wait(lambda: (lambda s: s is not None and s['values'].get('mode') == 'safe')(
+        loop.probe.latest('controller')), 2.0)
+    reacted = time.time() - stopped
+    time.sleep(0.5)
+    status = loop.probe.latest('controller')
+    detail['safe_after_s'] = round(reacted, 3)
+    detail['reason'] = status['values'].get('reasons') if status else None
+    bound = loop.params.watchdog_timeout + 2.0 / loop.params.expected_state_rate + \
+        1.0 / 10.0 + REACTION_SLACK                      # + a /diagnostics period (10 Hz)
+    if not safe or reacted > bound:
+        problems.append(f'safe after {reacted:.3f} s, bound {bound:.3f} s')
+    if not status or 'stale master' not in status['values'].get('reasons', ''):
+        problems.append('the reason does not name the stale master')
+    with loop.probe.lock:
+        late = [i for t, i in loop.probe.states if t > stopped + 0.4]
+    detail['largest_current_while_silent_A'] = round(max(map(abs, late)), 4) if late else None
+    if not late or max(map(abs, late)) >= _zero_current(loop):
+        problems.append('the current did not ramp to 0')
+    master.resume()
+    if not loop.probe.wait(lambda: _gripping(loop.probe), 10.0):
+        problems.append('no grip again after the master came back')
+    return problems
+
+
+_RUN = {'controller_sigkill_crtk': ('crtk', _kill_case),
+        'controller_sigkill_dvrk': ('dvrk', _kill_case),
+        'arm_disabled_mid_grasp': ('dvrk', _disable_case),
+        'current_on_effort_topic': ('dvrk', _units_case),
+        'dvrk_master_silent': ('dvrk', _master_case)}
+
+
+def run_process_case(case: FaultCase, config: Path, log_root: Path) -> dict:
+    """Run one case of :func:`dvrk_cases` on fresh processes; the report's detail dict."""
+    detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+              'description': case.description}
+    interface, body = _RUN[case.name]
+    loop = None
+    try:
+        loop = _Loop(Path(config), interface, log_root / case.name)
+        if not loop.probe.wait(lambda: _gripping(loop.probe), READY_TIMEOUT):
+            detail.update(passed=False, why='the loop never gripped before the fault')
+            return detail
+        time.sleep(0.3)                          # a steady grip
+        problems = body(loop, detail)
+    except ProcessError as exc:
+        problems = [f'processes: {exc}']
+    finally:
+        if loop is not None:
+            crashed = [n for n in loop.procs if 'Traceback' in loop.log(n)]
+            loop.close()
+            if crashed:
+                detail['crash'] = crashed
+    if detail.get('crash'):
+        problems.append(f"a Python traceback in {detail['crash']}")
+    detail['passed'] = not problems
+    if problems:
+        detail['why'] = '; '.join(problems)
+    return detail
+
+
+def run_process_cases(cases: list[FaultCase], config: Path, progress=None) -> list[dict]:
+    """Run the process cases one after the other (each on its own ROS domain)."""
+    import tempfile
+    root = Path(tempfile.mkdtemp(prefix='grip_force_faults_'))
+    details = []
+    for case in cases:
+        detail = run_process_case(case, config, root)
+        detail['logs'] = str(root / case.name)
+        details.append(detail)
+        if progress:
+            progress(detail)
+    return details
+
+
+__all__ = ['dvrk_cases', 'run_process_case', 'run_process_cases', 'KILL_TO_ZERO']

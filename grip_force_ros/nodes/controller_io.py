@@ -1,0 +1,378 @@
+"""The controller's I/O wiring of one interface profile: topics, messages, units.
+
+:class:`ControllerNode` (nodes/controller.py) keeps the loop, the timing and
+/diagnostics; the profile object made by :func:`controller_io` subscribes to the inputs,
+fills the controller's :class:`~grip_force_ros.control.ControlInputs`, asks the node to step
+when a fresh instrument state arrives, and publishes the command and the force outputs:
+
+``crtk`` (:class:`CrtkControllerIO`; topics.py, docs/ros_interface.md)
+    ``master/gripper/measured_js``, ``instrument/measured_js`` (wrist_pitch, jaw),
+    ``instrument/actuator/measured_js`` (jaw_drum, effort = current, A): the step runs on it;
+    command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A).
+``dvrk`` (:class:`DvrkControllerIO`; docs/dvrk.md)
+    ``<master>/gripper/measured_js`` (gripper), ``<arm>/measured_js`` (the wrist picked by
+    name among the arm's joints), ``<arm>/jaw/measured_js`` (jaw: position, velocity, effort
+    in N*m, turned into the motor current with the dVRK's own conversion,
+    :mod:`grip_force_ros.model.dvrk_jaw`): the step runs on it; command ``<arm>/jaw/servo_jf``
+    (jaw effort, N*m), sent only while ``<arm>/operating_state`` is ENABLED and homed (the
+    step is safe otherwise, with the reason); ``<arm>/state_command`` when asked to enable
+    and home (``request_enable``); the grip force topics under ``<arm>/grip/``.
+
+The node calls :meth:`ControllerIO.publish` after each step with the step's output.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+
+from grip_force_ros import topics
+from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
+    stamp_seconds
+from grip_force_ros.nodes.dvrk_msgs import arm_interlock, crtk_msgs
+
+_MASTER_JOINTS = (topics.MASTER_JOINT,)
+_INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
+_ACTUATOR_JOINTS = (topics.DRUM_JOINT,)
+_JAW_JOINTS = (topics.JAW_JOINT,)
+#: How often the dvrk profile asks the arm's operating_state service while it knows no state,
+#: and resends a pending enable/home request (s).
+ARM_POLL_PERIOD = 0.5
+
+
+class ControllerIO:
+    """What both profiles share: the master, the load cell, the force outputs.
+
+    Parameters
+    ----------
+    node : ControllerNode
+        Provides ``inputs`` (ControlInputs), ``now()`` (s), ``report(reason)``,
+        ``reject(source, now, exc)``, ``on_state(stamp)`` (run a control step on a fresh
+        state; ``stamp``: the state's header stamp, or None) and ``get_logger()``.
+    params : ParamSet
+        The node's parameters.
+    names : TopicSet
+        The profile's topics (:func:`grip_force_ros.topics.topic_set`).
+    """
+
+    interface = ''
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        self.node = node
+        self.names = names
+        node.create_subscription(JointState, names.master_js, self._on_master, STATE_SUB_QOS)
+        self._force_sub = None
+        self.update_params(params)
+        self._estimate_pub = node.create_publisher(WrenchStamped, names.estimated_force, STATE_PUB_QOS)
+        self._target_pub = node.create_publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
+        # Messages reused every step: fill, do not rebuild.
+        self._estimate_msg = WrenchStamped()
+        self._estimate_msg.header.frame_id = topics.JAW_FRAME
+        self._target_msg = WrenchStamped()
+        self._target_msg.header.frame_id = topics.JAW_FRAME
+        self.forces_pending = False    # estimated/target force of the last step not sent yet
+
+    # ------------------------------------------------------------------ inputs
+    def _on_master(self, msg: JointState) -> None:
+        node = self.node
+        now = node.now()
+        try:
+            (angle,), = read_joints(msg, _MASTER_JOINTS, ('position',)).values()
+        except InputRejected as exc:
+            return node.reject('master', now, exc)
+        node.report(node.inputs.set_master(now, angle, stamp_seconds(msg.header.stamp)))
+
+    def _on_force(self, msg: WrenchStamped) -> None:
+        node = self.node
+        node.report(node.inputs.set_force(node.now(), msg.wrench.force.z,
+                                          stamp_seconds(msg.header.stamp)))
+
+    def update_params(self, params) -> None:
+        """Apply accepted parameters (the load-cell subscription follows force_sensor_enabled)."""
+        enabled = params.force_sensor_enabled
+        if enabled and self._force_sub is None:
+            self._force_sub = self.node.create_subscription(
+                WrenchStamped, self.names.measured_force, self._on_force, STATE_SUB_QOS)
+        elif not enabled and self._force_sub is not None:
+            self.node.destroy_subscription(self._force_sub)
+            self._force_sub = None
+
+    # ------------------------------------------------------------------ outputs
+    def publish(self, out, stamp_msg, answered_stamp=None) -> None:
+        """Publish the command of one step, then (now or later) its forces."""
+        if self.forces_pending:         # the previous step's, not sent yet: first
+            self.publish_forces()
+        self.publish_command(out, stamp_msg, answered_stamp)
+        est = self._estimate_msg
+        est.header.stamp = stamp_msg
+        est.wrench.force.z = out.estimated_force
+        est.wrench.force.x = out.pull_out_force
+        target = self._target_msg
+        target.header.stamp = stamp_msg
+        target.wrench.force.z = out.target_force
+        self.forces_pending = True
+
+    def publish_forces(self) -> None:
+        """Estimated and target force of the last step (stamped with its time)."""
+        self.forces_pending = False
+        self._estimate_pub.publish(self._estimate_msg)
+        self._target_pub.publish(self._target_msg)
+
+    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
+        """Send the step's command (the profile's topic and unit)."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ state
+    def interlock(self) -> str | None:
+        """Return why the instrument may not be driven now (None: it may)."""
+        return None
+
+    def status(self) -> dict[str, str]:
+        """Key/value strings of the profile for /diagnostics."""
+        return {'interface': self.interface}
+
+
+class CrtkControllerIO(ControllerIO):
+    """The ``crtk`` profile: this package's own topics, the current in A."""
+
+    interface = 'crtk'
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        super().__init__(node, params, names)
+        node.create_subscription(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS)
+        node.create_subscription(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS)
+        self._servo_pub = node.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self._servo_msg = JointState(name=[topics.DRUM_JOINT], effort=[0.0])
+
+    def _on_instrument(self, msg: JointState) -> None:
+        node = self.node
+        now = node.now()
+        fields = ('position', 'velocity') if len(msg.velocity) else ('position',)
+        try:
+            joints = read_joints(msg, _INSTRUMENT_JOINTS, fields)
+        except InputRejected as exc:
+            return node.reject('instrument', now, exc)
+        if self.forces_pending:         # the loop has closed (the instrument sent its joints)
+            self.publish_forces()
+        wrist, jaw = joints[topics.WRIST_JOINT], joints[topics.JAW_JOINT]
+        jaw_velocity = jaw[1] if len(jaw) > 1 else 0.0
+        node.report(node.inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity,
+                                               stamp_seconds(msg.header.stamp)))
+
+    def _on_actuator(self, msg: JointState) -> None:
+        """Actuator state: store it and run the control step on it (event-driven loop)."""
+        fresh = self._read_actuator(msg)
+        self.node.on_state(msg.header.stamp if fresh else None)
+
+    def _read_actuator(self, msg: JointState) -> bool:
+        """Store the actuator state; True if it was accepted as a new, stamped sample."""
+        node = self.node
+        now = node.now()
+        fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
+        try:
+            (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
+        except InputRejected as exc:
+            node.reject('actuator', now, exc)
+            return False
+        velocity = drum[2] if len(drum) > 2 else 0.0
+        stamp = stamp_seconds(msg.header.stamp)
+        inputs = node.inputs
+        node.report(inputs.set_actuator(now, drum[0], drum[1], velocity, stamp))
+        # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
+        return inputs.actuator_time == now and stamp != 0.0
+
+    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
+        """Send the current command (A) on ``instrument/actuator/servo_jf``."""
+        servo = self._servo_msg
+        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
+        servo.effort[0] = out.current_command
+        self._servo_pub.publish(servo)
+
+
+class DvrkControllerIO(ControllerIO):
+    """The ``dvrk`` profile: a dVRK PSM's jaw and wrist, its operating state, effort in N*m.
+
+    Raises
+    ------
+    MissingCrtkMsgs
+        crtk_msgs cannot be imported (the node refuses to start, saying how to get it).
+    """
+
+    interface = 'dvrk'
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        self.msgs = crtk_msgs()          # first: without crtk_msgs nothing is created
+        self.arm = params.arm
+        super().__init__(node, params, names)
+        self.conversion = JawEffortConversion.from_params(params)
+        self.effort_limit = params.dvrk_jaw_effort_max      # N*m
+        self.wrist = math.nan            # rad, last wrist pitch of <arm>/measured_js
+        self.wrist_time = math.nan       # s, its receive time
+        self.wrist_joint = None          # the name the arm uses for it
+        self.state: str | None = None    # crtk operating state of the arm (None: not known)
+        self.is_homed = False
+        self.is_busy = False
+        self.state_stamp = -math.inf     # s, header stamp of the operating state held
+        self.withheld = 0                # steps whose command was not sent (arm not ready)
+        self.requested = False           # an enable/home request is pending (request_enable)
+        self._last_request = -math.inf   # perf_counter s of the last state_command sent
+        self._state_future = None
+        node.create_subscription(JointState, names.instrument_js, self._on_arm, STATE_SUB_QOS)
+        node.create_subscription(JointState, names.actuator_js, self._on_jaw, STATE_SUB_QOS)
+        node.create_subscription(self.msgs.OperatingState, names.operating_state,
+                                 self._on_operating_state, STATE_PUB_QOS)
+        self._state_client = node.create_client(self.msgs.TriggerOperatingState,
+                                                names.operating_state)
+        self._command_pub = node.create_publisher(self.msgs.StringStamped, names.state_command,
+                                                  STATE_PUB_QOS)
+        self._servo_pub = node.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self._servo_msg = JointState(name=[topics.JAW_JOINT], effort=[0.0])
+        self._poll_timer = node.create_timer(ARM_POLL_PERIOD, self._poll)
+        if params.request_enable:
+            self.request_enable()
+
+    # ------------------------------------------------------------------ inputs
+    def _on_arm(self, msg: JointState) -> None:
+        """Keep the wrist pitch of the arm's joints (other joints are normal, not a fault)."""
+        node = self.node
+        now = node.now()
+        names = list(msg.name)
+        joint = next((j for j in topics.DVRK_WRIST_JOINTS if j in names), None)
+        if joint is None:
+            return node.reject('instrument', now, InputRejected(
+                f'no wrist pitch joint ({" or ".join(topics.DVRK_WRIST_JOINTS)}) in '
+                f'{self.names.instrument_js}: {names}'))
+        try:
+            (wrist,), = read_joints(msg, (joint,), ('position',), others=True).values()
+        except InputRejected as exc:
+            return node.reject('instrument', now, exc)
+        self.wrist, self.wrist_time, self.wrist_joint = wrist, now, joint
+
+    def _on_jaw(self, msg: JointState) -> None:
+        """Feed the jaw to the instrument (with the wrist) and actuator (current) inputs; step."""
+        node = self.node
+        now = node.now()
+        fields = ('position', 'effort', 'velocity') if len(msg.velocity) else ('position', 'effort')
+        try:
+            (jaw,) = read_joints(msg, _JAW_JOINTS, fields).values()
+        except InputRejected as exc:
+            node.reject('actuator', now, exc)
+            node.reject('instrument', now, exc)
+            node.on_state(None)
+            return
+        stamp = stamp_seconds(msg.header.stamp)
+        inputs = node.inputs
+        jaw_velocity = jaw[2] if len(jaw) > 2 else 0.0
+        age = now - self.wrist_time
+        if age <= inputs_timeout(node):
+            node.report(inputs.set_instrument(now, self.wrist, jaw[0], jaw_velocity, stamp))
+        else:
+            why = ('no wrist yet' if age != age else f'stale wrist: {age * 1e3:.1f} ms old')
+            node.reject('instrument', now, InputRejected(f'{why} ({self.names.instrument_js})'))
+        # the dVRK's effort is computed from the measured motor currents: invert its conversion
+        node.report(inputs.set_actuator(now, self.conversion.current(jaw[1]), stamp=stamp))
+        fresh = inputs.actuator_time == now and stamp != 0.0
+        node.on_state(msg.header.stamp if fresh else None)
+
+    def _on_operating_state(self, msg) -> None:
+        stamp = stamp_seconds(msg.header.stamp)
+        if stamp and stamp < self.state_stamp:
+            return                      # an older state (a service reply overtaken by a topic)
+        previous = (self.state, self.is_homed, self.is_busy)
+        self.state, self.is_homed, self.is_busy = msg.state, bool(msg.is_homed), bool(msg.is_busy)
+        self.state_stamp = stamp if stamp else self.state_stamp
+        if (self.state, self.is_homed, self.is_busy) != previous:
+            self.node.get_logger().info(
+                f'arm {self.arm}: {self.state}, {"homed" if self.is_homed else "not homed"}'
+                f'{", busy" if self.is_busy else ""}')
+        if self.requested and self.interlock() is None:
+            self.requested = False
+            self.node.get_logger().info(f'arm {self.arm} is enabled and homed')
+
+    # ------------------------------------------------------------------ the arm
+    def request_enable(self) -> None:
+        """Ask the arm to enable and home (sent when the arm's state_command is subscribed)."""
+        self.requested = True
+        self._last_request = -math.inf
+        self._poll()
+
+    def _poll(self) -> None:
+        """Ask for the operating state while none is known; send a pending enable/home."""
+        if self.state is None and self._state_client.service_is_ready() and (
+                self._state_future is None or self._state_future.done()):
+            self._state_future = self._state_client.call_async(
+                self.msgs.TriggerOperatingState.Request())
+            self._state_future.add_done_callback(self._on_state_reply)
+        if not self.requested or self._command_pub.get_subscription_count() == 0:
+            return                      # a state_command nobody hears is lost (sent once)
+        if time.perf_counter() - self._last_request < ARM_POLL_PERIOD * 1.9:
+            return
+        if self.state != 'ENABLED':
+            self._send('enable')
+        elif not self.is_homed and not self.is_busy:
+            self._send('home')
+
+    def _on_state_reply(self, future) -> None:
+        try:
+            self._on_operating_state(future.result().operating_state)
+        except Exception as exc:  # noqa: BLE001 - a failed call: poll again later
+            self.node.get_logger().warning(f'operating_state service of {self.arm} failed: {exc}',
+                                           throttle_duration_sec=5.0)
+
+    def _send(self, command: str) -> None:
+        msg = self.msgs.StringStamped()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.string = command
+        self._command_pub.publish(msg)
+        self._last_request = time.perf_counter()
+        self.node.get_logger().info(f'asked arm {self.arm} to {command} ({self.names.state_command})')
+
+    def interlock(self) -> str | None:
+        """Return why the arm may not be driven: not ENABLED, not homed, busy, or unknown."""
+        return arm_interlock(self.arm, self.state, self.is_homed, self.is_busy)
+
+    # ------------------------------------------------------------------ outputs
+    def publish(self, out, stamp_msg, answered_stamp=None) -> None:
+        """Send the step's effort (only to a ready arm), then its forces at once.
+
+        At the dVRK's 100 Hz nothing is gained by deferring the forces after the command.
+        """
+        super().publish(out, stamp_msg, answered_stamp)
+        self.publish_forces()
+
+    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
+        """Send the jaw effort (N*m) on ``<arm>/jaw/servo_jf`` while the arm is ready."""
+        if self.interlock() is not None:
+            self.withheld += 1          # a disabled arm gets nothing (servo_jf takes over the jaw)
+            return
+        effort = self.conversion.effort(out.current_command)
+        limit = self.effort_limit       # the current limit already keeps it inside; rounding
+        servo = self._servo_msg
+        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
+        servo.effort[0] = limit if effort > limit else (-limit if effort < -limit else effort)
+        self._servo_pub.publish(servo)
+
+    def status(self) -> dict[str, str]:
+        """Key/value strings of the dvrk profile for /diagnostics."""
+        return {'interface': self.interface, 'arm': self.arm,
+                'arm_state': self.state or 'unknown', 'arm_homed': str(self.is_homed).lower(),
+                'arm_busy': str(self.is_busy).lower(),
+                'wrist_joint': self.wrist_joint or 'none yet',
+                'commands_withheld': str(self.withheld),
+                'enable_requested': str(self.requested).lower()}
+
+
+def inputs_timeout(node) -> float:
+    """Return the node controller's watchdog timeout (s): the wrist's freshness bound too."""
+    return node.controller.watchdog_timeout
+
+
+def controller_io(node, params) -> ControllerIO:
+    """Make the I/O object of the node's ``interface`` profile."""
+    names = topics.topic_set(params.interface, params.arm, params.master)
+    if params.interface == 'dvrk':
+        return DvrkControllerIO(node, params, names)
+    return CrtkControllerIO(node, params, names)

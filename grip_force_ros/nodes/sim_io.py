@@ -1,0 +1,263 @@
+"""The simulated instrument's I/O wiring of one interface profile: topics, messages, units.
+
+:class:`SimInstrumentNode` (nodes/sim_instrument.py) steps the plant, holds the current
+command and its drive-side timeout, and publishes /diagnostics; the profile object made by
+:func:`sim_io` takes the commands in and publishes the sensors:
+
+``crtk`` (:class:`CrtkSimIO`)
+    command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A); sensors
+    ``instrument/actuator/measured_js`` (at once: the controller steps on it), then
+    ``instrument/measured_js`` and ``grip/measured_force`` once the answering command came.
+``dvrk`` (:class:`DvrkSimIO`): the sim as a dVRK PSM named ``arm``
+    command ``<arm>/jaw/servo_jf`` (jaw, effort = jaw effort, N*m; turned into the motor
+    current with the dVRK's conversion, :mod:`grip_force_ros.model.dvrk_jaw`), taken only
+    while the arm is ENABLED and homed and within the tool's effort limit
+    (``dvrk_jaw_effort_max``), refused with a warning otherwise; sensors ``<arm>/measured_js``
+    (the PSM's six joints by name, :data:`grip_force_ros.topics.DVRK_PSM_JOINTS`; the sim
+    moves only the wrist pitch, the others hold 0), ``<arm>/jaw/measured_js`` (jaw position,
+    velocity, effort computed from the measured current as the dVRK does) and the load cell
+    ``<arm>/grip/measured_force`` (not a dVRK topic: the sim's extra); the arm's
+    ``<arm>/operating_state`` (crtk_msgs/OperatingState: published on every change and in
+    answer to every state command, and a service of the same name) driven by
+    ``<arm>/state_command`` (crtk_msgs/StringStamped: enable, disable, pause, resume, home,
+    unhome; :class:`grip_force_ros.sim.drive.ArmState`).
+"""
+from __future__ import annotations
+
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import JointState
+
+from grip_force_ros import topics
+from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
+    stamp_nanoseconds
+from grip_force_ros.nodes.dvrk_msgs import crtk_msgs
+from grip_force_ros.sim.drive import ArmState
+
+_COMMAND_JOINTS = (topics.DRUM_JOINT,)
+_JAW_JOINTS = (topics.JAW_JOINT,)
+
+
+class SimIO:
+    """What both profiles share: the load cell.
+
+    Parameters
+    ----------
+    node : SimInstrumentNode
+        Provides ``accept(current, stamp_ns)`` (a command to hold, A), ``refuse(reason)``,
+        ``now()`` (s) and ``get_logger()``.
+    params : ParamSet
+        The node's parameters.
+    names : TopicSet
+        The profile's topics (:func:`grip_force_ros.topics.topic_set`).
+    """
+
+    interface = ''
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        self.node = node
+        self.names = names
+        self._force_pub = node.create_publisher(WrenchStamped, names.measured_force, STATE_PUB_QOS)
+        self._force_msg = WrenchStamped()
+        self._force_msg.header.frame_id = topics.JAW_FRAME
+
+    def powered(self) -> bool:
+        """Tell whether the drive may carry a current (the dVRK arm: ENABLED)."""
+        return True
+
+    def update(self, now: float) -> None:
+        """Advance the profile's own state to ``now`` (s)."""
+
+    def status(self) -> dict[str, str]:
+        """Key/value strings of the profile for /diagnostics."""
+        return {'interface': self.interface}
+
+
+class CrtkSimIO(SimIO):
+    """The ``crtk`` profile: this package's topics, the current in A."""
+
+    interface = 'crtk'
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        super().__init__(node, params, names)
+        node.create_subscription(JointState, names.command, self._on_command, STATE_SUB_QOS)
+        self._joint_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
+        self._actuator_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
+        self._joint_msg = JointState(name=[topics.WRIST_JOINT, topics.JAW_JOINT],
+                                     position=[0.0, 0.0], velocity=[0.0, 0.0])
+        self._actuator_msg = JointState(name=[topics.DRUM_JOINT], position=[0.0],
+                                        velocity=[0.0], effort=[0.0])
+        self.sensors_pending = False   # joint state and force of the last step not yet sent
+
+    def _on_command(self, msg: JointState) -> None:
+        stamp = stamp_nanoseconds(msg.header.stamp)
+        try:
+            (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
+        except InputRejected as exc:
+            self.node.refuse(f'rejected current command: {exc}', stamp)
+            return
+        self.node.accept(current, stamp)
+        if self.sensors_pending:
+            self.publish_sensors()
+
+    def publish_state(self, m, stamp) -> None:
+        """Publish a step's actuator state now, its joints and load cell once answered."""
+        if self.sensors_pending:        # no answer to the previous state came: now
+            self.publish_sensors()
+        act = self._actuator_msg
+        act.header.stamp = stamp
+        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
+        self._actuator_pub.publish(act)
+        js = self._joint_msg
+        js.header.stamp = stamp
+        js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
+        js.velocity[1] = m.jaw_velocity
+        force = self._force_msg
+        force.header.stamp = stamp
+        force.wrench.force.z = m.grip_force
+        self.sensors_pending = True     # sent once the command answering this state is in
+
+    def publish_sensors(self) -> None:
+        """Joint state and load cell of the last step (stamped with the actuator state's time)."""
+        self.sensors_pending = False
+        self._joint_pub.publish(self._joint_msg)
+        self._force_pub.publish(self._force_msg)
+
+
+class DvrkSimIO(SimIO):
+    """The ``dvrk`` profile: the sim as a dVRK PSM (topics, units, operating state).
+
+    Raises
+    ------
+    MissingCrtkMsgs
+        crtk_msgs cannot be imported (the node refuses to start, saying how to get it).
+    """
+
+    interface = 'dvrk'
+
+    def __init__(self, node, params, names: topics.TopicSet):
+        self.msgs = crtk_msgs()          # first: without crtk_msgs nothing is created
+        super().__init__(node, params, names)
+        self.arm_name = params.arm
+        self.arm = ArmState(params.homing_time)
+        self.conversion = JawEffortConversion.from_params(params)
+        self.effort_limit = params.dvrk_jaw_effort_max       # N*m
+        self.refused_not_ready = 0       # servo_jf while not ENABLED and homed
+        self.refused_effort = 0          # servo_jf beyond the effort limit
+        self.state_commands = 0
+        node.create_subscription(JointState, names.command, self._on_servo_jf, STATE_SUB_QOS)
+        node.create_subscription(self.msgs.StringStamped, names.state_command,
+                                 self._on_state_command, STATE_SUB_QOS)
+        self._state_pub = node.create_publisher(self.msgs.OperatingState, names.operating_state,
+                                                STATE_PUB_QOS)
+        node.create_service(self.msgs.TriggerOperatingState, names.operating_state,
+                            self._on_state_request)
+        self._arm_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
+        self._jaw_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
+        self._arm_msg = JointState(name=list(topics.DVRK_PSM_JOINTS),
+                                   position=[0.0] * len(topics.DVRK_PSM_JOINTS))
+        self._wrist_index = topics.DVRK_PSM_JOINTS.index(topics.WRIST_JOINT)
+        self._jaw_msg = JointState(name=[topics.JAW_JOINT], position=[0.0], velocity=[0.0],
+                                   effort=[0.0])
+        self._published_state = None
+        self.publish_operating_state()
+
+    # ------------------------------------------------------------------ the arm
+    def _operating_state_msg(self):
+        msg = self.msgs.OperatingState()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.frame_id = self.arm_name
+        msg.state, msg.is_homed, msg.is_busy = self.arm.key()
+        return msg
+
+    def publish_operating_state(self) -> None:
+        """Publish the arm's operating state (on change, and in answer to a state command)."""
+        self._published_state = self.arm.key()
+        self._state_pub.publish(self._operating_state_msg())
+
+    def _on_state_request(self, _request, response):
+        response.operating_state = self._operating_state_msg()
+        return response
+
+    def _on_state_command(self, msg) -> None:
+        command = str(msg.string)
+        self.state_commands += 1
+        before = self.arm.key()
+        why = self.arm.command(command, self.node.now())
+        log = self.node.get_logger()
+        if why is not None:
+            log.warning(f'{self.arm_name}: {why}')
+        elif self.arm.key() != before:
+            log.info(f'{self.arm_name}: {command} -> {self.arm.state}'
+                     f'{", homing" if self.arm.is_busy else ""}')
+        self.publish_operating_state()   # every command gets an answer (the client waits on it)
+
+    def powered(self) -> bool:
+        """Tell whether the drives of the arm carry current: it is ENABLED (homing or not)."""
+        return self.arm.state == 'ENABLED'
+
+    def update(self, now: float) -> None:
+        """Complete a homing in progress; publish the operating state when it changed."""
+        self.arm.update(now)
+        if self.arm.key() != self._published_state:
+            self.node.get_logger().info(f'{self.arm_name}: {self.arm.state}, '
+                                        f'{"homed" if self.arm.is_homed else "not homed"}')
+            self.publish_operating_state()
+
+    # ------------------------------------------------------------------ commands
+    def _on_servo_jf(self, msg: JointState) -> None:
+        stamp = stamp_nanoseconds(msg.header.stamp)
+        node = self.node
+        if not msg.name and len(msg.effort) == 1:    # the dVRK's own client names no joint
+            msg = JointState(header=msg.header, name=[topics.JAW_JOINT], effort=list(msg.effort))
+        try:
+            (effort,), = read_joints(msg, _JAW_JOINTS, ('effort',)).values()
+        except InputRejected as exc:
+            node.refuse(f'rejected jaw effort: {exc}', stamp)
+            return
+        if not self.arm.ready:
+            self.refused_not_ready += 1
+            node.refuse(f'servo_jf refused: arm {self.arm_name} is {self.arm.state}'
+                        f'{"" if self.arm.is_homed else ", not homed"}'
+                        f'{", busy homing" if self.arm.is_busy else ""}', stamp)
+            return
+        if abs(effort) > self.effort_limit:
+            self.refused_effort += 1
+            node.refuse(f'servo_jf refused: jaw effort {effort:.4f} N*m beyond the tool limit '
+                        f'+-{self.effort_limit:g} N*m (a current in A on the effort topic?)', stamp)
+            return
+        node.accept(self.conversion.current(effort), stamp)
+
+    # ------------------------------------------------------------------ sensors
+    def publish_state(self, m, stamp) -> None:
+        """Publish a step's arm joints, then the jaw (the controller steps on it), then the cell."""
+        arm = self._arm_msg
+        arm.header.stamp = stamp
+        arm.position[self._wrist_index] = m.wrist_angle
+        self._arm_pub.publish(arm)
+        jaw = self._jaw_msg
+        jaw.header.stamp = stamp
+        jaw.position[0], jaw.velocity[0] = m.jaw_angle, m.jaw_velocity
+        jaw.effort[0] = self.conversion.effort(m.current)   # the dVRK: from the measured current
+        self._jaw_pub.publish(jaw)
+        force = self._force_msg
+        force.header.stamp = stamp
+        force.wrench.force.z = m.grip_force
+        self._force_pub.publish(force)
+
+    def status(self) -> dict[str, str]:
+        """Key/value strings of the dvrk profile for /diagnostics."""
+        state, homed, busy = self.arm.key()
+        return {'interface': self.interface, 'arm': self.arm_name, 'arm_state': state,
+                'arm_homed': str(homed).lower(), 'arm_busy': str(busy).lower(),
+                'servo_jf_refused_not_ready': str(self.refused_not_ready),
+                'servo_jf_refused_effort_limit': str(self.refused_effort),
+                'state_commands': str(self.state_commands)}
+
+
+def sim_io(node, params) -> SimIO:
+    """Make the I/O object of the node's ``interface`` profile."""
+    names = topics.topic_set(params.interface, params.arm, params.master)
+    if params.interface == 'dvrk':
+        return DvrkSimIO(node, params, names)
+    return CrtkSimIO(node, params, names)

@@ -1,0 +1,37 @@
+"""Fault cases of the dVRK interface and the drive on real node processes (faults/dvrk.py).
+
+Each case starts sim_instrument, controller and master as processes (the dvrk profile in the
+sourced ROS tools environment) and injects its fault mid-grasp; ``grip-force faultcheck`` runs
+the same cases after the in-process ones.
+"""
+import pytest
+
+from _ros_tools import require_ros_tools
+from grip_force_ros.faults.catalogue import OUTCOMES, catalogue
+from grip_force_ros.faults.dvrk import KILL_TO_ZERO, dvrk_cases, run_process_cases
+from grip_force_ros.params.files import instrument_path
+
+pytestmark = pytest.mark.ros
+
+
+def test_the_cases_are_in_the_catalogue_with_defined_outcomes():
+    cases = dvrk_cases()
+    names = {c.name for c in catalogue()}
+    assert {c.name for c in cases} <= names
+    assert all(c.kind == 'process' and c.outcome in OUTCOMES and c.reason for c in cases)
+    assert {'drive_cut', 'arm_interlock', 'effort_refused'} <= {c.outcome for c in cases}
+
+
+def test_dvrk_and_drive_faults_on_real_processes():
+    require_ros_tools()
+    details = {d['name']: d for d in run_process_cases(dvrk_cases(), instrument_path(None))}
+    failed = {n: d.get('why') for n, d in details.items() if not d['passed']}
+    assert not failed, (failed, {n: d.get('logs') for n, d in details.items()})
+    for name in ('controller_sigkill_crtk', 'controller_sigkill_dvrk'):
+        d = details[name]
+        assert d['current_at_kill_A'] > 0.1                      # it was gripping
+        assert d['current_zero_after_ms'] <= KILL_TO_ZERO * 1e3   # 0 A within 35 ms
+    assert details['arm_disabled_mid_grasp']['servo_jf_after_disable'] == 0
+    assert 'DISABLED' in details['arm_disabled_mid_grasp']['reason']
+    assert details['current_on_effort_topic']['refused_by_effort_limit'] >= 40
+    assert 'stale master' in details['dvrk_master_silent']['reason']
