@@ -38,8 +38,8 @@ def add_arguments(parser) -> None:
                              "(e.g. 21 or 21.TXT; 'auto' = the default rule: mid frequency, mid "
                              "load); never scored. Without it: zero-shot")
     parser.add_argument('--groups', nargs='+', metavar='GROUP', default=None,
-                        help='transfer: calibration groups (default all: gain efficiency coulomb '
-                             'spring zeros viscous)')
+                        help='transfer: calibration groups (default: every group of '
+                             'grip_force_ros.rig.transfer.GROUPS; listed in docs/real_data.md)')
     parser.add_argument('--sweep', action='store_true',
                         help='transfer: also every single run of the test folder as the '
                              'calibration run (mean, worst, best)')

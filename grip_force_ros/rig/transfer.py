@@ -63,8 +63,11 @@ TARE_OUTLIER_A = 0.05
 
 
 #: The transfer model: the one-folder observer's settings plus the load-dependent
-#: efficiency (the training folders together span 10-100 % loads).
-TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True)
+#: efficiency (the training folders together span 10-100 % loads) and a Coulomb friction
+#: that changes linearly along the disk stroke (friction map, Legendre P1): in
+#: ``Tool_4_Maryland_L_4`` it falls by 28 mN*m at the jaw from the open to the closed end,
+#: in ``L_2`` by 9 mN*m (docs/real_data.md, "The wide-load floor").
+TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True, friction_map_order=1)
 
 
 # -- folders: read, orient, tare ---------------------------------------------------------------
@@ -351,9 +354,11 @@ class CalibrationGroup:
 #: The per-instrument groups. Prior widths are engineering tolerances: motor torque
 #: constant and pulley radii (Maxon datasheet +-5 %, here +-3 % on their product),
 #: friction efficiency of cable over pulleys (+-30 % of the direction-dependent part),
-#: Coulomb friction from pretension (+-15 %), zeros left after the current tare and the
-#: jaw sensor zero found against the resisting motor (+-5 mA: 5 mN*m at the jaw), spring
-#: from cable pretension (+-5 mA per Legendre coefficient), viscous friction (+-2 mA*s/rad).
+#: Coulomb friction from pretension (+-15 %), its change along the stroke (the same
+#: +-15 % of the 0.08 A Coulomb level: +-12 mA on the P1 coefficient), zeros left after
+#: the current tare and the jaw sensor zero found against the resisting motor (+-5 mA:
+#: 5 mN*m at the jaw), spring from cable pretension (+-5 mA per Legendre coefficient),
+#: viscous friction (+-2 mA*s/rad).
 GROUPS = (
     CalibrationGroup('gain', ('alpha0', 'alpha1', 'alpha1_quad'), 'scale', 0.03, '1 (relative)',
                      'loss-free current-to-jaw-torque gain G: motor torque constant x gear x '
@@ -363,6 +368,9 @@ GROUPS = (
                      'and its fall with load'),
     CalibrationGroup('coulomb', ('coulomb',), 'scale', 0.15, '1 (relative)',
                      'load-independent friction from cable pretension (Coulomb)'),
+    CalibrationGroup('friction_map', ('friction_P1',), 'shift', 0.012, 'A',
+                     'change of the Coulomb friction along the disk stroke (cable pretension '
+                     'varying with the stroke), Legendre P1: half the closed-minus-open change'),
     CalibrationGroup('spring', ('spring_P1', 'spring_P2'), 'shift', 0.005, 'A',
                      'position spring over the stroke (cable pretension, jaw), Legendre P1, P2'),
     CalibrationGroup('zeros', ('offset',), 'shift', 0.005, 'A',
@@ -376,11 +384,17 @@ GROUP_NAMES = tuple(g.name for g in GROUPS)
 #: Units of the forward-model coefficients (I in A, tau in N*m, v in rad/s).
 COEFFICIENT_UNITS = {'alpha0': 'A/(N*m)', 'alpha1': 'A/(N*m)', 'alpha2': 'A/(N*m)',
                      'alpha1_quad': 'A/(N*m)^2', 'offset': 'A', 'coulomb': 'A',
-                     'coulomb_slow': 'A', 'spring': 'A', 'viscous': 'A*s/rad'}
+                     'coulomb_slow': 'A', 'spring': 'A', 'friction': 'A', 'viscous': 'A*s/rad'}
 #: Units of the interpretable parameters (:func:`.estimator._physical`).
 PHYSICAL_UNITS = {'gain_Nm_per_A': 'N*m/A', 'efficiency': '1', 'efficiency_at_100mNm': '1',
                   'offset_Nm': 'N*m', 'coulomb_Nm': 'N*m', 'viscous_Nms_per_rad': 'N*m*s/rad',
-                  'spring_span_Nm': 'N*m'}
+                  'spring_span_Nm': 'N*m', 'coulomb_change_Nm': 'N*m'}
+
+
+def coefficient_unit(name: str) -> str:
+    """Return the unit of a forward-model coefficient (``spring_P2``, ``friction_P1``: their family's)."""
+    family, _, order = name.rpartition('_P')
+    return COEFFICIENT_UNITS.get(family if family and order.isdigit() else name, '')
 
 
 @dataclass
@@ -599,8 +613,7 @@ class Calibration:
 
     def to_json(self) -> dict:
         """Return the calibration as plain JSON types, with units."""
-        units = {k: COEFFICIENT_UNITS.get(k.split('_P')[0] if k.startswith('spring_P') else k, '')
-                 for k in self.coefficients}
+        units = {k: coefficient_unit(k) for k in self.coefficients}
         return {'runs': list(self.runs), 'groups': self.groups,
                 'coefficients': self.coefficients, 'coefficient_units': units,
                 'physical': self.physical,
@@ -626,12 +639,16 @@ def _alias(cache: dict, copy, original) -> list:
 
 
 def _physical_ok(coef: dict, max_torque: float) -> bool:
-    """Every branch slope dI/dtau stays positive (0 < eta < 1 locally) over 0..max torque."""
+    """Check the physics: positive branch slopes, and Coulomb friction positive along the stroke.
+
+    Every branch slope dI/dtau stays positive (0 < eta < 1 locally) over 0..max torque, and
+    the Coulomb friction stays positive everywhere along the stroke (|P1 term| < level).
+    """
     tau = np.linspace(0.0, max_torque, 50)
     split = coef.get('alpha1', 0.0) + 2.0 * coef.get('alpha1_quad', 0.0) * tau
     closing, opening = coef['alpha0'] + split, coef['alpha0'] - split
     return bool(np.all(opening > 0.05 * coef['alpha0']) and np.all(closing >= opening)
-                and coef.get('coulomb', 1.0) > 0)
+                and coef.get('coulomb', 1.0) - abs(coef.get('friction_P1', 0.0)) > 0)
 
 
 def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
