@@ -45,6 +45,10 @@ def add_arguments(parser) -> None:
                              'calibration run (mean, worst, best)')
     parser.add_argument('--ablation', action='store_true',
                         help='transfer: each calibration group alone and all but one')
+    parser.add_argument('--no-consistency', action='store_true',
+                        help='transfer: leave out the session consistency (the motor side of '
+                             'every test run moving the calibration groups); zero-shot is then '
+                             'the trained model as it is')
 
 
 def _summary(result) -> str:
@@ -102,7 +106,8 @@ def _run_transfer(args) -> int:
     try:
         result = transfer(args.train, args.test, calibrate_runs=list(args.calibrate),
                           groups=tuple(args.groups) if args.groups else GROUP_NAMES,
-                          with_sweep=args.sweep, with_ablation=args.ablation, progress=progress)
+                          with_sweep=args.sweep, with_ablation=args.ablation,
+                          consistency=not args.no_consistency, progress=progress)
     except (RigDataError, EstimatorError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
