@@ -291,6 +291,9 @@ def test_transfer_cli_json_contract(tmp_path, capsys):
     assert cal['physical_units']['coulomb_Nm'] == 'N*m' and 'target_zero_Nm' in cal
     assert result['test']['current_tare']['zero_A'] < 0
     assert result['session_consistency']['used'] is True
+    assert 0 < result['heldout_rmse_after_startup'] < 0.1
+    assert 0 < result['startup']['fraction_of_samples'] < 0.1          # the first slide: < 2 s
+    assert 0 <= result['startup']['share_of_squared_error'] <= 1
     assert cal['session_consistency']['runs'] == 4          # every run's motor side
     # zero-shot: every run scored, nothing calibrated
     assert cli_main(['realdata', '--train', str(train_dir), '--test', str(test_dir), '--json']) == 0

@@ -81,6 +81,9 @@ def _transfer_summary(result) -> str:
              f"held-out RMSE {result['heldout_rmse'] * 1e3:.2f} mN m over "
              f"{len(result['per_run'])} runs (published {result['published_rmse_mNm']:.2f}); "
              f"worst run {result['worst_run']['file']} {result['worst_run']['rmse'] * 1e3:.2f}"]
+    lines.append(f"after the first second {result['heldout_rmse_after_startup'] * 1e3:.2f} mN m; the "
+                 f"start-up ({100 * result['startup']['fraction_of_samples']:.1f} % of the samples) "
+                 f"holds {100 * result['startup']['share_of_squared_error']:.0f} % of the squared error")
     if not result['zero_shot']:
         lines.append(f"zero-shot on the same runs {result['zero_shot_heldout_rmse'] * 1e3:.2f} mN m")
     tare = result['test']['current_tare']

@@ -932,11 +932,6 @@ DEFAULT_RULE = ('lower median of the folder\'s sine frequencies, of its resistin
 
 
 # -- scoring ---------------------------------------------------------------------------------------
-def _rmse(pred: np.ndarray, target: np.ndarray) -> tuple[float, int]:
-    err = pred - target
-    return float(np.sum(err * err)), int(err.size)
-
-
 #: Seconds at the start of a run left out of the session prior (the estimate there is the prior).
 SESSION_PRIOR_SKIP_S = C.STARTUP_S
 
@@ -983,20 +978,35 @@ def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int =
 
     The target is ``target_sign * jaw_torque - target_zero`` (N*m). ``session_prior``:
     the start of each run at the folder's mean estimate (:func:`predict_session`),
-    else at the estimator's own prior.
+    else at the estimator's own prior. Also the RMSE after each run's first
+    :data:`.constants.STARTUP_S` and the start-up's part: the samples before each run's
+    first sliding sample (the estimate is the start-up value there) and their share of
+    the squared error.
     """
     if session_prior:
         preds, prior = predict_session(est, runs, cache)
     else:
         preds, prior = [est.predict(run, cache=cache) for run in runs], est.prior_torque
     se_total, n_total, per_run = 0.0, 0, []
+    se_late = n_late = se_start = n_start = 0.0
     for run, pred in zip(runs, preds):
-        se, n = _rmse(pred, target_sign * run.jaw_torque - target_zero)
+        err = pred - (target_sign * run.jaw_torque - target_zero)
+        se, n = float(np.sum(err * err)), int(err.size)
         se_total += se
         n_total += n
         per_run.append({'file': run.file or run.name, 'rmse': math.sqrt(se / n)})
+        late = run.t - run.t[0] >= C.STARTUP_S
+        se_late += float(np.sum(err[late] ** 2))
+        n_late += int(late.sum())
+        sliding = np.flatnonzero(est.inversion(run, cache=cache)[1] > 0)
+        first = int(sliding[0]) if sliding.size else err.size
+        se_start += float(np.sum(err[:first] ** 2))
+        n_start += first
     return {'heldout_rmse': math.sqrt(se_total / n_total), 'per_run': per_run,
-            'startup_estimate_Nm': prior}
+            'startup_estimate_Nm': prior,
+            'heldout_rmse_after_startup': math.sqrt(se_late / max(n_late, 1)),
+            'startup': {'fraction_of_samples': n_start / n_total,
+                        'share_of_squared_error': se_start / se_total if se_total else 0.0}}
 
 
 def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NAMES,
@@ -1160,12 +1170,14 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
         result['heldout_rmse'] = res['heldout_rmse']
         result['per_run'] = res['per_run']
         result['zero_shot_heldout_rmse'] = zero['heldout_rmse']
-        result['startup_estimate_Nm'] = res['startup_estimate_Nm']
     else:
         result['calibration'] = None
+        res = zero
         result['heldout_rmse'] = zero['heldout_rmse']
         result['per_run'] = zero['per_run']
-        result['startup_estimate_Nm'] = zero['startup_estimate_Nm']
+    result['startup_estimate_Nm'] = res['startup_estimate_Nm']
+    result['heldout_rmse_after_startup'] = res['heldout_rmse_after_startup']
+    result['startup'] = res['startup']
     result['heldout_rmse_mNm'] = round(result['heldout_rmse'] * 1e3, 3)
     result['worst_run'] = max(result['per_run'], key=lambda p: p['rmse'])
     result['beats_published'] = bool(result['heldout_rmse'] <= C.PUBLISHED_RMSE_NM)
