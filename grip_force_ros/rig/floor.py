@@ -72,6 +72,9 @@ class HeldOut:
         Observer weight, friction direction s, scaled disk position.
     first : int
         Index of the first sliding sample (the start-up ends there).
+    sensor_zero : float
+        The jaw torque sensor's zero (N*m) found on the training runs against the resisting
+        motor (:func:`.transfer.front_end_reference`), the frame the fit was made in.
     """
 
     run: object
@@ -80,11 +83,12 @@ class HeldOut:
     direction: np.ndarray
     position: np.ndarray
     first: int
+    sensor_zero: float = 0.0
 
     @property
     def error(self) -> np.ndarray:
-        """Prediction minus the measured jaw torque (N*m)."""
-        return self.prediction - self.run.jaw_torque
+        """Prediction minus the measured jaw torque in the fit's frame (N*m)."""
+        return self.prediction - (self.run.jaw_torque - self.sensor_zero)
 
 
 def folds(runs: Sequence, kind: str) -> list[list]:
@@ -106,6 +110,7 @@ def held_out(folder: Folder, settings: ObserverSettings, kind: str, *,
         ids = {id(r) for r in test}
         model = train([replace(folder, runs=[r for r in folder.runs if id(r) not in ids])], settings)
         est, cache = model.estimator, model.cache
+        zero = model.front_end['zeros_Nm'][folder.name]      # same session: the same sensor zero
         preds, _ = predict_session(est, test, cache)
         for run, pred in zip(test, preds):
             inverted, weight, dt = est.inversion(run, cache=cache)
@@ -114,7 +119,7 @@ def held_out(folder: Folder, settings: ObserverSettings, kind: str, *,
             first = int(on[0]) if on.size else weight.size
             if two_sided:
                 pred = two_sided_average(inverted, weight, est.settings.observer_time_constant, dt)
-            out.append(HeldOut(run, pred, weight, sig.direction, sig.position, first))
+            out.append(HeldOut(run, pred, weight, sig.direction, sig.position, first, zero))
     return out
 
 
@@ -328,8 +333,8 @@ def plot_floor(before: Sequence[HeldOut], after: Sequence[HeldOut], path: Path) 
 def analyse_floor(folder: Folder, *, quick: bool = False, out_dir=None, progress=None) -> dict:
     """Run the whole floor analysis of one folder, JSON-ready (``grip-force realdata --floor``).
 
-    ``quick``: even/odd and leave-one-level-out only, no candidate beyond the two models. ``out_dir``: also
-    write the figure ``realdata_floor.png`` there.
+    ``quick``: even/odd and leave-one-level-out only, no candidate beyond the two models.
+    ``out_dir``: also write the figure ``realdata_floor.png`` there.
     """
     say = progress or (lambda msg: None)
     started = time.perf_counter()

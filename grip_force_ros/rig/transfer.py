@@ -3,8 +3,9 @@
 The observer (:mod:`.estimator`) fitted on one folder of the MRDLab rig was 10-21 mN*m
 off on the others. What the motor side alone fixes, and what one run of the new folder
 whose jaw torque is read (a calibration jig, once per instrument) fixes of the rest
-(the model itself gains a load-dependent efficiency, :data:`TRANSFER_SETTINGS`, and a
-run's start-up estimate is the session's, :func:`predict_session`):
+(the model itself gains a load-dependent efficiency and a Coulomb friction that changes
+along the stroke, :data:`TRANSFER_SETTINGS`, and a run's start-up estimate is the
+session's, :func:`predict_session`):
 
 * **Motor-side conventions, per folder, from the motor side alone.** Which way is
   closing (:func:`orient`): the current pushes the motor the way it moves (friction),
@@ -18,16 +19,23 @@ run's start-up estimate is the session's, :func:`predict_session`):
   ``Tool_4_Maryland_L_2``, -0.019 A in ``Tool_4_Maryland_L_4``: 15 mN*m at the jaw,
   most of the zero-shot gap). Robust least squares of the measured current on the
   command over the folder's runs gives it; motor-side columns only.
+* **The session consistency, from the motor side of every run of the folder**
+  (:mod:`.consistency`): a run holds one load, so its closing- and opening-branch
+  estimates may differ only by the rig front end's own friction (learned on the
+  training folders); their disagreement over the folder's runs, at several loads,
+  tells the groups that split the branches (efficiency, Coulomb friction and its
+  change along the stroke), zero-shot too.
 * **Per instrument, identified on the calibration run** (:func:`calibrate`): a
   Bayesian update of the forward model's coefficients in physical groups (gain,
-  efficiency, Coulomb friction, spring, zeros, viscous), each regularised towards the
+  efficiency, Coulomb friction, friction map, spring, zeros, viscous; with the session
+  consistency's rows when a session is given), each regularised towards the
   training folders' value with a prior width (a stated tolerance, widened to the
   spread between training folders), the calibration run's residual treated as
   correlated noise plus a run-level offset per friction branch (the run-to-run
   friction scatter seen in training, which one run cannot tell from a parameter).
   What transfers and is never refitted: the model's structure, the Dahl width,
-  thresholds, filters and observer (the fixed settings), the gain and efficiency
-  except through their narrow priors.
+  thresholds, filters and observer (the fixed settings), the gain except through its
+  narrow prior.
 
 Scoring target. Zero-shot: the jaw torque sensor as recorded (the rig firmware tares
 it at the start of each session, header ``torque0AverageTorque``), with the sign of
