@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from grip_force_ros.identify.calibration import block_bootstrap_std
+
 __all__ = ['MAX_FIT_ROWS', 'HUBER_K', 'ANGLE_FLOOR_MS', 'FORCE_FLOOR', 'PooledData', 'lstsq',
            'block_bootstrap_std', 'rms', 'huber_lstsq', 'huber_ms', 'channel_fit', 'fold_fit',
            'evaluate', 'full_fit', 'combine_designs', 'held_out_score']
@@ -43,24 +45,6 @@ def lstsq(X: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> np
         sw = np.ones(len(y)) if weights is None else np.sqrt(weights)
         coef, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
         return coef
-
-
-def block_bootstrap_std(X, y, rng, blocks: int = 20, draws: int = 200) -> np.ndarray:
-    """Std of least-squares coefficients over a moving-block bootstrap (keeps autocorrelation)."""
-    n, k = X.shape
-    if n < 2 * blocks:
-        return np.full(k, np.nan)
-    edges = np.linspace(0, n, blocks + 1).astype(int)
-    xtx = np.stack([X[a:b].T @ X[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    xty = np.stack([X[a:b].T @ y[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    picks = rng.integers(0, blocks, size=(draws, blocks))
-    coefs = []
-    for p in picks:
-        try:
-            coefs.append(np.linalg.solve(xtx[p].sum(0), xty[p].sum(0)))
-        except np.linalg.LinAlgError:
-            continue
-    return np.std(coefs, axis=0) if len(coefs) > 2 else np.full(k, np.nan)
 
 
 def rms(x) -> float:
