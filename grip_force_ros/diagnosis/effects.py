@@ -62,6 +62,7 @@ __all__ = ['EFFECT_NAMES', 'EFFECTS', 'NONE', 'Design', 'Effect', 'stroke_range'
 class Design:
     """Regressors of one effect at one grid value, for one frame."""
 
+    #: the base columns (n, k): the nominal and its derivatives by the re-identified parameters
     force_base: np.ndarray
     force_cols: list = field(default_factory=list)
     angle_cols: list = field(default_factory=list)
@@ -98,6 +99,11 @@ ANGLE_PER_TORQUE = 1.0
 MOTOR_PLAY_WIDTHS = (0.005, 0.02, 0.05)
 
 
+def _base(f):
+    """Base columns of a frame: the nominal and its parameter derivatives (the engine sets them)."""
+    return f['base'] if 'base' in f else f['nominal'][:, None]
+
+
 def _cached(f, key, make):
     cache = f.setdefault('_cache', {})
     if key not in cache:
@@ -121,7 +127,7 @@ def _coulomb(f, grid_value):
         # current, so the transmitted load is the one of the last sliding sample
         force_dir, sliding = _cached(f, ('play_sliding_motor', width),
                                      lambda: play_sliding(f['motor'], width))
-        base = _cached(f, ('held_nominal', width), lambda: hold_where_stuck(f['nominal'], sliding))
+        base = _cached(f, ('held_base', width), lambda: hold_where_stuck(_base(f), sliding))
         angle_dir = _cached(f, ('play_jaw_model', width),
                             lambda: play(f['jaw_model'], width))
         return Design(base, [f['contact'] * f['gain'] * force_dir], [angle_dir])
@@ -130,11 +136,11 @@ def _coulomb(f, grid_value):
     force_dir = _cached(f, ('play_torque', tau), lambda: play(f['torque'], 2.0 * tau))
     angle_dir = _cached(f, ('play_jaw_model', 2.0 * tau / ANGLE_PER_TORQUE),
                         lambda: play(f['jaw_model'], 2.0 * tau / ANGLE_PER_TORQUE))
-    return Design(f['nominal'], [f['contact'] * f['gain'] * force_dir], [angle_dir])
+    return Design(_base(f), [f['contact'] * f['gain'] * force_dir], [angle_dir])
 
 
 def _viscous(f, _):
-    return Design(f['nominal'], [f['contact'] * f['jaw_velocity']])
+    return Design(_base(f), [f['contact'] * f['jaw_velocity']])
 
 
 def _hysteresis(f, grid_value):
@@ -142,40 +148,42 @@ def _hysteresis(f, grid_value):
     if source == 'motor_angle':
         # friction proportional to the cable tension, its direction following the drive motion
         # with memory: a transmission efficiency that differs between driving and back-driving
-        return Design(f['nominal'], [f['nominal'] * _motor_direction(f, width)])
+        return Design(_base(f), [f['nominal'] * _motor_direction(f, width)])
     # Dahl loop: a moment proportional to the tension, flipping after a relative tension change
     log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
     direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
-    return Design(f['nominal'], [f['nominal'] * direction])
+    return Design(_base(f), [f['nominal'] * direction])
 
 
 def _backlash(f, current_width):
     # the cable is taut on the side the current pulls: the jaw sits half the dead band
     # to that side of where the drum puts it; the side flips as the current changes sign
-    return Design(f['nominal'], [], [np.tanh(f['current'] / current_width)])
+    return Design(_base(f), [], [np.tanh(f['current'] / current_width)])
 
 
 def _tension(f, _):
     # efficiency falling with tension: first and second order in the current
-    return Design(f['nominal'], [f['nominal'] * f['current'], f['nominal'] * f['current'] ** 2])
+    return Design(_base(f), [f['nominal'] * f['current'], f['nominal'] * f['current'] ** 2])
 
 
 def _creep(f, tau):
-    return Design(f['nominal'], [lowpass(f['nominal'], float(f['dt']), tau, initial=0.0)])
+    return Design(_base(f), [lowpass(f['nominal'], float(f['dt']), tau, initial=0.0)])
 
 
 def _delay(f, d):
-    return Design(np.interp(f['t'] - d, f['t'], f['nominal']))
+    # the sensor sees the whole force late: every base column delayed
+    base = _base(f)
+    return Design(np.column_stack([np.interp(f['t'] - d, f['t'], base[:, j]) for j in range(base.shape[1])]))
 
 
 def _drift(f, tau):
     i_ref = float(f['max_current']) if 'max_current' in f else max(float(np.max(np.abs(f['current']))), 1e-9)
     heat = lowpass((f['current'] / i_ref) ** 2, float(f['dt']), float(tau), initial=0.0)
-    return Design(f['nominal'], [f['nominal'] * heat])
+    return Design(_base(f), [f['nominal'] * heat])
 
 
 def _offset(f, _):
-    return Design(f['nominal'], [np.ones_like(f['nominal'])])
+    return Design(_base(f), [np.ones_like(f['nominal'])])
 
 
 #: Angle signals a position spring may follow (frame key of each).
@@ -214,7 +222,7 @@ def _spring(f, source):
     legendre = np.polynomial.legendre.legvander(x, SPRING_ORDER)
     # jaw torque of the spring (N*m) -> measured column: G converts it to grip force (1 for torque)
     scale = f['contact'] * f['gain']
-    return Design(f['nominal'], [scale * legendre[:, k] for k in range(SPRING_ORDER + 1)])
+    return Design(_base(f), [scale * legendre[:, k] for k in range(SPRING_ORDER + 1)])
 
 
 def spring_summary(coefs, _grid_value=None) -> dict:

@@ -83,12 +83,18 @@ class PooledData:
         for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
                     'jaw_velocity', 'load_time', 'object', 't'):
             setattr(self, key, _concat(frames, key))
-        # angle calibration: zero, scale, the cable's elastic stretch under both tensions and
-        # the lag of the jaw behind the drum in motion
-        # (the scale r0/r_n is geometry: kept, so the target is jaw - jaw_model)
+        #: the force channel's base columns: the nominal and, when the frames have them, its
+        #: derivatives by the re-identified parameters (a local refit of them with every effect)
+        self.base = (np.concatenate([f['base'] for f in frames]) if all('base' in f for f in frames)
+                     else self.nominal[:, None])
+        self.force_base_width = self.base.shape[1]
+        # angle calibration: the encoder zero, the cable's elastic stretch (its coefficient: the
+        # re-identified stiffness refitted), the lag of the jaw behind the drum in motion and the
+        # wrist (the re-identified coupling refitted); the scale r0/r_n is geometry: kept, so the
+        # target is jaw - jaw_model
         self.angle_target = self.jaw - self.jaw_model
-        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'drum_tension'),
-                                           _concat(frames, 'jaw_tension'), self.jaw_velocity])
+        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'stretch'),
+                                           self.jaw_velocity, self.wrist])
         self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
 
     def shift(self, X, delay: float):
@@ -141,7 +147,7 @@ def channel_fit(data: PooledData, X, fold: int, force: bool):
     A design that is just the channel's baseline (no column of the effect) is fitted
     once and cached.
     """
-    base_width = 1 if force else data.angle_base.shape[1]
+    base_width = data.force_base_width if force else data.angle_base.shape[1]
     key = (fold, force)
     is_base = X.shape[1] == base_width and (not force or np.array_equal(X[:, 0], data.nominal))
     if is_base and key in data.base_cache:
@@ -224,12 +230,13 @@ def combine_designs(data, first, other, first_name, other_name, fits, other_valu
     the whole force late).
     """
     (f1, a1), (f2, a2) = first, other
+    nb = data.force_base_width
     if other_name == 'sensor_delay':
         Xf = data.shift(f1, float(other_value))
     elif first_name == 'sensor_delay':
-        Xf = np.column_stack([f1, data.shift(f2[:, 1:], float(fits[first_name]['value']))])
+        Xf = np.column_stack([f1, data.shift(f2[:, nb:], float(fits[first_name]['value']))])
     else:
-        Xf = np.column_stack([f1, f2[:, 1:]])
+        Xf = np.column_stack([f1, f2[:, nb:]])
     Xa = np.column_stack([a1, a2[:, 4:]])
     return Xf, Xa
 
