@@ -56,20 +56,20 @@ def _factor_for(t: np.ndarray, analysis_rate: float) -> int:
 
 
 def load_decimated(source, analysis_rate: float = 200.0, *, chunk_rows: int = 200_000,
-                   progress=None) -> dict[str, np.ndarray]:
+                   progress=None, measured: bool = True) -> dict[str, np.ndarray]:
     """Read a log (path or dict) and block-average it to about ``analysis_rate`` (Hz).
 
     A path is streamed in chunks (CSV) so the full-rate log is never held whole.
-    ``progress(rows)`` is called per chunk.
+    ``progress(rows)`` is called per chunk. ``measured=False`` accepts a log of inputs only.
     """
     if isinstance(source, Mapping):
-        log = normalise_log(source)
+        log = normalise_log(source, measured=measured)
         return decimate(log, _factor_for(log['t'], analysis_rate))
     parts: dict[str, list[np.ndarray]] = {}
     factor = None
     carry: dict[str, np.ndarray] | None = None
     rows = 0
-    for chunk in iter_log(source, chunk_rows=chunk_rows):
+    for chunk in iter_log(source, chunk_rows=chunk_rows, measured=measured):
         if carry:
             chunk = {k: np.concatenate([carry[k], v]) for k, v in chunk.items()}
         if factor is None:
