@@ -20,7 +20,7 @@ grid; the coefficients are linear least squares. Each effect's shape:
 |---|---|---|---|
 | pivot_coulomb_friction | contact * G * dir(drive torque), or contact * G * dir(motor angle) with the nominal held while stuck | dir(jaw_model) | friction torque, or motor play width |
 | viscous_friction | contact * jaw_velocity | - | - |
-| cable_hysteresis | nominal * dir(log jaw tension), or nominal * dir(motor angle) | - | relative width, or motor play width |
+| cable_hysteresis | nominal * dir(log jaw tension) on stiff objects and nominal * dir(motor angle) on tissue (two coefficients), or nominal * dir(motor angle) | - | relative width and motor width, or motor play width |
 | backlash | - | tanh(current / width) | width |
 | tension_dependent_friction | nominal * current, nominal * current^2 | - | - |
 | viscoelastic_creep | lowpass_tau(nominal) | - | tau |
@@ -50,6 +50,7 @@ import numpy as np
 
 from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
 from grip_force_ros.effects import DIAGNOSED, NONE
+from grip_force_ros.objects import OBJECTS
 
 #: The effects the diagnosis fits, in the registry's order (``none`` is the verdict when
 #: no effect is needed).
@@ -97,6 +98,11 @@ ANGLE_PER_TORQUE = 1.0
 #: Full widths (rad of motor angle) of the play whose output is the friction direction when it
 #: follows the drive motion (pivot_coulomb_friction, cable_hysteresis on a sliding jaw).
 MOTOR_PLAY_WIDTHS = (0.005, 0.02, 0.05)
+#: Widths (rad of motor angle) of the drive's direction that a hysteresis follows where the jaw
+#: moves with a soft load (tissue).
+SOFT_PLAY_WIDTHS = (0.02, 0.1)
+#: Object code of the soft contact (the jaw moves with its load).
+_TISSUE = OBJECTS.index('tissue')
 
 
 def _base(f):
@@ -144,15 +150,22 @@ def _viscous(f, _):
 
 
 def _hysteresis(f, grid_value):
-    source, width = grid_value
+    source, width = grid_value[:2]
+    soft = f['object'] == _TISSUE
     if source == 'motor_angle':
         # friction proportional to the cable tension, its direction following the drive motion
         # with memory: a transmission efficiency that differs between driving and back-driving
-        return Design(_base(f), [f['nominal'] * _motor_direction(f, width)])
-    # Dahl loop: a moment proportional to the tension, flipping after a relative tension change
-    log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
-    direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
-    return Design(_base(f), [f['nominal'] * direction])
+        direction = soft_direction = _motor_direction(f, width)
+    else:
+        # Dahl loop: a moment proportional to the tension, flipping after a relative change of the
+        # tension where the jaw is blocked (a stiff object: the moment goes into the grip); where
+        # the jaw moves with its load (a soft object: the stuck cable takes most of the moment),
+        # it shows with the direction of the drive's motion, with its own size and sign
+        log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
+        direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
+        soft_direction = _motor_direction(f, grid_value[2])
+    return Design(_base(f), [f['nominal'] * np.where(soft, 0.0, direction),
+                             f['nominal'] * np.where(soft, soft_direction, 0.0)])
 
 
 def _backlash(f, current_width):
@@ -250,10 +263,12 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ('force_per_jaw_velocity',), (),
            (('force_per_jaw_velocity', 'unit of y*s/rad', lambda c, g: c),)),
     Effect('cable_hysteresis',
-           tuple(('log_tension', v) for v in (0.02, 0.05, 0.1, 0.2))
+           tuple(('log_tension', v, m) for v in (0.02, 0.05, 0.1, 0.2) for m in SOFT_PLAY_WIDTHS)
            + tuple(('motor_angle', v) for v in MOTOR_PLAY_WIDTHS),
            'direction_state_width', '- (log_tension) or rad (motor_angle play width)', _hysteresis,
-           ('loop_fraction',), (), (('loop_fraction', '-', lambda c, g: -_rel(c, g)),)),
+           ('loop_fraction', 'loop_fraction_soft'), (),
+           (('loop_fraction', '-', lambda c, g: -_rel(c, g)),
+            ('loop_fraction_soft', '-', lambda c, g: -_rel(c, g)))),
     Effect('backlash', (0.002, 0.005, 0.01, 0.02), 'current_width', 'A', _backlash,
            (), ('dead_band',), (('dead_band', 'rad', lambda c, g: -2.0 * c),)),
     Effect('tension_dependent_friction', (None,), None, '', _tension,

@@ -132,15 +132,19 @@ def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, g
             out[sname] = {'value': sval, 'std': None, 'unit': sunit,
                           'note': 'derived from the fitted coefficients'}
     if effect.grid_name and isinstance(value, tuple):
-        # (which signal the direction state follows, its width)
-        source, width = value
+        # (which signal the direction state follows, its width[, the drive's width on soft objects])
+        source, width = value[:2]
         out[effect.grid_name] = {'value': width, 'std': None, 'direction_state_of': source,
                                  'unit': 'rad' if source == 'motor_angle' else
                                  ('N*m' if source == 'drive_torque' else '-'),
-                                 'note': 'picked from a grid on the training parts'}
+                                 'note': 'picked on the training parts (grid, refined between its points)'}
+        if len(value) > 2:
+            out['soft_direction_state_width'] = {'value': value[2], 'std': None,
+                                                 'direction_state_of': 'motor_angle', 'unit': 'rad',
+                                                 'note': 'picked from a grid on the training parts'}
     elif effect.grid_name:
         out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
-                                 'note': 'picked from a grid on the training parts'}
+                                 'note': 'picked on the training parts (grid, refined between its points)'}
     return out
 
 
@@ -254,29 +258,38 @@ def _reidentified_frames(inputs, params, model_of, jaw_side_cable_length, train_
 
 
 def _joint_refit(name, value, step, data: PooledData, inputs, params, model_of, jaw_side_cable_length,
-                 train_count: int, fold_tests):
-    """Refit the pulley friction beside one effect (``name`` None: the base alone): Gauss-Newton in log(mu).
+                 train_count: int, fold_tests, yaml, modulus_follows: bool = True):
+    """Refit the friction and the gain beside one effect (``name`` None: the base alone): Gauss-Newton.
 
     Each step rebuilds the frames at the friction, fits the effect with the base's derivative
     column on the training samples (robust) and moves log(mu) by the derivative's coefficient /
-    the gain, starting with ``step``. For the base alone the torque constant follows the gain
-    too (so that the gain left is 1). Returns the pooled data at the refitted friction
-    (:func:`_pooled`), on the same samples as ``data``; None when the friction goes to its
-    bound (not identified beside this effect, as in the re-identification).
+    the gain (starting with ``step``) and the torque constant by the gain. The cable modulus
+    moves with the torque constant (``modulus_follows``, when the jaw angle identified it): the
+    angle measured the stretch, tension / E, and the tension per ampere scales with the torque
+    constant. Returns the pooled data of the refitted
+    model (:func:`_pooled`), on the same samples as ``data``; None when a parameter goes to its
+    bound, a factor MAX_FACTOR from the ``yaml`` ParamSet's value (not identified beside this
+    effect, as in the re-identification).
     """
     from grip_force_ros.diagnosis.fitting import huber_lstsq
     from grip_force_ros.diagnosis.reidentify import MAX_FACTOR
-    mu0 = float(params.pulley_friction_coefficient)                # the re-identified friction
-    torque0 = float(params.torque_constant)
+    mu0 = float(params.pulley_friction_coefficient)                # the re-identified values
+    torque0, modulus0 = float(params.torque_constant), float(params.cable_modulus)
+    mu_yaml = float(yaml.pulley_friction_coefficient)
     if not (mu0 > 0.0 and data.force_base_width > 1):
         return None
     steady = [f['steady'] for f in data.frames]
-    low, high = math.log(1.0 / MAX_FACTOR), math.log(MAX_FACTOR)
-    log_mu, torque = 0.0, torque0
+    limit = math.log(MAX_FACTOR)
+    log_mu, scale = math.log(mu0 / mu_yaml), 1.0
+    torque_yaml = math.log(torque0 / float(yaml.torque_constant))
     refitted = None
     for _ in range(JOINT_ITERATIONS):
-        log_mu = min(max(log_mu + min(max(step, -JOINT_MAX_STEP), JOINT_MAX_STEP), low), high)
-        p = params.replace(pulley_friction_coefficient=mu0 * math.exp(log_mu), torque_constant=torque)
+        log_mu += min(max(step, -JOINT_MAX_STEP), JOINT_MAX_STEP)
+        if not (abs(log_mu) < limit and abs(torque_yaml + math.log(scale)) < limit):
+            return None                     # at a bound: not identified beside this effect
+        p = params.replace(pulley_friction_coefficient=mu_yaml * math.exp(log_mu),
+                           torque_constant=torque0 * scale,
+                           cable_modulus=modulus0 * (scale if modulus_follows else 1.0))
         frames = _reidentified_frames(inputs, p, model_of, jaw_side_cable_length, train_count, steady)
         refitted = _pooled(frames, fold_tests, p, data.force_scale)
         Xf = refitted.base if name is None else refitted.designs(EFFECTS[name], value)[0]
@@ -284,15 +297,17 @@ def _joint_refit(name, value, step, data: PooledData, inputs, params, model_of, 
         tr = tr[::max(1, int(np.ceil(tr.size / MAX_FIT_ROWS)))]
         coef = huber_lstsq(Xf[tr], refitted.y[tr], refitted.force_scale)
         gain = float(coef[0])
-        step = float(coef[1]) / gain if gain != 0.0 else 0.0
-        if log_mu in (low, high):
-            return None                     # at its bound: not identified beside this effect
-        if name is None and gain > 0.0:
-            torque *= gain
-        if abs(step) < JOINT_TOLERANCE and (name is not None or abs(gain - 1.0) < JOINT_TOLERANCE):
+        if not gain > 0.0:
+            return None
+        step = float(coef[1]) / gain
+        scale *= gain
+        if abs(step) < JOINT_TOLERANCE and abs(gain - 1.0) < JOINT_TOLERANCE:
             break
-    if name is None and torque != float(p.torque_constant):
-        p = p.replace(torque_constant=torque)
+    if scale != float(p.torque_constant) / torque0:       # the last gain, applied
+        if not abs(torque_yaml + math.log(scale)) < limit:
+            return None
+        p = p.replace(torque_constant=torque0 * scale,
+                      cable_modulus=modulus0 * (scale if modulus_follows else 1.0))
         frames = _reidentified_frames(inputs, p, model_of, jaw_side_cable_length, train_count, steady)
         refitted = _pooled(frames, fold_tests, p, data.force_scale)
     return refitted
@@ -303,6 +318,7 @@ def _pooled(frames, fold_tests, params, force_scale: float | None = None) -> Poo
     data = PooledData(frames, fold_tests)
     data.friction = float(params.pulley_friction_coefficient)
     data.torque_constant = float(params.torque_constant)
+    data.cable_modulus = float(params.cable_modulus)
     if force_scale is not None:
         data.force_scale = force_scale
     return data
@@ -426,7 +442,7 @@ def _fit_effect(data: PooledData, name: str, base: dict, rng, force_floor_ms: fl
         # constant, the derivative column moves the friction (to first order)
         entry['reidentified_beside'] = {
             'pulley_friction_coefficient': data.friction * math.exp(step),
-            'torque_constant': data.torque_constant * g}
+            'torque_constant': data.torque_constant * g, 'cable_modulus': data.cable_modulus * g}
     return fit, entry, step
 
 
@@ -614,17 +630,17 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
         # the base's friction at the optimum of the same objective every effect's refit reaches
         # (the re-identification's fit weighs and scales a little differently)
         polished = _joint_refit(None, None, _friction_step(data), data, inputs, re.params, model_of, jaw_side,
-                                len(train_logs), fold_tests)
+                                len(train_logs), fold_tests, re.yaml, 'cable_modulus' in re.values)
         if polished is not None:
             re.polish(pulley_friction_coefficient=polished.friction,
-                      torque_constant=polished.torque_constant)
+                      torque_constant=polished.torque_constant, cable_modulus=polished.cable_modulus)
             data = polished
     base, gain, calibration = _calibrate(data, rng, measured, jaw_side, re, raw_gap)         # 1.
     force_floor_ms = (FORCE_FLOOR * rms(data.y[data.test])) ** 2
 
     def joint(name, value, step):
         return _joint_refit(name, value, step, data, inputs, re.params, model_of, jaw_side, len(train_logs),
-                            fold_tests)
+                            fold_tests, re.yaml, 'cable_modulus' in re.values)
 
     ranking, fits = _rank_effects(data, base, gain, rng, force_floor_ms, param_penalty,     # 3.
                                   min_improvement, unit, say, joint)

@@ -18,7 +18,7 @@ from grip_force_ros.identify.calibration import block_bootstrap_std
 
 __all__ = ['MAX_FIT_ROWS', 'HUBER_K', 'ANGLE_FLOOR_MS', 'FORCE_FLOOR', 'PooledData', 'lstsq',
            'block_bootstrap_std', 'rms', 'huber_lstsq', 'huber_ms', 'channel_fit', 'fold_fit',
-           'evaluate', 'full_fit', 'combine_designs', 'held_out_score']
+           'neighbours', 'evaluate', 'full_fit', 'combine_designs', 'held_out_score']
 
 #: Training rows used per fit at most (an even subsample beyond; 10 min at 200 Hz).
 MAX_FIT_ROWS = 120_000
@@ -177,22 +177,65 @@ def fold_fit(data: PooledData, Xf, Xa, fold: int):
     return objective, rf, ra
 
 
-def evaluate(data: PooledData, designs, grid):
+def neighbours(grid, value) -> list:
+    """Values between ``value`` and its neighbours on the grid: geometric midpoints of the numeric width.
+
+    A grid value is a number (a time constant, a delay, a width) or a tuple whose second
+    element is one (``(source, width[, ...])``: neighbours share the other elements). A
+    non-numeric value (None, a name) has no neighbours.
+    """
+    def width(v):
+        w = v[1] if isinstance(v, tuple) else v
+        return float(w) if isinstance(w, (int, float)) and not isinstance(w, bool) and w > 0 else None
+
+    def same_kind(v):
+        return isinstance(v, tuple) == isinstance(value, tuple) and (
+            not isinstance(v, tuple) or (len(v) == len(value) and v[:1] + v[2:] == value[:1] + value[2:]))
+
+    w0 = width(value)
+    if w0 is None:
+        return []
+    widths = sorted({width(v) for v in grid if same_kind(v) and width(v) is not None})
+    i = widths.index(w0) if w0 in widths else None
+    if i is None:
+        return []
+    out = []
+    for j in (i - 1, i + 1):
+        if 0 <= j < len(widths):
+            mid = math.sqrt(w0 * widths[j])
+            out.append(value[:1] + (mid,) + value[2:] if isinstance(value, tuple) else mid)
+    return out
+
+
+def evaluate(data: PooledData, designs, grid, refine: bool = True):
     """Fit every grid value on each fold's training part; keep each fold's best.
 
     Each fold's best is chosen by its own training objective; held-out residuals come
-    from the fold that did not see them.
+    from the fold that did not see them. With ``refine``, each fold then tries the geometric
+    midpoints between its best value and the grid neighbours (:func:`neighbours`), so a time
+    constant or a width between the grid points is not stuck at one of them.
 
     Returns held-out residual arrays (force, angle; zero outside the held-out part), the
     pooled held-out MSEs, and the grid value chosen by most folds.
     """
     best = [None] * len(data.folds)
-    for value in grid:
+
+    def consider(value, folds):
         Xf, Xa = designs(value)
-        for k in range(len(data.folds)):
+        for k in folds:
             objective, rf, ra = fold_fit(data, Xf, Xa, k)
             if best[k] is None or objective < best[k][0]:
                 best[k] = (objective, value, rf, ra)
+
+    for value in grid:
+        consider(value, range(len(data.folds)))
+    if refine:
+        candidates: dict = {}
+        for k, b in enumerate(best):
+            for v in neighbours(grid, b[1]):
+                candidates.setdefault(v, []).append(k)
+        for value, folds in candidates.items():
+            consider(value, folds)
     resid_f = np.zeros(data.y.size)
     resid_a = np.zeros(data.y.size)
     for (_, te), (_, _, rf, ra) in zip(data.folds, best):

@@ -157,10 +157,11 @@ def block_bootstrap_std(X, y, rng, blocks: int = 20, draws: int = 200, labels=No
     picks = rng.integers(0, blocks, size=(draws, blocks))
     coefs = []
     for p in picks:
+        a, b = xtx[p].sum(0), xty[p].sum(0)
         try:
-            coefs.append(np.linalg.solve(xtx[p].sum(0), xty[p].sum(0)))
-        except np.linalg.LinAlgError:
-            continue
+            coefs.append(np.linalg.solve(a, b))
+        except np.linalg.LinAlgError:      # a column that is zero in the draw: its minimum-norm 0
+            coefs.append(np.linalg.lstsq(a, b, rcond=None)[0])
     return np.std(coefs, axis=0) if len(coefs) > 2 else np.full(k, np.nan)
 
 
