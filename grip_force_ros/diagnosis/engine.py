@@ -36,6 +36,11 @@ from grip_force_ros.objects import OBJECTS
 MIN_IMPROVEMENT = 0.15
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
 PARAM_PENALTY = 0.01
+#: An effect that acts on the measured column (it has force columns) is named only when that
+#: column's held-out loss alone falls by at least this fraction: a jaw-angle residual of a few
+#: tenths of a mrad must not name a friction whose force the data do not show (an angle-only
+#: effect, backlash, is judged on the angle).
+MIN_FORCE_SUPPORT = 0.05
 #: Default split of a log into time blocks when no test logs are given.
 BLOCKS = 6
 FOLDS = 3
@@ -392,7 +397,7 @@ def _calibrate(data: PooledData, rng, measured: str, jaw_side_cable_length: floa
                                   'scale left after the re-identification: 1 when it holds)'},
         'jaw_angle_offset': {'value': float(ca0[0]), 'std': float(a_std[0]),
                              'unit': 'rad', 'meaning': 'jaw encoder zero'},
-        'jaw_angle_lag': {'value': float(ca0[2]), 'std': float(a_std[2]),
+        'jaw_angle_lag': {'value': float(ca0[3]), 'std': float(a_std[3]),
                           'unit': 's', 'meaning': 'jaw angle per jaw velocity (dynamic lag)'},
         'jaw_side_cable_length': {'value': jaw_side_cable_length, 'std': None, 'unit': 'm',
                                   'meaning': 'given (not fitted; cable_length x cable_jaw_side_fraction '
@@ -416,6 +421,22 @@ def _friction_step(data: PooledData) -> float:
     return float(coef[1]) / float(coef[0]) if coef[0] != 0.0 else 0.0
 
 
+def _force_support(effect, fit: dict, reference: dict, force_floor_ms: float) -> bool:
+    """Whether the measured column's held-out loss supports ``effect`` (:data:`MIN_FORCE_SUPPORT`).
+
+    Always True for an effect without force columns (judged on the jaw angle).
+    """
+    if effect.angle_params and not effect.force_params:
+        return True
+    ratio = (fit['test_loss_f'] + force_floor_ms) / (reference['test_loss_f'] + force_floor_ms)
+    return ratio <= 1.0 - MIN_FORCE_SUPPORT
+
+
+def _first_named(ranking: list) -> int:
+    """Index of the verdict in the ranking: the best score whose effect the force supports, or none."""
+    return next(i for i, r in enumerate(ranking) if r['effect'] == NONE or r.get('force_support', True))
+
+
 def _fit_effect(data: PooledData, name: str, base: dict, rng, force_floor_ms: float, param_penalty: float,
                 unit: str):
     """Fit one effect on top of ``data``'s base: its held-out fit, its ranking entry, its friction step.
@@ -432,10 +453,12 @@ def _fit_effect(data: PooledData, name: str, base: dict, rng, force_floor_ms: fl
     score = held_out_score(fit, base, force_floor_ms) + param_penalty * effect.n_params
     g = float(cf[0])
     nb = data.force_base_width
-    params_out = _describe(effect, value, cf[nb:], sf[nb:], ca[4:], sa[4:], g, unit)
+    na = data.angle_base_width
+    params_out = _describe(effect, value, cf[nb:], sf[nb:], ca[na:], sa[na:], g, unit)
     entry = {'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
              'holdout_angle_rmse': math.sqrt(fit['test_mse_a']), 'train_rmse': math.sqrt(train_mse),
-             'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out}
+             'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out,
+             'force_support': _force_support(effect, fit, base, force_floor_ms)}
     step = float(cf[1]) / g if nb > 1 and g != 0.0 else 0.0
     if nb > 1:
         # the re-identified parameters beside this effect: the gain column scales the torque
@@ -533,7 +556,8 @@ def _second_effect(data: PooledData, winner: str, fits: dict, rng, force_floor_m
         fit2 = evaluate(data, lambda value, name=name: pair(value, name), EFFECTS[name].grid)
         score2 = held_out_score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
         say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
-        if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
+        supported = _force_support(EFFECTS[name], fit2, fits[winner], force_floor_ms)
+        if supported and score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
             best2 = (score2, name, fit2)
     if best2 is None:
         return None
@@ -557,7 +581,7 @@ def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured:
     final : dict
         Held-out fit with every named effect (``base`` when none is named).
     """
-    winner = ranking[0]['effect']
+    winner = ranking[_first_named(ranking)]['effect']
     gap_before = math.sqrt(base['test_mse_f'])
     angle_before = math.sqrt(base['test_mse_a'])
     named = [] if winner == NONE else [winner]
@@ -575,11 +599,13 @@ def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured:
                'shrink': 1.0 - gap_after / gap_before if gap_before > 0 else 0.0,
                'unit': unit, 'measured': measured,
                'angle_gap_before': angle_before, 'angle_gap_after': angle_after, 'angle_unit': 'rad',
-               'runner_up': ranking[1]['effect'],
+               'runner_up': next(r['effect'] for r in ranking if r['effect'] != winner),
                'rule': f'an effect is named when its held-out score (log ratio of the Huber loss of the '
                        f'force + log ratio of the angle MSE, +{param_penalty} per parameter) is below '
-                       f'log(1 - {min_improvement}); a second effect when it passes the same margin on '
-                       f'top of the first; gap_after is with every named effect'}
+                       f'log(1 - {min_improvement}) and, if it acts on the measured column, that '
+                       f'column\'s held-out loss alone falls by {100 * MIN_FORCE_SUPPORT:g} % '
+                       f'(force_support); a second effect when it passes the same on top of the first; '
+                       f'gap_after is with every named effect'}
     return verdict, final
 
 
@@ -644,7 +670,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
 
     ranking, fits = _rank_effects(data, base, gain, rng, force_floor_ms, param_penalty,     # 3.
                                   min_improvement, unit, say, joint)
-    winner = ranking[0]['effect']
+    winner = ranking[_first_named(ranking)]['effect']
     second = None if winner == NONE else _second_effect(                                    # 4.
         data, winner, fits, rng, force_floor_ms, param_penalty, min_improvement, unit, say)
     verdict, final = _verdict(base, fits, ranking, second, unit, measured, param_penalty,

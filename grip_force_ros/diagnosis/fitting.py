@@ -88,13 +88,16 @@ class PooledData:
         self.base = (np.concatenate([f['base'] for f in frames]) if all('base' in f for f in frames)
                      else self.nominal[:, None])
         self.force_base_width = self.base.shape[1]
-        # angle calibration: the encoder zero, the cable's elastic stretch (its coefficient: the
-        # re-identified stiffness refitted), the lag of the jaw behind the drum in motion and the
-        # wrist (the re-identified coupling refitted); the scale r0/r_n is geometry: kept, so the
-        # target is jaw - jaw_model
+        # angle calibration: the encoder zero, the cable's elastic stretch on the drum side and on
+        # the jaw side (their coefficients: the re-identified stiffness refitted, and the split
+        # of the cable left free as before issue 10), the lag of the jaw behind the drum in motion
+        # and the wrist (the re-identified coupling refitted); the scale r0/r_n is geometry:
+        # kept, so the target is jaw - jaw_model
         self.angle_target = self.jaw - self.jaw_model
-        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'stretch'),
-                                           self.jaw_velocity, self.wrist])
+        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'stretch_drum'),
+                                           _concat(frames, 'stretch_jaw'), self.jaw_velocity, self.wrist])
+        #: columns of the angle channel's base (an effect's angle columns follow them)
+        self.angle_base_width = self.angle_base.shape[1]
         self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
 
     def shift(self, X, delay: float):
@@ -280,7 +283,7 @@ def combine_designs(data, first, other, first_name, other_name, fits, other_valu
         Xf = np.column_stack([f1, data.shift(f2[:, nb:], float(fits[first_name]['value']))])
     else:
         Xf = np.column_stack([f1, f2[:, nb:]])
-    Xa = np.column_stack([a1, a2[:, 4:]])
+    Xa = np.column_stack([a1, a2[:, data.angle_base_width:]])
     return Xf, Xa
 
 

@@ -303,7 +303,8 @@ def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
         ``jaw_tension`` (N), ``efficiency`` (-), ``gain`` (1/m, grip force per drive
         torque), ``uncertain`` (bool: the stuck tension is not yet determined),
         ``jaw_model`` (rad, model jaw angle from the drum angle) and ``stretch`` (rad: the
-        jaw angle the cable's elastic stretch adds, ``(L_d T0 + L_j Tn) / (E A r_n)``).
+        jaw angle the cable's elastic stretch adds, ``(L_d T0 + L_j Tn) / (E A r_n)``; its two
+        parts ``stretch_drum`` and ``stretch_jaw``).
     """
     current, wrist, jaw = inputs['current'], inputs['wrist'], inputs['jaw']
     objects = inputs['objects']
@@ -345,6 +346,8 @@ def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
     return {'nominal': np.asarray(predicted, float), 'torque': torque, 'drum_tension': drum_tension,
             'jaw_tension': tn, 'efficiency': efficiency, 'gain': gain, 'uncertain': uncertain,
             'jaw_model': np.asarray(model.jaw_angle(inputs['motor'], wrist, current), float),
+            'stretch_drum': drum_side * drum_tension / (section * rn),
+            'stretch_jaw': jaw_side * tn / (section * rn),
             'stretch': (drum_side * drum_tension + jaw_side * tn) / (section * rn)}
 
 
@@ -410,6 +413,7 @@ def assemble_frame(inputs: Mapping, model, *, direction_aware: bool = True,
             'torque': nom['torque'],
             'gain': np.ones(t.size) if inputs['measured'] == 'jaw_torque' else nom['gain'],
             'drum_tension': nom['drum_tension'], 'jaw_tension': nom['jaw_tension'], 'stretch': nom['stretch'],
+            'stretch_drum': nom['stretch_drum'], 'stretch_jaw': nom['stretch_jaw'],
             'nominal': nom['nominal'], 'contact': contact, 'current': inputs['current'],
             'current_rate': inputs['current_rate'], 'jaw': inputs['jaw'], 'wrist': inputs['wrist'],
             'motor': inputs['motor'], 'jaw_velocity': inputs['jaw_velocity'],
