@@ -106,7 +106,7 @@ _TISSUE = OBJECTS.index('tissue')
 
 
 def _base(f):
-    """Base columns of a frame: the nominal and its parameter derivatives (the engine sets them)."""
+    """Return the base columns of a frame: the nominal and its parameter derivatives (set by the engine)."""
     return f['base'] if 'base' in f else f['nominal'][:, None]
 
 

@@ -222,7 +222,7 @@ def _prepare(train_logs, test_logs, model, analysis_rate, default_object, blocks
 
 
 def _training_rows(data: PooledData, frames) -> list[np.ndarray]:
-    """Indices (within each frame) of the samples the fits may see, at most MAX_FIT_ROWS in all."""
+    """Return the indices (within each frame) of the samples the fits may see, MAX_FIT_ROWS at most."""
     offsets = np.cumsum([0] + [len(f['t']) for f in frames])
     train = np.flatnonzero(data.train)
     train = train[::max(1, int(np.ceil(train.size / MAX_FIT_ROWS)))]

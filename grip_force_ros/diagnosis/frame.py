@@ -205,7 +205,7 @@ def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
 
 def frame_inputs(log: Mapping[str, np.ndarray], *, measured: str | None = None,
                  default_object: str = 'needle', require_measured: bool = True) -> dict:
-    """The parameter-free part of a frame: signals, smoothed velocities, objects, current steps.
+    """Return the parameter-free part of a frame: signals, smoothed velocities, objects, current steps.
 
     Parameters
     ----------
@@ -279,7 +279,7 @@ def cable_lengths(params, jaw_side_cable_length: float | None = None) -> tuple[f
 
 def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
             jaw_side_cable_length: float | None = None) -> dict[str, np.ndarray]:
-    """The model's part of a frame: the nominal prediction, tensions, model jaw angle, cable stretch.
+    """Return the model's part of a frame: the nominal prediction, tensions, model jaw angle, stretch.
 
     Parameters
     ----------

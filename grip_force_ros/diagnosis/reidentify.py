@@ -96,7 +96,7 @@ class Reidentified:
         return [name for _, name in sorted(out, reverse=True)]
 
     def as_json(self) -> dict:
-        """The result's ``calibration`` entries: ``parameters``, ``parameters_off``, ``reidentification``."""
+        """Return the result's ``calibration`` entries: parameters, parameters_off, reidentification."""
         parameters = {}
         off = self.off
         for name in REIDENTIFIED:
