@@ -29,6 +29,8 @@ COMMANDS = {
     'faultcheck': 'faultcheck',
     'soak': 'soak',
     'bench': 'bench',
+    'load': 'load',
+    'loadcheck': 'loadcheck',
 }
 
 
