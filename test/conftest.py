@@ -54,3 +54,16 @@ def cpu_load(request):
     from grip_force_ros.bench.load import MAX_SECONDS, LoadGenerator
     with LoadGenerator(request.config.getoption('--load-workers'), seconds=MAX_SECONDS) as load:
         yield load
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests of the ros2 command-line tools (test/_ros_tools.py) ``ros`` too.
+
+    They start real nodes over DDS (``ros2 launch``, ``ros2 topic``, crtk_msgs between
+    processes), so ``-m ros`` (``grip-force loadcheck``) must select them with the others.
+    """
+    ros = pytest.mark.ros
+    for item in items:
+        module = getattr(item, 'module', None)
+        if module is not None and hasattr(module, 'require_ros_tools'):
+            item.add_marker(ros)

@@ -98,6 +98,7 @@ def test_cli_rejects_unknown_part(capsys):
     assert 'warp' in capsys.readouterr().err
 
 
+@pytest.mark.ros
 @pytest.mark.timeout(240)
 def test_bench_all_parts_tiny(tmp_path):
     """Floor, product (real node processes), model and diagnosis in one short run."""

@@ -93,7 +93,7 @@ def print_report(result: dict, stream=sys.stdout) -> None:
 
 
 def run(args) -> int:
-    from grip_force_ros.nodes.processes import ProcessError, pick_domain_ids
+    from grip_force_ros.nodes.processes import ProcessError, reserve_domains
     from grip_force_ros.params import ParameterError, load_params_file
     from grip_force_ros.params.files import instrument_path
 
@@ -126,7 +126,9 @@ def run(args) -> int:
         config = instrument_path(args.config)
         params = load_params_file(config)
         out = Path(args.out) if args.out else _default_out('demo')
-        domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]
+        # a free domain, held until this run ends (no other run on the machine takes it)
+        held = reserve_domains(1) if args.domain_id is None else None
+        domain = args.domain_id if held is None else held.domain_id
         spec = RunSpec(config=config, duration=args.duration or DEMO_DURATION,
                        label=params.instrument_name)
         progress = None if args.quiet else Progress(sys.stderr)

@@ -192,7 +192,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         than two) and ``runs_still_spoiled``.
     """
     from grip_force_ros.identify import calibrated_yaml, fit_instrument
-    from grip_force_ros.nodes.processes import pick_domain_ids
+    from grip_force_ros.nodes.processes import reserve_domains
     from grip_force_ros.logs import read_log
     from grip_force_ros.params import load_params_file
 
@@ -206,8 +206,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     n = len(configs)
     if domain_id is not None:
         domains = list(range(domain_id, domain_id + n))
-    else:
-        domains = pick_domain_ids(n)
+    else:   # free domains, held until this function returns (no other run takes them)
+        held = reserve_domains(n)
+        domains = held.ids
     scales = [plant_scales(k, plant_error) for k in range(n)]
     gain = naive_gain(configs[0])
     _log(log, f'compare: {n} instruments {names}, plants off by {plant_error:.0%} '
