@@ -92,13 +92,17 @@ def test_ctrl_c_stops_every_node(tmp_path):
             children = psutil.Process(demo.pid).children(recursive=True)
             time.sleep(0.2)
         assert len(children) >= 3, 'the three nodes never started'
+        names = [' '.join(c.cmdline()[:2]) for c in children if c.is_running()]
         time.sleep(2.0)
+        sent = time.monotonic()
         demo.send_signal(signal.SIGINT)
-        _, err = demo.communicate(timeout=30)
+        out, err = demo.communicate(timeout=30)
     finally:
         if demo.poll() is None:
             demo.kill()
-    assert demo.returncode == 130, err[-2000:]
+    assert demo.returncode == 130, (
+        f'exit {demo.returncode} {time.monotonic() - sent:.1f} s after SIGINT; children {names}; '
+        f'stderr: {err[-1500:]!r}; stdout: {out[-1500:]!r}')
     assert 'interrupted' in err
     gone, alive = psutil.wait_procs(children, timeout=5)
     assert not alive, [p.pid for p in alive]

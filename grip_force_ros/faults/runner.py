@@ -25,6 +25,7 @@ from pathlib import Path
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
+from grip_force_ros.control.inputs import source_timeouts
 from grip_force_ros.faults.catalogue import SOURCES, FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
@@ -252,13 +253,15 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     if case.outcome in ('reject_safe', 'stale_safe') and not safe_rows:
         problems.append('output never went to the safe state')
     if case.outcome == 'stale_safe':
+        timeout = _case_timeout(case, params)
+        detail['watchdog_timeout_ms'] = round(timeout * 1e3, 3)
         latency = _watchdog_latency(case, probe, last_good, rows, session)
         detail['safe_after_last_input_ms'] = None if latency is None else round(latency * 1e3, 3)
-        limit = params.watchdog_timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
+        limit = timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
         detail['safe_latency_limit_ms'] = round(limit * 1e3, 3)
         received = _watchdog_latency(case, probe, last_received, rows, session)
         detail['safe_after_last_receive_ms'] = None if received is None else round(received * 1e3, 3)
-        steps = _steps_to_safe(case, probe, last_received, rows, params.watchdog_timeout)
+        steps = _steps_to_safe(case, probe, last_received, rows, timeout)
         detail['controller_steps_after_timeout'] = steps
         if latency is None or steps is None:
             problems.append('no safe output after the last input')
@@ -320,12 +323,22 @@ def _diag_mode(values: dict) -> Mode | None:
     return None
 
 
+def _case_sources(case) -> tuple:
+    """Input sources a message or restart case silences or faults."""
+    if case.kind == 'restart':
+        return ('instrument', 'actuator')
+    return SOURCES if case.source == 'all' else (case.source,)
+
+
+def _case_timeout(case, params) -> float:
+    """Watchdog timeout (s) that applies to the case: the shortest of its sources'."""
+    timeouts = source_timeouts(params)
+    return min(timeouts[s] for s in _case_sources(case))
+
+
 def _watchdog_latency(case, probe, last_good, rows, session):
     """Time from the last good input of the silenced source to the first safe output (s)."""
-    if case.kind == 'restart':
-        sources = ('instrument', 'actuator')
-    else:
-        sources = (case.source,)
+    sources = _case_sources(case)
     # the last good sample went out just before the fault window began
     last = max(last_good[s] for s in sources if s in last_good)
     if last != last:
@@ -345,7 +358,7 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
     DDS delivery and of scheduling stalls of a loaded machine, which the wall-clock
     latencies include.
     """
-    sources = ('instrument', 'actuator') if case.kind == 'restart' else (case.source,)
+    sources = _case_sources(case)
     last = max(last_good[s] for s in sources if s in last_good)
     if last != last:
         return None
