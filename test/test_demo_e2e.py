@@ -17,14 +17,18 @@ pytestmark = [
 ]
 
 
-#: Demo runs tried until one is not spoiled by a starved node (a loaded CI machine).
+#: A run spoiled in its hold phase (an input lost for longer than its watchdog timeout, or a
+#: topic silent for 100 ms: docs/demo.md) is redone at most twice; a third spoiled run fails
+#: the hold test with the causes of all three. A late input (control went on) spoils nothing.
 ATTEMPTS = 3
 
 
 @pytest.fixture(scope='module')
 def demo_run(tmp_path_factory):
+    """(output folder, result JSON, problems of each spoiled attempt) of the last run."""
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    for _ in range(ATTEMPTS):
+    spoiled = []
+    for attempt in range(ATTEMPTS):
         out = tmp_path_factory.mktemp('demo')
         proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
                                '4', '--json', '--quiet', '--out', str(out)],
@@ -33,12 +37,14 @@ def demo_run(tmp_path_factory):
         result = json.loads(proc.stdout)
         if not result['problems']:
             break
-    return out, result
+        spoiled.append(f"attempt {attempt + 1}: {'; '.join(result['problems'])} (load average "
+                       f'{os.getloadavg()[0]:.1f})')
+    return out, result, spoiled
 
 
 def test_bag_holds_every_topic_and_rosbags_reads_it(demo_run):
     from rosbags.highlevel import AnyReader
-    out, result = demo_run
+    out, result, _ = demo_run
     bag = out / 'bag'
     assert result['bag'] == str(bag) and (bag / 'metadata.yaml').exists()
     with AnyReader([bag]) as reader:
@@ -53,7 +59,7 @@ def test_bag_holds_every_topic_and_rosbags_reads_it(demo_run):
 
 
 def test_plot_and_results_are_written(demo_run):
-    out, result = demo_run
+    out, result, _ = demo_run
     plot = out / 'summary.png'
     assert result['plot'] == str(plot)
     assert plot.read_bytes()[:4] == b'\x89PNG' and plot.stat().st_size > 30_000
@@ -64,10 +70,12 @@ def test_plot_and_results_are_written(demo_run):
 
 
 def test_hold_force_reaches_the_target(demo_run):
-    _, result = demo_run
-    if result['problems']:
-        pytest.skip(f'{ATTEMPTS} demo runs all spoiled by a starved node (machine overloaded): '
-                    f"{result['problems'][0]}")
+    _, result, spoiled = demo_run
+    assert not result['problems'], f'{ATTEMPTS} demo runs spoiled: ' + ' | '.join(spoiled)
+    # late inputs and safe-state entries are reported apart; none of the latter in this run
+    assert set(result['late_inputs']) >= {'total'} and result['metrics']['late_inputs'] >= 0
+    hold = result['phases']['hold']
+    assert not [e for e in result['safe_state_entries'] if hold[0] <= e['t'] <= hold[1]]
     m = result['metrics']
     assert m['target_force'] > 1.0                               # N: the grasp did squeeze
     assert abs(m['hold_error_mean']) < 0.1 * m['target_force']   # sensorless, same plant

@@ -10,6 +10,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from grip_force_ros.control import Mode
+from grip_force_ros.control.inputs import SOURCES
 from grip_force_ros.trajectories import Trajectory
 
 #: Share of the hold phase, at its end, over which the force counts as steady.
@@ -201,6 +202,52 @@ def safe_state_entries(diagnostics, window: tuple[float, float], offset: float =
                 out.append({'t': round(tt, 3),
                             'reason': status['values'].get('reasons') or status['message']})
             last = mode
+    return out
+
+
+def late_inputs(diagnostics, window: tuple[float, float], offset: float = 0.0,
+                name_part: str = 'controller') -> dict:
+    """Late inputs the controller counted within ``window`` (s, data axis), per source.
+
+    Late: older than three of its own sample intervals but not lost (control went on with
+    the last value; docs/control.md). The controller's /diagnostics carry cumulative
+    counts (``late_<source>``) and the largest age (``late_<source>_max_ms``); the counts
+    in the window are the last report in it minus the last report before it.
+
+    Parameters
+    ----------
+    diagnostics, window, offset, name_part
+        As :func:`safe_state_entries`.
+
+    Returns
+    -------
+    dict
+        ``total`` (int) and, per source with late inputs in the window, ``{'count': int,
+        'max_ms': float}`` (``max_ms``: the largest age reported within the window, ms).
+    """
+    before: dict = {}
+    last: dict = {}
+    oldest: dict = {}          # source -> largest age reported in the window (ms)
+    for t, statuses in diagnostics:
+        for status in statuses:
+            if name_part not in status['name']:
+                continue
+            values = status['values']
+            tt = t - offset
+            if tt < window[0]:
+                before = values
+            elif tt <= window[1]:
+                last = values
+                for source in SOURCES:
+                    age = values.get(f'late_{source}_max_ms')
+                    if age is not None:
+                        oldest[source] = max(oldest.get(source, 0.0), float(age))
+    out: dict = {'total': 0}
+    for source in SOURCES:
+        count = int(last.get(f'late_{source}', 0)) - int(before.get(f'late_{source}', 0))
+        if count > 0:
+            out[source] = {'count': count, 'max_ms': oldest.get(source, float('nan'))}
+            out['total'] += count
     return out
 
 

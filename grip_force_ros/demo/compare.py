@@ -145,6 +145,9 @@ def _done(job: dict, result: dict) -> str:
     text = f"  {job['spec']['label']}: done ({result['wall_time']:.1f} s"
     if ratio is not None:
         text += f', steady hold force / target {ratio:.3f}'
+    late = (result.get('late_inputs') or {}).get('total')
+    if late:
+        text += f', {late} late input(s)'
     if result['spoiled_attempts']:
         text += f", {len(result['spoiled_attempts'])} spoiled run(s) redone: " \
                 f"{result['spoiled_attempts'][0]['problems'][0]}"
@@ -280,7 +283,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                 'steady_ratio': m.get('steady_ratio'), 'target_force': m.get('target_force'),
                 'measured_force': m.get('measured_force'),
                 'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag'],
-                'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts']}
+                'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts'],
+                'late_inputs': r.get('late_inputs') or {},
+                'safe_state_entries': len(r.get('safe_state_entries') or [])}
         instruments.append(per)
     report: dict[str, Any] = {'instruments': instruments}
     for condition in CONDITIONS:

@@ -116,6 +116,7 @@ class RunResult:
     plot: Path | None = None
     timing: dict = field(default_factory=dict)
     safe_events: list = field(default_factory=list)
+    late_inputs: dict = field(default_factory=dict)
     problems: list = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
@@ -131,6 +132,7 @@ class RunResult:
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
             'metrics': self.metrics, 'safe_state_entries': self.safe_events,
+            'late_inputs': self.late_inputs,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
@@ -395,6 +397,8 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     events = analysis.safe_state_entries(diagnostics, (0.0, result.trajectory.duration), start)
     result.metrics['safe_state_entries'] = len(events)
     result.safe_events = events
+    result.late_inputs = analysis.late_inputs(diagnostics, (0.0, result.trajectory.duration), start)
+    result.metrics['late_inputs'] = result.late_inputs['total']
     if 'hold' in windows:
         hold = windows['hold']
         result.metrics['largest_gap_hold'] = max(
