@@ -147,10 +147,19 @@ def test_needle_grasp_reaches_target_force_with_load_cell_feedback(tmp_path):
     assert np.median(periods) == pytest.approx(1e-3, rel=0.2)
 
 
+#: Sensorless hold on a plant that matches its YAML: the load cell's mean may differ from the
+#: target by the model's residual. Expected within ~2 % (docs/control.md: +1.0 % for the same
+#: grasp on the same sim without ROS; three runs here: -1.6 %, -0.1 %, +0.2 %); bound 3 %:
+#: after a move the stick band's state can be 1-3 % off, because
+#: the sim's drum tension lags gear*K*I/r0 (drum inertia, cable compliance). The load cell's
+#: own noise (0.02 N std) averages to ~1e-3 N over the hold's > 500 samples.
+SENSORLESS_HOLD_TOLERANCE = 0.03
+
+
 def test_needle_grasp_sensorless_tracks_its_estimate(tmp_path):
     """Without a sensor the loop closes on the model estimate: the estimate must hold the
-    target. How close the load cell comes is the model's accuracy (printed; the instrument
-    comparison of `grip-force demo --compare-instruments` judges it)."""
+    target, and with the plant as its YAML says the load cell must too, within the model's
+    residual (:data:`SENSORLESS_HOLD_TOLERANCE`)."""
     params = load_params_file(CONFIG)
     rec = run_loop(tmp_path, 5.5, controller={'force_sensor_enabled': False},
                    master={'trajectory': 'needle_grasp'})
@@ -162,6 +171,7 @@ def test_needle_grasp_sensorless_tracks_its_estimate(tmp_path):
     print(f'sensorless hold: estimate {estimate.mean():.3f} N, load cell {force.mean():.3f} N, '
           f'target {target:.3f} N')
     assert np.isfinite(force).all() and force.size > 100
+    assert abs(force.mean() - target) < SENSORLESS_HOLD_TOLERANCE * target, (force.mean(), target)
 
 
 def _summary(rec):
