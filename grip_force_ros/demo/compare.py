@@ -165,7 +165,8 @@ def _log(stream: TextIO | None, text: str) -> None:
 def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = None,
                         plant_error: float = 0.2, parallel: bool = False,
                         domain_id: int | None = None, task_duration: float = TASK_DURATION,
-                        log: TextIO | None = None) -> dict[str, Any]:
+                        log: TextIO | None = None, conditions: Sequence[str] = CONDITIONS,
+                        plot: bool = True) -> dict[str, Any]:
     """Calibrate, then run the four conditions on every instrument; return the report.
 
     Parameters
@@ -185,6 +186,11 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         Length of each run's needle-grasp task (s).
     log : text stream, optional
         Progress lines go here (default: none).
+    conditions : sequence of str
+        Which of :data:`CONDITIONS` to run after the calibration (default all; the CI test
+        of the calibrated sensorless spread runs 'controlled' only).
+    plot : bool
+        Draw ``compare.png`` (needs every condition).
 
     Returns
     -------
@@ -199,6 +205,10 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     from grip_force_ros.logs import read_log
     from grip_force_ros.params import load_params_file
 
+    unknown = [c for c in conditions if c not in CONDITIONS]
+    if unknown or not conditions:
+        raise ValueError(f'conditions {list(conditions)}: each one of {CONDITIONS}')
+    conditions = [c for c in CONDITIONS if c in conditions]
     started = time.monotonic()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -222,7 +232,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     # feedback), slow ramps up: the pulley friction stays in its loading direction. A force
     # loop would overshoot and settle from above, where the stick-slip friction holds a
     # different tension than the model describes.
-    _log(log, 'stage 1/5: calibration grasps (current staircase on the load cell)')
+    _log(log, f'stage 1/{len(conditions) + 1}: calibration grasps (current staircase on the load cell)')
     jobs = []
     for k, config in enumerate(configs):
         params = load_params_file(config)
@@ -265,8 +275,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         return base
 
     runs: dict[str, list[dict]] = {}
-    for stage, condition in enumerate(CONDITIONS, start=2):
-        _log(log, f'stage {stage}/5: {condition}')
+    for stage, condition in enumerate(conditions, start=2):
+        _log(log, f'stage {stage}/{len(conditions) + 1}: {condition}')
         jobs = [{'spec': spec_for(condition, k),
                  'out_dir': str(out_dir / names[k] / condition), 'domain_id': domains[k],
                  'analyse': True, 'plot': True} for k in range(n)]
@@ -276,7 +286,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     for k in range(n):
         per = {'name': names[k], 'config': str(configs[k]), 'plant': scales[k],
                'calibration': calibrations[k], 'runs': {}}
-        for condition in CONDITIONS:
+        for condition in conditions:
             r = runs[condition][k]
             m = r['metrics'] or {}
             per['runs'][condition] = {
@@ -287,15 +297,15 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                 'late_inputs': r.get('late_inputs') or {},
                 'safe_state_entries': len(r.get('safe_state_entries') or [])}
         instruments.append(per)
-    report: dict[str, Any] = {'instruments': instruments}
-    for condition in CONDITIONS:
+    report: dict[str, Any] = {'instruments': instruments, 'conditions': list(conditions)}
+    for condition in conditions:
         report[f'spread_{condition}'] = spread(
             [i['runs'][condition]['steady_ratio'] for i in instruments])
         clean = [i['runs'][condition]['steady_ratio'] for i in instruments
                  if not i['runs'][condition]['problems']]
         report[f'spread_{condition}_unspoiled'] = spread(clean) if len(clean) >= 2 else None
     report['runs_still_spoiled'] = [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
-                                    for i in instruments for c in CONDITIONS
+                                    for i in instruments for c in conditions
                                     if i['runs'][c]['problems']]
     report['naive_current_closed'] = gain
     report['plant_error'] = plant_error
@@ -303,8 +313,10 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     report['wall_time'] = time.monotonic() - started
     report['out_dir'] = str(out_dir)
     _json_safe(report)
-    from grip_force_ros.demo.plot import compare_plot
-    report['plot'] = str(compare_plot(report, out_dir / 'compare.png'))
+    report['plot'] = None
+    if plot and list(conditions) == list(CONDITIONS):
+        from grip_force_ros.demo.plot import compare_plot
+        report['plot'] = str(compare_plot(report, out_dir / 'compare.png'))
     (out_dir / 'compare.json').write_text(json.dumps(report, indent=1))
     return report
 
@@ -324,16 +336,17 @@ def _json_safe(obj: Any) -> Any:
 
 def format_report(report: dict[str, Any]) -> str:
     """Format a table: steady hold force / target per instrument and condition, then the spreads."""
-    lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in CONDITIONS)]
+    conditions = report.get('conditions', CONDITIONS)
+    lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in conditions)]
     for inst in report['instruments']:
         cells = []
-        for c in CONDITIONS:
+        for c in conditions:
             v = inst['runs'][c]['steady_ratio']
             cells.append(f'{v:14.3f}' if v is not None else f"{'n/a':>14s}")
         lines.append(f"{inst['name']:28s}" + ''.join(cells))
     lines.append(f"{'spread (max - min)':28s}" + ''.join(
         f"{report[f'spread_{c}']:14.3f}" if report[f'spread_{c}'] is not None else f"{'n/a':>14s}"
-        for c in CONDITIONS))
+        for c in conditions))
     for item in report.get('runs_still_spoiled') or []:
         lines.append(f'spoiled by a starved node after {ATTEMPTS} attempts: {item}')
     lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "
