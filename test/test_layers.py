@@ -23,7 +23,7 @@ MAY_IMPORT = {
     'diagnosis': {'objects', 'effects', 'model', 'sim', 'logs', 'params', 'plotting'},
     'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
     'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
-    'nodes': {'objects', 'effects', 'control', 'sim', 'trajectories', 'params', 'topics'},
+    'nodes': {'objects', 'effects', 'control', 'sim', 'model', 'trajectories', 'params', 'topics'},
     'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
              'params', 'topics', 'plotting'},
     'faults': {'objects', 'effects', 'nodes', 'control', 'sim', 'params', 'topics'},

@@ -43,7 +43,7 @@ def plant_scales(index: int, plant_error: float) -> dict[str, float]:
 
     The first instrument gets the lower friction (and stiffer cable), the second the
     higher, and so on. With the shipped configs sorted by name, the lossiest one (the
-    four-pulley driver: 1.78 N at 0.5 A with +20 % friction) comes first, so every
+    four-pulley driver: 2.76 N at 0.5 A with +20 % friction) comes first, so every
     plant can still reach the 4 N target.
     """
     sign = -1.0 if index % 2 == 0 else 1.0
