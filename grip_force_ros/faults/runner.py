@@ -3,12 +3,18 @@
 * Message, silence and sim-restart faults: the controller node runs in this process
   (``parameter_overrides`` from the instrument YAML), a :class:`FaultProbe` closes the loop
   with a simulated instrument and injects each fault over DDS; one executor thread spins both.
+  Every case that involves the instrument runs a second time against the shipped
+  ``sim_instrument`` process (plant ``sim_instrument``): its states reach the controller
+  through the probe, which applies the fault on the way; "sim restart" kills that process
+  and starts a new one.
 * Runtime parameter faults: the probe calls the controller's parameter services.
 * Parameter-file faults: the ``controller`` executable is started with the bad
   ``--params-file`` and must exit non-zero naming the problem (no traceback).
+* Negative control (:mod:`.defects`): each deliberately broken controller build runs the
+  cases that must catch it; every defect must make at least one of them fail.
 
 :func:`run_faultcheck` returns the report ``{"cases", "passed", "crashes",
-"limit_violations", "failures", "details"}``.
+"limit_violations", "failures", "details", "negative_control"}``.
 """
 from __future__ import annotations
 
@@ -43,6 +49,23 @@ RESUME_JUMP_SHARE = 0.5
 ISOLATION_NS = '/faultcheck_param_file'
 #: Extra allowance on the watchdog latency for DDS delivery and timer jitter (s).
 WATCHDOG_SLACK = 0.002
+#: The plants a case can run against: the probe's own InstrumentSim, or the shipped
+#: ``sim_instrument`` process (relayed through the probe).
+PLANTS = ('probe', 'sim_instrument')
+#: Topic prefix of the ``sim_instrument`` process's states (the probe relays them).
+RELAY_PREFIX = '/faultcheck_sim'
+#: Longest wait for a ``sim_instrument`` process to start and the loop to grip (s).
+PROCESS_READY_TIMEOUT = 30.0
+#: A fault window this short is one bad sample among good ones; it is sent again (at most
+#: SINGLE_SAMPLE_ATTEMPTS times in all) until the controller has taken one.
+SINGLE_SAMPLE_TICKS = 2
+SINGLE_SAMPLE_ATTEMPTS = 5
+
+
+def involves_instrument(case: FaultCase) -> bool:
+    """Tell whether a case faults the instrument's side (so it runs on the sim process too)."""
+    return case.kind in ('message', 'restart') and case.source in (
+        'instrument', 'actuator', 'force', 'all', 'restart')
 
 
 # ---------------------------------------------------------------------------- session
@@ -55,9 +78,14 @@ class Session:
         Instrument YAML (its values become the controller's ``parameter_overrides``).
     sensor : bool
         Controller with ``force_sensor_enabled`` and a probe publishing the load cell.
+    plant : str
+        One of :data:`PLANTS`: the probe's InstrumentSim, or a ``sim_instrument`` process.
+    defect : str, optional
+        A deliberately broken controller (:mod:`.defects`, negative control only).
     """
 
-    def __init__(self, config: Path, sensor: bool = False):
+    def __init__(self, config: Path, sensor: bool = False, plant: str = 'probe',
+                 defect: str | None = None):
         import rclpy
         from rclpy.context import Context
         from rclpy.parameter import Parameter
@@ -74,8 +102,19 @@ class Session:
         overrides = [Parameter(k, value=list(v) if isinstance(v, (list, tuple)) else v)
                      for k, v in values.items()]
         self.controller = ControllerNode(parameter_overrides=overrides, context=self.context)
+        if defect is not None:
+            from grip_force_ros.faults.defects import break_controller
+            break_controller(self.controller, defect)
+        if plant not in PLANTS:
+            raise ValueError(f'unknown plant {plant!r}; one of {PLANTS}')
+        self.plant, self.config, self.sim = plant, Path(config), None
+        self.ready_timeout = READY_TIMEOUT if plant == 'probe' else PROCESS_READY_TIMEOUT
+        self.recovery_timeout = RECOVERY_TIMEOUT
         self.probe = FaultProbe(self.params, rate=self.params.control_rate, sensor=sensor,
-                                master_angle=GRIP_MASTER_ANGLE, context=self.context)
+                                master_angle=GRIP_MASTER_ANGLE, context=self.context,
+                                relay=RELAY_PREFIX if plant == 'sim_instrument' else None)
+        if plant == 'sim_instrument':
+            self.sim = self._start_sim()
         self.executor = self._executor()
         self.executor.add_node(self.controller)
         self.executor.add_node(self.probe)
@@ -105,8 +144,39 @@ class Session:
     def alive(self) -> bool:
         return self.crash is None and self._thread.is_alive()
 
+    # ------------------------------------------------------------------ the sim process
+    def _start_sim(self):
+        """Start the shipped ``sim_instrument`` on the instrument file, its states relayed."""
+        from grip_force_ros.faults.probe import relay_remaps
+        from grip_force_ros.nodes.processes import NodeProcess, node_command
+        log = Path(tempfile.gettempdir()) / f'grip_force_faultcheck_sim_{os.getpid()}.log'
+        return NodeProcess('sim_instrument', command=node_command(
+            'sim_instrument', self.config, remaps=relay_remaps(RELAY_PREFIX)), log_path=log)
+
+    def restart_plant(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
+        """Restart the instrument: the probe's plant, or kill and start the sim process.
+
+        Returns the event of the fault window (``ticks`` probe ticks of silence; stamps
+        shifted by ``stamp_offset`` s from its end on).
+        """
+        done = self.probe.restart_sim(ticks, stamp_offset)
+        if self.sim is None:
+            return done
+        self.killed = {'pid': self.sim.pid}
+        self.sim.popen.kill()               # a crash, not a clean shutdown
+        self.killed['exit_code'] = self.sim.popen.wait()
+        self.recovery_timeout = PROCESS_READY_TIMEOUT   # a new process has to start
+
+        def start_again():
+            done.wait(ticks * self.probe.period * 20 + 2.0)
+            self.sim = self._start_sim()
+        threading.Thread(target=start_again, name='faultcheck-sim-restart', daemon=True).start()
+        return done
+
     def close(self) -> None:
         import rclpy
+        if self.sim is not None:
+            self.sim.stop(grace=2.0)
         self._stop = True
         self._thread.join(timeout=2.0)
         try:
@@ -126,10 +196,10 @@ class Session:
         targets = self.probe.targets[-samples:]
         return len(targets) == samples and targets[0][0] >= since and all(t[2] > 0 for t in targets)
 
-    def wait_gripping(self, timeout: float = READY_TIMEOUT) -> bool:
+    def wait_gripping(self, timeout: float | None = None) -> bool:
         from grip_force_ros.nodes.harness import wait_until
         start = self.probe.now()
-        return wait_until(lambda: self.gripping(start), timeout)
+        return wait_until(lambda: self.gripping(start), timeout or self.ready_timeout)
 
     # ------------------------------------------------------------------ parameters
     def set_parameters(self, values: dict, atomic: bool = False, timeout: float = 5.0):
@@ -202,8 +272,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     from grip_force_ros.nodes.harness import wait_until
     probe, params = session.probe, session.params
     detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
-                    'description': case.description}
+                    'description': case.description, 'plant': session.plant}
     probe.master_angle = GRIP_MASTER_ANGLE if case.master_angle is None else case.master_angle
+    session.recovery_timeout = RECOVERY_TIMEOUT
     if not session.wait_gripping():
         detail.update(passed=False, why='controller not gripping before the fault')
         return detail
@@ -215,7 +286,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         offset = 0.0
         if case.mutate is not None:   # the clock-reset variant carries its stamp shift
             offset = case.mutate({'stamp': 0.0}, 0)[0]['stamp']
-        done = probe.restart_sim(case.ticks, offset)
+        done = session.restart_plant(case.ticks, offset)
     else:
         sources = SOURCES if case.source == 'all' else (case.source,)
         done = probe.inject(sources, case.mutate, case.ticks)
@@ -225,8 +296,22 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     last_received = session.receive_times()
     held = session.held_inputs()     # what the controller holds while the fault lasts
     done.wait(case.ticks * probe.period * 20 + 2.0)
+    attempts = 1
+    if case.kind == 'message' and case.ticks <= SINGLE_SAMPLE_TICKS:
+        # The controller keeps only the newest sample of a topic (KEEP_LAST 1): a single bad
+        # sample that the next good one overtakes before the controller takes it was never
+        # delivered. Send it again (the same fault) until the controller has seen one.
+        while attempts < SINGLE_SAMPLE_ATTEMPTS and not wait_until(
+                lambda: session.rejected_count() > rejected_before, 0.2):
+            attempts += 1
+            done = probe.inject(sources, case.mutate, case.ticks)
+            done.wait(case.ticks * probe.period * 20 + 2.0)
+        detail['attempts'] = attempts
     t1 = probe.now()
-    recovered = wait_until(lambda: session.gripping(t1), RECOVERY_TIMEOUT)
+    recovered = wait_until(lambda: session.gripping(t1), session.recovery_timeout)
+    if case.kind == 'restart' and session.sim is not None:   # the real process, killed and new
+        detail['sim_process'] = {'killed_pid': session.killed['pid'],
+                                 'exit_code': session.killed['exit_code'], 'new_pid': session.sim.pid}
     pattern = re.compile(case.reason, re.I) if case.reason else None
     if pattern is not None:   # /diagnostics may come at a lower rate: give it time
         wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
@@ -245,7 +330,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     )
     problems = []
     if not recovered:
-        problems.append('control did not resume within %.1f s' % RECOVERY_TIMEOUT)
+        problems.append('control did not resume within %.1f s' % session.recovery_timeout)
     if jumps and max(jumps) > RESUME_JUMP_SHARE * step + 1e-9:
         problems.append(f'current jump {max(jumps):.4f} A at resume (> {RESUME_JUMP_SHARE} slew step)')
     if case.outcome in ('reject_safe', 'reject_once', 'stale_safe', 'clamp') and reason_text is None:
@@ -283,6 +368,10 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             problems.append(f'went to the safe state: {unsafe[0][:200]}')
         if grip_share < 0.5:
             problems.append(f'left grip in {1 - grip_share:.0%} of the fault window')
+    if case.outcome == 'bounded':   # a wrong but plausible input: only the limits stand
+        commands = [abs(r[2]) for r in window]
+        detail['peak_command'] = max(commands) if commands else math.nan
+        detail['max_current'] = params.max_current
     detail['rejected_samples'] = rejected
     if case.outcome == 'ignore' and rejected:
         problems.append(f'{rejected} samples rejected: {session.last_rejection()}')
@@ -340,7 +429,9 @@ def _watchdog_latency(case, probe, last_good, rows, session):
     """Time from the last good input of the silenced source to the first safe output (s)."""
     sources = _case_sources(case)
     # the last good sample went out just before the fault window began
-    last = max(last_good[s] for s in sources if s in last_good)
+    # several silenced sources (a restart): the first of them to go stale trips the watchdog
+    last = min((last_good[s] for s in sources if last_good.get(s) == last_good.get(s)),
+               default=math.nan)
     if last != last:
         return None
     safe = [r for r in rows if r[3] == 0.0 and r[1] >= last]
@@ -359,7 +450,9 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
     latencies include.
     """
     sources = _case_sources(case)
-    last = max(last_good[s] for s in sources if s in last_good)
+    # several silenced sources (a restart): the first of them to go stale trips the watchdog
+    last = min((last_good[s] for s in sources if last_good.get(s) == last_good.get(s)),
+               default=math.nan)
     if last != last:
         return None
     steps = 0
@@ -473,8 +566,83 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
 
 
 # ---------------------------------------------------------------------------- all of it
+def _run_group(group: list[FaultCase], config: Path, sensor: bool, plant: str, progress=None,
+               defect: str | None = None) -> tuple[list[dict], int, int]:
+    """Run message, restart and runtime-parameter cases on sessions of one kind.
+
+    A fresh session (controller, probe, plant) after any failure or crash.
+
+    Returns
+    -------
+    tuple
+        (details, crashes, limit violations seen by the sessions).
+    """
+    details: list[dict] = []
+    crashes = violations = 0
+    session = None
+    for case in group:
+        try:
+            if session is None:
+                session = Session(config, sensor=sensor, plant=plant, defect=defect)
+            if case.kind == 'param_set':
+                detail = run_param_set_case(session, case)
+            else:
+                detail = run_message_case(session, case)
+        except Exception:  # noqa: BLE001 - a harness error fails the case, not the run
+            detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                      'passed': False, 'why': 'harness error: ' + traceback.format_exc(limit=3)}
+        if plant != 'probe':
+            detail['name'] = f'{case.name}@{plant}'
+        if session is not None and not session.alive:
+            crashes += 1
+            detail['passed'] = False
+            detail['crash'] = (session.crash or 'executor thread ended')[-800:]
+            detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
+        details.append(detail)
+        if progress:
+            progress(detail)
+        if session is not None and (not session.alive or not detail.get('passed')):
+            violations += session.violation_count()   # also those between cases
+            session.close()   # a fresh controller for the next case
+            session = None
+    if session is not None:
+        violations += session.violation_count()
+        session.close()
+    return details, crashes, violations
+
+
+def run_negative_control(config: str | os.PathLike | None = None, progress=None) -> dict:
+    """Run each defect's matching cases on a controller with that defect (:mod:`.defects`).
+
+    Returns
+    -------
+    dict
+        ``cases`` (defects injected), ``caught`` (defects that made at least one case
+        fail), ``defects``: per defect its cases, ``caught_by`` (the failing ones, with why).
+    """
+    from grip_force_ros.faults.defects import DEFECTS, negative_control_session
+    config = instrument_path(config)
+    by_name = {c.name: c for c in catalogue()}
+    results = []
+    with negative_control_session():
+        for defect in DEFECTS.values():
+            cases = [by_name[n] for n in defect.cases]
+            details = []
+            for sensor in (False, True):
+                group = [c for c in cases if c.sensor == sensor]
+                if group:
+                    details += _run_group(group, config, sensor, 'probe', defect=defect.name)[0]
+            caught_by = {d['name']: d.get('why', '') for d in details if not d.get('passed')}
+            result = {'defect': defect.name, 'description': defect.description,
+                      'cases': list(defect.cases), 'caught': bool(caught_by), 'caught_by': caught_by}
+            results.append(result)
+            if progress:
+                progress(result)
+    return {'cases': len(results), 'caught': sum(r['caught'] for r in results), 'defects': results}
+
+
 def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike | None = None,
-                   progress=None) -> dict:
+                   progress=None, plants=PLANTS, negative_control: bool = True) -> dict:
     """Run ``cases`` (default: the whole catalogue) and return the report.
 
     Parameters
@@ -485,15 +653,36 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         Instrument YAML (path or shipped name) of the controller under test; default
         :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
-        ``progress(detail)`` after each case.
+        ``progress(detail)`` after each case (and each defect of the negative control).
+    plants : sequence of str
+        :data:`PLANTS` to run against: every case on the probe's plant, the cases that
+        involve the instrument (:func:`involves_instrument`) on the ``sim_instrument``
+        process too (named ``<case>@sim_instrument``).
+    negative_control : bool
+        Also run :func:`run_negative_control`.
 
     Returns
     -------
     dict
         ``cases``, ``passed``, ``crashes``, ``limit_violations``, ``failures`` (names and
-        why), ``details`` (one dict per case) and ``seconds``.
+        why), ``details`` (one dict per case run), ``negative_control`` (``{cases, caught,
+        defects}``; ``{cases: 0, caught: 0}`` when not run) and ``seconds``.
     """
+    from grip_force_ros.nodes.processes import reserve_domains
     start = time.monotonic()
+    held = None
+    if not os.environ.get('ROS_DOMAIN_ID'):   # a domain of its own, held for the run
+        held = reserve_domains(1)
+        os.environ['ROS_DOMAIN_ID'] = str(held.domain_id)
+    try:
+        return _run_faultcheck(cases, config, progress, plants, negative_control, start)
+    finally:
+        if held is not None:
+            del os.environ['ROS_DOMAIN_ID']
+            held.release()
+
+
+def _run_faultcheck(cases, config, progress, plants, negative_control, start) -> dict:
     config = instrument_path(config)
     cases = catalogue() if cases is None else list(cases)
     file_cases = [c for c in cases if c.kind == 'param_file']
@@ -505,45 +694,24 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
             daemon=True)
         file_thread.start()
     details: list[dict] = []
-    crashes = 0
-    violations = 0
-    for sensor in (False, True):
-        group = [c for c in cases if c.kind != 'param_file' and c.sensor == sensor]
-        if not group:
-            continue
-        session = None
-        for case in group:
-            if session is None:
-                session = Session(config, sensor=sensor)
-            try:
-                if case.kind == 'param_set':
-                    detail = run_param_set_case(session, case)
-                else:
-                    detail = run_message_case(session, case)
-            except Exception:  # noqa: BLE001 - a harness error fails the case, not the run
-                detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
-                          'passed': False, 'why': 'harness error: ' + traceback.format_exc(limit=3)}
-            if not session.alive:
-                crashes += 1
-                detail['passed'] = False
-                detail['crash'] = (session.crash or 'executor thread ended')[-800:]
-                detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
-            details.append(detail)
-            if progress:
-                progress(detail)
-            if not session.alive or not detail.get('passed'):
-                violations += session.violation_count()   # also those between cases
-                session.close()   # a fresh controller for the next case
-                session = None
-        if session is not None:
-            violations += session.violation_count()
-            session.close()
+    crashes = violations = 0
+    for plant in plants:
+        for sensor in (False, True):
+            group = [c for c in cases if c.kind != 'param_file' and c.sensor == sensor
+                     and (plant == 'probe' or involves_instrument(c))]
+            if group:
+                d, c, v = _run_group(group, config, sensor, plant, progress)
+                details += d
+                crashes += c
+                violations += v
     if file_thread is not None:
         file_thread.join()
         for detail in file_thread_result:
             details.append(detail)
             if progress:
                 progress(detail)
+    negative = (run_negative_control(config, progress) if negative_control
+                else {'cases': 0, 'caught': 0, 'defects': []})
     failures = [{'name': d['name'], 'why': d.get('why', '')} for d in details if not d.get('passed')]
     return {
         'cases': len(details),
@@ -551,6 +719,7 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         'crashes': crashes,
         'limit_violations': violations,
         'failures': failures,
+        'negative_control': negative,
         'seconds': round(time.monotonic() - start, 1),
         'details': details,
     }
