@@ -17,6 +17,20 @@ pytestmark = [
 ]
 
 
+#: Sensorless hold on a plant that matches its YAML (the demo's default): the load cell's
+#: mean may differ from the target by the model's residual, expected within ~2 % (the
+#: closed loop on the same sim without ROS: +1.0 %, docs/control.md; test_ros_nodes: -1.6
+#: to +0.2 %), bound 3 %: the stick band's state can be 1-3 % off after a move, and this
+#: 4 s task moves 2.5x faster than the 10 s default. RMS: that mean plus the load cell's
+#: own noise (0.02 N = 0.5 % of 4 N) and the ripple the current noise (2 mA) makes through
+#: dF/dI ~ 14 N/A (0.03 N = 0.7 %): sqrt(3^2 + 0.5^2 + 0.7^2) % = 3.1 %, bound 4 %.
+HOLD_MEAN_TOLERANCE = 0.03
+HOLD_RMS_TOLERANCE = 0.04
+#: Pull-out force = (sqrt(2) + 1) mu' x the grip estimate (the paper's needle held in three
+#: points, mu' = 0.15): 0.362 x 4 N = 1.45 N while the master holds the target; 5 % for the
+#: estimate's excursions at the pull phase's start (the estimate holds within 1 % after).
+PULL_OUT_TOLERANCE = 0.05
+
 #: A run spoiled in its hold phase (an input lost for longer than its watchdog timeout, or a
 #: topic silent for 100 ms: docs/demo.md) is redone at most twice; a third spoiled run fails
 #: the hold test with the causes of all three. A late input (control went on) spoils nothing.
@@ -77,10 +91,11 @@ def test_hold_force_reaches_the_target(demo_run):
     hold = result['phases']['hold']
     assert not [e for e in result['safe_state_entries'] if hold[0] <= e['t'] <= hold[1]]
     m = result['metrics']
-    assert m['target_force'] > 1.0                               # N: the grasp did squeeze
-    assert abs(m['hold_error_mean']) < 0.1 * m['target_force']   # sensorless, same plant
-    assert m['hold_error_rms'] < 0.15 * m['target_force']
-    assert m['pull_out_force'] > 0.0
+    assert m['target_force'] == pytest.approx(4.0)               # N: grip_force_max, master closed
+    assert abs(m['hold_error_mean']) < HOLD_MEAN_TOLERANCE * m['target_force'], m
+    assert m['hold_error_rms'] < HOLD_RMS_TOLERANCE * m['target_force'], m
+    expected_pull_out = (2 ** 0.5 + 1) * 0.15 * m['target_force']
+    assert m['pull_out_force'] == pytest.approx(expected_pull_out, rel=PULL_OUT_TOLERANCE), m
 
 
 def test_ctrl_c_stops_every_node(tmp_path):

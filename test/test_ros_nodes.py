@@ -8,6 +8,7 @@ process has its own ROS_DOMAIN_ID (conftest.py).
 """
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -142,9 +143,16 @@ def test_needle_grasp_reaches_target_force_with_load_cell_feedback(tmp_path):
     t_grip = now[grip_rows[0]]
     reached = meas_t[(meas_t > t_grip) & (np.abs(meas_f - target) < 0.05 * target)]
     assert reached.size and reached[0] - t_grip < 1.5, 'target force not reached within 1.5 s'
-    # the loop really ran at its rate: median period 1 ms
-    periods = np.diff(now[rec.column('mode') != 'safe'])
-    assert np.median(periods) == pytest.approx(1e-3, rel=0.2)
+    # the loop steps once per actuator state: its median period is the sim's median state
+    # interval (1 ms on a quiet machine; a loaded one delays the sim's timer and both grow
+    # alike: 1.25 ms at load 9); a controller stepping on its timer besides, or skipping
+    # states, would differ. The period itself is reported, not judged (machine-dependent).
+    running = rec.column('mode') != 'safe'
+    periods = np.diff(now[running])
+    states = np.diff(np.unique(rec.column('actuator_time')[running]))
+    print(f'median control period {np.median(periods) * 1e3:.3f} ms, median actuator state '
+          f'interval {np.median(states) * 1e3:.3f} ms (load average {os.getloadavg()[0]:.1f})')
+    assert np.median(periods) == pytest.approx(np.median(states), rel=0.2)
 
 
 #: Sensorless hold on a plant that matches its YAML: the load cell's mean may differ from the
