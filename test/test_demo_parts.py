@@ -273,3 +273,17 @@ def test_late_inputs_and_safe_state_entries_are_reported_apart():
     safe = analysis.safe_state_entries(diagnostics, (0.0, 5.0), offset=10.0)
     assert [e['t'] for e in safe] == [2.5] and 'stale instrument' in safe[0]['reason']
     assert analysis.late_inputs([], (0.0, 5.0)) == {'total': 0}
+
+
+def test_a_run_is_spoiled_by_a_loss_in_the_hold_or_the_pull_test_only():
+    windows = {'close': (0.5, 1.3), 'hold': (1.3, 2.8), 'pull': (2.8, 4.3), 'release': (4.3, 5.0)}
+    clean = {'target_force': 4.0, 'largest_gap_hold': 0.004, 'largest_gap_pull': 0.004,
+             'safe_events': [{'t': 0.9, 'reason': 'stale master input'},       # closing
+                             {'t': 4.6, 'reason': 'stale master input'}]}      # release
+    assert analysis.run_problems(clean, windows) == []
+    pull = dict(clean, safe_events=[{'t': 3.0, 'reason': 'stale actuator input: 31.0 ms old'}])
+    assert analysis.run_problems(pull, windows) == [
+        'safe state at 3.00 s (pull phase): stale actuator input: 31.0 ms old']
+    silent = dict(clean, largest_gap_pull=0.283)
+    assert analysis.run_problems(silent, windows) == [
+        'a topic went silent for 283 ms during the pull phase']

@@ -259,21 +259,29 @@ def largest_gap(times: np.ndarray, window: tuple[float, float]) -> float:
     return float(np.max(np.diff(edges)))
 
 
-def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str]:
-    """Why a run cannot be trusted (empty if it can): stalls and safe-state entries in hold.
+#: The phases the demo's figures come from: the hold (force error, steady ratio) and the
+#: pull test (pull-out force).
+MEASURED_PHASES = ('hold', 'pull')
 
-    A loaded machine can starve a node for a while; the controller then trips its
-    watchdog. Such a run measures the machine, not the controller.
+
+def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str]:
+    """Why a run cannot be trusted (empty if it can): stalls and safe-state entries.
+
+    In the phases the figures come from (:data:`MEASURED_PHASES`). A loaded machine can
+    starve a node for a while; the controller then loses an input and enters its safe
+    state. Such a run measures the machine, not the controller.
     """
     problems = []
-    gap = metrics.get('largest_gap_hold', 0.0)
-    if gap > max_gap:
-        problems.append(f'a topic went silent for {gap * 1e3:.0f} ms during the hold phase')
-    hold = windows.get('hold')
-    for event in metrics.get('safe_events', []):
-        if hold and hold[0] <= event['t'] <= hold[1]:
-            problems.append(f"safe state at {event['t']:.2f} s: {event['reason']}")
-            break
+    for phase in MEASURED_PHASES:
+        gap = metrics.get(f'largest_gap_{phase}', 0.0)
+        if gap > max_gap:
+            problems.append(f'a topic went silent for {gap * 1e3:.0f} ms during the {phase} phase')
+        window = windows.get(phase)
+        for event in metrics.get('safe_events', []):
+            if window and window[0] <= event['t'] <= window[1]:
+                problems.append(f"safe state at {event['t']:.2f} s ({phase} phase): "
+                                f"{event['reason']}")
+                break
     if not metrics.get('target_force', 0.0) > 0:
         problems.append('no grip force target during the hold phase')
     return problems

@@ -399,12 +399,12 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     result.safe_events = events
     result.late_inputs = analysis.late_inputs(diagnostics, (0.0, result.trajectory.duration), start)
     result.metrics['late_inputs'] = result.late_inputs['total']
-    if 'hold' in windows:
-        hold = windows['hold']
-        result.metrics['largest_gap_hold'] = max(
-            analysis.largest_gap(series[t]['t'] - start, hold)
-            for t in (topics.TARGET_FORCE, topics.MEASURED_FORCE, topics.INSTRUMENT_JS,
-                      topics.ACTUATOR_JS))
+    for phase in analysis.MEASURED_PHASES:     # where the figures come from
+        if phase in windows:
+            result.metrics[f'largest_gap_{phase}'] = max(
+                analysis.largest_gap(series[t]['t'] - start, windows[phase])
+                for t in (topics.TARGET_FORCE, topics.MEASURED_FORCE, topics.INSTRUMENT_JS,
+                          topics.ACTUATOR_JS))
     result.problems = analysis.run_problems({**result.metrics, 'safe_events': events}, windows)
     if plot:
         from grip_force_ros.demo.plot import summary_plot
