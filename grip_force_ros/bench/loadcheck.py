@@ -14,6 +14,7 @@ No rclpy here: the tests run in child processes.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -104,8 +105,11 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
     loads = []
     try:
         with open(log, 'w') as out:
+            # SIGINT at its default, as in a terminal: a runner started in the background
+            # (`&`, nohup) would hand the suite SIGINT ignored
             proc = subprocess.Popen(cmd, cwd=tests.parent, env=env, stdout=out,
-                                    stderr=subprocess.STDOUT, start_new_session=True)
+                                    stderr=subprocess.STDOUT, start_new_session=True,
+                                    preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
             while proc.poll() is None and time.monotonic() - start < timeout:
                 loads.append(os.getloadavg()[0])
                 time.sleep(2.0)
