@@ -122,3 +122,10 @@ def test_loadcheck_groups_failures_by_test(tmp_path):
     entry = table['failures_by_test']['test/test_ros_nodes.py::test_b']
     assert entry['failed_runs'] == 2 and entry['runs'] == [1, 2]
     assert table['skips'] == {'test/test_demo_e2e.py::test_c: not built': 2}
+
+
+def test_load_command_refuses_values_beyond_its_bounds(capsys):
+    from grip_force_ros.cli import main
+    assert main(['load', '--seconds', '0']) == 2
+    assert 'seconds' in capsys.readouterr().err
+    assert main(['loadcheck', '--runs', '0']) == 2
