@@ -487,6 +487,7 @@ def test_a_lost_master_trips_its_own_watchdog_and_is_not_counted_late(params):
     feed(inp, t + 130 * PERIOD, 0.0, 0.04, ctrl.command)
     ctrl.step(t + 130 * PERIOD, inp)
     assert ctrl.late_counts['master'] == 0     # lost, not late: the safe state reported it
+    assert ctrl.late_max_age['master'] == 0.0  # nor its age
 
 
 def test_a_stale_actuator_trips_at_its_own_timeout(params):

@@ -123,6 +123,7 @@ class GripController:
         self.late_counts = dict.fromkeys(SOURCES, 0)
         self.late_max_age = dict.fromkeys(SOURCES, 0.0)
         self._late_now = dict.fromkeys(SOURCES, False)   # an episode is under way
+        self._late_age = dict.fromkeys(SOURCES, 0.0)     # s, the oldest age in it so far
 
     def _configure(self, params) -> None:
         """Build the map, PIDs and limiter from ``params`` (state of the loop kept by caller)."""
@@ -223,13 +224,13 @@ class GripController:
                 if age > timeout:
                     why = f'stale {source} input: {age * 1e3:.1f} ms old > {timeout * 1e3:.1f} ms'
                     late_now[source] = False      # lost, not late: the safe state says so
+                    self._late_age[source] = 0.0
                 elif age < -timeout:
                     why = f'{source} receive time {-age * 1e3:.1f} ms ahead of the controller clock'
                 elif age > LATE_FACTOR * getattr(inputs, interval_attr):   # NaN: never late
                     self._late(source, age)
                 elif late_now[source]:            # a fresh sample ended a late episode
-                    late_now[source] = False
-                    self.late_counts[source] += 1
+                    self._late_ended(source)
             if why is not None:
                 reasons = [why] if reasons is None else reasons + [why]
         return _NO_REASONS if reasons is None else tuple(reasons)
@@ -237,8 +238,16 @@ class GripController:
     def _late(self, source: str, age: float) -> None:
         """Note a late input (age s): control goes on with its last value; counted when it ends."""
         self._late_now[source] = True
-        if age > self.late_max_age[source]:
-            self.late_max_age[source] = age
+        if age > self._late_age[source]:
+            self._late_age[source] = age
+
+    def _late_ended(self, source: str) -> None:
+        """Count a late episode that a fresh sample ended (not a loss), with its oldest age."""
+        self._late_now[source] = False
+        self.late_counts[source] += 1
+        if self._late_age[source] > self.late_max_age[source]:
+            self.late_max_age[source] = self._late_age[source]
+        self._late_age[source] = 0.0
 
     # ------------------------------------------------------------------ step
     def step(self, now: float, inputs: ControlInputs) -> ControlOutput:
