@@ -17,6 +17,8 @@ MAX_REJECTION_KINDS = 64
 
 #: Input sources, in the order the controller checks them.
 SOURCES = ('master', 'instrument', 'actuator', 'force')
+#: The sources an instrument (or its simulation) publishes; the master is the console.
+INSTRUMENT_SOURCES = SOURCES[1:]
 #: The schema parameter of each source's watchdog timeout (s): older than it by receive time,
 #: the input is lost and the output goes to the safe state (docs/control.md).
 TIMEOUT_PARAMS = {'master': 'master_watchdog_timeout', 'instrument': 'watchdog_timeout',

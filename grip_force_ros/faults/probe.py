@@ -22,14 +22,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.control.inputs import SOURCES
+from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, SOURCES
 from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, STATE_SUB_QOS
 from grip_force_ros.sim import InstrumentSim
 
 _TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
            'actuator': topics.ACTUATOR_JS, 'force': topics.MEASURED_FORCE}
-#: The sources a ``sim_instrument`` process publishes (relayed by the probe in relay mode).
-INSTRUMENT_SOURCES = ('instrument', 'actuator', 'force')
 
 
 def relay_remaps(prefix: str) -> dict:

@@ -192,6 +192,20 @@ def node_command(name: str, params_file: str | os.PathLike | None = None,
 
 
 # ---------------------------------------------------------------- processes
+def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
+    """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
+
+    A parent started as a background job (``&``, nohup, a CI runner) has SIGINT ignored, and
+    its children would inherit that: they could not be stopped with SIGINT, the first step of
+    :meth:`NodeProcess.stop` (found by the suite run as a background job).
+    """
+    def setup() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        if preexec_fn is not None:
+            preexec_fn()
+    return setup
+
+
 class NodeProcess:
     """One node (or any command) in its own process, stopped for sure.
 
@@ -246,7 +260,7 @@ class NodeProcess:
             self.popen = subprocess.Popen(self.command, env=child_env,
                                           stdout=stdout, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, start_new_session=own_session,
-                                          preexec_fn=preexec_fn, **text)
+                                          preexec_fn=_child_setup(preexec_fn), **text)
         except OSError as exc:
             raise ProcessError(f'cannot start {name}: {exc}') from exc
         finally:
