@@ -8,9 +8,9 @@ a controller with that defect and reports ``negative_control: {cases, caught}``.
 The test-only switch: a defect exists only as a class swapped onto the controller object
 of the fault check's own in-process ``ControllerNode`` (:func:`break_controller`). No
 parameter, environment variable or command-line argument of the ``controller`` executable
-reaches this module, and nothing outside ``faults/`` imports it (``test_ownership`` and
-``test_layers`` guard who imports what), so a robot's controller cannot be started with a
-defect by accident. :func:`break_controller` also refuses to run outside a fault check
+reaches this module (only ``faults/runner.py`` imports it; ``nodes/`` may not import
+``faults/``, ``test_layers``), so a robot's controller cannot be started with a defect by
+accident. :func:`break_controller` also refuses to run outside a fault check
 (:data:`NEGATIVE_CONTROL_FLAG`, set only while :func:`negative_control_session` runs).
 """
 from __future__ import annotations
