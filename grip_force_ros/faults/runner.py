@@ -173,15 +173,21 @@ class Session:
 
         def start_again():
             done.wait(ticks * self.probe.period * 20 + 2.0)
-            self.sim = self._start_sim()
-        threading.Thread(target=start_again, name='faultcheck-sim-restart', daemon=True).start()
+            if not self._stop:          # a closed session starts no process
+                self.sim = self._start_sim()
+        self._restarting = threading.Thread(target=start_again, name='faultcheck-sim-restart',
+                                            daemon=True)
+        self._restarting.start()
         return done
 
     def close(self) -> None:
         import rclpy
+        self._stop = True
+        restarting = getattr(self, '_restarting', None)
+        if restarting is not None:      # let a pending restart finish (or see _stop) first
+            restarting.join(timeout=5.0)
         if self.sim is not None:
             self.sim.stop(grace=2.0)
-        self._stop = True
         self._thread.join(timeout=2.0)
         try:
             self.executor.shutdown(timeout_sec=1.0)
