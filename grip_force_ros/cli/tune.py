@@ -95,7 +95,7 @@ def run(args) -> int:
     png = out_dir / f'tune_{params.instrument_name}.png'
     rates = ' and '.join(f'{r:g} Hz' for r in figure_rates(tuned))
     settling = plot_steps(tuned, png, title=(f'{params.instrument_name}: unit step responses at {rates} '
-                                             'states (nominal linear plant, scheduled gains)'))
+                                             'states\n(nominal linear plant, scheduled gains)'))
     ok = all(r.stable and r.gain_margin_db >= tune.CLAIM_GM_DB and r.phase_margin_deg >= tune.CLAIM_PM_DEG
              for r in result.reports)
     expected = float(params.expected_state_rate)
