@@ -38,13 +38,20 @@ def add_arguments(parser) -> None:
                              "(e.g. 21 or 21.TXT; 'auto' = the default rule: mid frequency, mid "
                              "load); never scored. Without it: zero-shot")
     parser.add_argument('--groups', nargs='+', metavar='GROUP', default=None,
-                        help='transfer: calibration groups (default all: gain efficiency coulomb '
-                             'spring zeros viscous)')
+                        help='transfer: calibration groups (default: every group of '
+                             'grip_force_ros.rig.transfer.GROUPS; listed in docs/real_data.md)')
     parser.add_argument('--sweep', action='store_true',
                         help='transfer: also every single run of the test folder as the '
                              'calibration run (mean, worst, best)')
     parser.add_argument('--ablation', action='store_true',
                         help='transfer: each calibration group alone and all but one')
+    parser.add_argument('--floor', metavar='DIR', default=None,
+                        help='in-folder floor of the transfer model: cross-validation inside '
+                             'this folder and where the error lies (with --out: the figure)')
+    parser.add_argument('--no-consistency', action='store_true',
+                        help='transfer: leave out the session consistency (the motor side of '
+                             'every test run moving the calibration groups); zero-shot is then '
+                             'the trained model as it is')
 
 
 def _summary(result) -> str:
@@ -74,6 +81,9 @@ def _transfer_summary(result) -> str:
              f"held-out RMSE {result['heldout_rmse'] * 1e3:.2f} mN m over "
              f"{len(result['per_run'])} runs (published {result['published_rmse_mNm']:.2f}); "
              f"worst run {result['worst_run']['file']} {result['worst_run']['rmse'] * 1e3:.2f}"]
+    lines.append(f"after the first second {result['heldout_rmse_after_startup'] * 1e3:.2f} mN m; the "
+                 f"start-up ({100 * result['startup']['fraction_of_samples']:.1f} % of the samples) "
+                 f"holds {100 * result['startup']['share_of_squared_error']:.0f} % of the squared error")
     if not result['zero_shot']:
         lines.append(f"zero-shot on the same runs {result['zero_shot_heldout_rmse'] * 1e3:.2f} mN m")
     tare = result['test']['current_tare']
@@ -102,7 +112,8 @@ def _run_transfer(args) -> int:
     try:
         result = transfer(args.train, args.test, calibrate_runs=list(args.calibrate),
                           groups=tuple(args.groups) if args.groups else GROUP_NAMES,
-                          with_sweep=args.sweep, with_ablation=args.ablation, progress=progress)
+                          with_sweep=args.sweep, with_ablation=args.ablation,
+                          consistency=not args.no_consistency, progress=progress)
     except (RigDataError, EstimatorError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
@@ -113,7 +124,42 @@ def _run_transfer(args) -> int:
     return 0
 
 
+def _floor_summary(result) -> str:
+    lines = [f"in-folder floor of {result['folder']} ({result['runs']} runs)"]
+    for label, rows in result['cross_validation'].items():
+        lines.append(f'{label:16s} ' + ', '.join(
+            f"{k} {v['rmse_mNm']:.2f} ({v['rmse_after_startup_mNm']:.2f} after 1 s)"
+            for k, v in rows.items()))
+    bound = result['two_sided_bound_even_odd']
+    lines.append(f"two-sided (non-causal) bound, even/odd: {bound['rmse_mNm']:.2f} "
+                 f"({bound['rmse_after_startup_mNm']:.2f} after 1 s) mN m")
+    for row in result['breakdown']['transfer_model']['by_phase']:
+        lines.append(f"  {row['phase']:36s} {100 * row['fraction_of_samples']:5.1f} % of samples, "
+                     f"RMSE {row['rmse_mNm']:6.2f}, "
+                     f"{100 * row['share_of_squared_error']:4.1f} % of the error")
+    lines.append(f"runtime {result['runtime_s']:.1f} s")
+    return '\n'.join(lines)
+
+
+def _run_floor(args) -> int:
+    from grip_force_ros.rig import RigDataError
+    from grip_force_ros.rig.estimator import EstimatorError
+    from grip_force_ros.rig.floor import analyse_floor
+    from grip_force_ros.rig.transfer import load_folder
+    progress = (lambda msg: print(f'[realdata] {msg}', file=sys.stderr))
+    try:
+        result = analyse_floor(load_folder(args.floor), quick=args.quick, out_dir=args.out,
+                               progress=progress)
+    except (RigDataError, EstimatorError) as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    print(json.dumps(result, indent=1, default=float) if args.json else _floor_summary(result))
+    return 0
+
+
 def run(args) -> int:
+    if args.floor:
+        return _run_floor(args)
     if args.train or args.test:
         if not args.train:
             print('error: --test needs --train', file=sys.stderr)

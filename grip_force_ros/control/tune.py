@@ -571,17 +571,17 @@ def _variant(params, variant: str, model=None) -> PlantData:
 
 
 def loop_transfer(params, loop: str, variant: str = 'nominal', model=None,
-                  rate: float | None = None, data: PlantData | None = None):
+                  rate: float | None = None):
     """Discrete open loop L(z) = PID(z) * z^-1 * plant(z), the gains scheduled at ``rate``.
 
     ``rate``: the state rate (Hz) the PID steps at (default ``expected_state_rate``); the
     gains are the controller's at that rate (:func:`~grip_force_ros.control.schedule.
     scheduled_gains`). ``variant``: a key of :data:`VARIANTS` or (force loops)
-    :data:`EDGE_VARIANTS`; ``data``: its plant numbers when already computed.
+    :data:`EDGE_VARIANTS`.
     """
     rate = float(rate or params.expected_state_rate)
-    d = _variant(params, variant, model) if data is None else data
-    return _controller_tf(params, loop, rate) * discrete_plant(d, loop, 1.0 / rate)
+    return (_controller_tf(params, loop, rate)
+            * discrete_plant(_variant(params, variant, model), loop, 1.0 / rate))
 
 
 def margins(loop_tf, period: float, n: int = 1500) -> tuple[float, float, float, float]:

@@ -1,13 +1,16 @@
 """Identification: instrument parameters fitted to measured data (numpy/scipy, no rclpy).
 
-:mod:`.calibration`: the cable-pulley friction (or another schema parameter of the
-model) from a load-cell grasp, with standard errors, and the calibrated instrument
-YAML. Used by ``grip-force calibrate`` and the demo's instrument comparison; it
-depends on the model and the parameter schema only (nothing below imports it).
+:mod:`.calibration`: one fitter of schema parameters (:func:`fit_parameters`, bounded,
+robust, standard errors from the covariance or a moving-block bootstrap); with it the
+cable-pulley friction (or another schema parameter of the model) from a load-cell grasp
+and the calibrated instrument YAML (``grip-force calibrate``, the demo's instrument
+comparison), and the diagnosis' re-identification of an instrument's parameters on whole
+logs. It depends on the model and the parameter schema only.
 """
 from grip_force_ros.identify.calibration import (FITTABLE, CalibrationError, CalibrationResult,
-                                                 Plateaus, calibrated_yaml, fit_instrument,
+                                                 ParameterFit, Plateaus, block_bootstrap_std,
+                                                 calibrated_yaml, fit_instrument, fit_parameters,
                                                  steady_plateaus)
 
-__all__ = ['FITTABLE', 'CalibrationError', 'CalibrationResult', 'Plateaus', 'calibrated_yaml',
-           'fit_instrument', 'steady_plateaus']
+__all__ = ['FITTABLE', 'CalibrationError', 'CalibrationResult', 'ParameterFit', 'Plateaus',
+           'block_bootstrap_std', 'calibrated_yaml', 'fit_instrument', 'fit_parameters', 'steady_plateaus']

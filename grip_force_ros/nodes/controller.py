@@ -72,6 +72,9 @@ DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
 MIN_STEP_SPACING_PERIODS = 0.5
 #: The timer steps only when no instrument state came for this many state periods:
 FALLBACK_AFTER_PERIODS = 1.5
+#: A timer tick this many timer periods after the previous one follows a stall of this process:
+#: it does not step (once), so that the states that came in meanwhile are taken first.
+STALL_PERIODS = 5.0
 
 #: The plausibility ranges of ControlInputs (copied on a runtime parameter change).
 _INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance',
@@ -106,8 +109,11 @@ class ControllerNode(Node):
         self._min_spacing = MIN_STEP_SPACING_PERIODS * self._period
         self._fallback_after = FALLBACK_AFTER_PERIODS * self._period
         self._last_step = -math.inf        # when the last control step started
+        self._last_timer = -math.inf       # when the timer last fired
+        self._timer_period = 1.0 / params.control_rate   # s, between timer ticks
+        self._late_reported = 0            # late inputs counted at the last /diagnostics
         self._last_state_step = -math.inf  # when the last step on an instrument state started
-        self.steps = {'on_state': 0, 'on_timer': 0}   # control steps by trigger
+        self.steps = {'on_state': 0, 'on_timer': 0, 'deferred_after_stall': 0}   # by trigger
         self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
         try:                               # the profile's topics (dvrk: needs crtk_msgs)
             self.io = controller_io(self, params)
@@ -179,9 +185,18 @@ class ControllerNode(Node):
         Steps when no instrument state came for :data:`FALLBACK_AFTER_PERIODS` state
         periods (a lost state; when they stop, every half state period at most, so the
         watchdog acts on the stale inputs), never within :data:`MIN_STEP_SPACING_PERIODS`
-        state periods of the previous step.
+        state periods of the previous step. A tick more than :data:`STALL_PERIODS` timer
+        periods after the previous one (this process was not scheduled) does not step: the
+        states that came in meanwhile run first, so a stall of this process is not taken for a
+        lost input (the next tick steps if none came).
         """
         started = time.perf_counter()
+        previous, self._last_timer = self._last_timer, started
+        if previous != -math.inf and started - previous > STALL_PERIODS * self._timer_period:
+            # this process did not run for a while: the inputs' age says nothing about them
+            # until the callbacks queued meanwhile have run (a scheduling stall, not a fault)
+            self.steps['deferred_after_stall'] += 1
+            return
         if (started - self._last_state_step >= self._fallback_after
                 and started - self._last_step >= self._min_spacing):
             self.steps['on_timer'] += 1
@@ -230,10 +245,11 @@ class ControllerNode(Node):
     def diagnostic_status(self, out) -> DiagnosticStatus:
         """Build the controller's DiagnosticStatus for the last output ``out``."""
         params = self._param.params
+        late = sum(self.controller.late_counts.values())
         if out is None or out.mode is Mode.SAFE:
             level = DiagnosticStatus.ERROR
-        elif out.limits_hit or out.reasons or self._limits_seen:
-            level = DiagnosticStatus.WARN
+        elif out.limits_hit or out.reasons or self._limits_seen or late > self._late_reported:
+            level = DiagnosticStatus.WARN   # late inputs since the last report: a warning
         else:
             level = DiagnosticStatus.OK
         mode = out.mode if out is not None else 'starting'
@@ -244,6 +260,8 @@ class ControllerNode(Node):
             'stale' in r or 'input yet' in r for r in out.reasons)
         values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
+        values.update((f'watchdog_timeout_{source}_s', f'{timeout:g}')
+                      for source, timeout in self.controller.timeouts.items())
         faults = [getattr(self.inputs, f'{s}_fault') for s in SOURCES]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
         values['new_rejections'] = '; '.join(self._new_rejections) or 'none'
@@ -257,6 +275,7 @@ class ControllerNode(Node):
         values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an instrument state
         values['steps_on_timer'] = str(self.steps['on_timer'])   # fallback: no fresh state
         values.update(self.io.status())
+        values['steps_deferred_after_stall'] = str(self.steps['deferred_after_stall'])
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'
@@ -272,6 +291,7 @@ class ControllerNode(Node):
         self._diag_pub.publish(array)
         self._limits_seen = set()
         self._new_rejections = []
+        self._late_reported = sum(self.controller.late_counts.values())
 
 
 def main(args=None) -> int:

@@ -25,7 +25,7 @@ from grip_force_ros.rig.estimator import (ALLOWED_INPUTS, CableFrictionObserver,
                                           motor_side_inputs)
 
 #: Seconds at the start of each run reported separately (the observer has seen no sliding yet).
-STARTUP_S = 1.0
+STARTUP_S = C.STARTUP_S
 HOLDOUT_TRAIN_LEVELS = (0, 2)
 HOLDOUT_TEST_LEVELS = (1, 3)
 CV_KINDS = ('level', 'frequency', 'run')

@@ -68,6 +68,9 @@ BACKEND_COMMAND_FULL_SCALE = 2.05
 
 #: Sample period of the rig (s).
 SAMPLE_PERIOD = 0.001
+#: Start-up of a run (s), reported apart and left out of per-run statistics: a 0.1 Hz
+#: stroke starts from rest, and the friction direction is known only after ~0.75 s.
+STARTUP_S = 1.0
 
 #: Run file name XY.TXT: X = frequency step, Y = resisting torque step. The
 #: headers give 0.1..0.5 Hz and 10..40 % (checked against the data: the period

@@ -230,8 +230,10 @@ class ObserverSettings:
     spring_order : int
         Legendre order of the position spring k(x) (0 = none).
     friction_map_order : int
-        Legendre order of a position-dependent friction s * m(x) (pulley and
-        cable ripple along the stroke; 0 = none).
+        Legendre order of a position-dependent Coulomb friction s * m(x) over the disk
+        stroke (0 = none). Order 1 is the transfer model's (:data:`.transfer.TRANSFER_SETTINGS`):
+        the cable pretension, and with it the Coulomb friction, changes along the stroke,
+        by a different amount in each session (docs/real_data.md, "The wide-load floor").
     backlash_angle : str
         Angle that drives the friction state: ``'motor_shaft_angle'`` (gearbox
         output; the backlash of the coupling lies between it and the disk) or
@@ -370,7 +372,9 @@ class FitResult:
         Interpretable parameters: ``gain_Nm_per_A`` G, ``efficiency`` eta (at
         zero load), ``efficiency_at_100mNm`` (with the load-dependent term),
         ``coulomb_Nm`` (at the jaw), ``offset_Nm``, ``viscous_Nms_per_rad``,
-        ``spring_span_Nm`` (peak-to-peak of k(x) over the disk range).
+        ``spring_span_Nm`` (peak-to-peak of k(x) over the disk range),
+        ``coulomb_change_Nm`` (with a friction map: Coulomb friction at the closed end
+        of the disk range minus at the open end, at the jaw).
     training_samples : int
         Sliding samples the fit used.
     """
@@ -408,6 +412,10 @@ def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
         shape = sum(coef[k] * np.polynomial.legendre.legval(grid, [0.0] * int(k[8:]) + [1.0])
                     for k in spring)
         out['spring_span_Nm'] = float(np.ptp(shape)) * gain
+    friction = [k for k in names if k.startswith('friction_P')]
+    if friction:
+        # P_k(+1) - P_k(-1) = 1 - (-1)^k: the odd terms change the friction along the stroke
+        out['coulomb_change_Nm'] = sum(coef[k] * (1 - (-1) ** int(k[10:])) for k in friction) * gain
     return out
 
 

@@ -3,8 +3,9 @@
 The observer (:mod:`.estimator`) fitted on one folder of the MRDLab rig was 10-21 mN*m
 off on the others. What the motor side alone fixes, and what one run of the new folder
 whose jaw torque is read (a calibration jig, once per instrument) fixes of the rest
-(the model itself gains a load-dependent efficiency, :data:`TRANSFER_SETTINGS`, and a
-run's start-up estimate is the session's, :func:`predict_session`):
+(the model itself gains a load-dependent efficiency and a Coulomb friction that changes
+along the stroke, :data:`TRANSFER_SETTINGS`, and a run's start-up estimate is the
+session's, :func:`predict_session`):
 
 * **Motor-side conventions, per folder, from the motor side alone.** Which way is
   closing (:func:`orient`): the current pushes the motor the way it moves (friction),
@@ -18,16 +19,23 @@ run's start-up estimate is the session's, :func:`predict_session`):
   ``Tool_4_Maryland_L_2``, -0.019 A in ``Tool_4_Maryland_L_4``: 15 mN*m at the jaw,
   most of the zero-shot gap). Robust least squares of the measured current on the
   command over the folder's runs gives it; motor-side columns only.
+* **The session consistency, from the motor side of every run of the folder**
+  (:mod:`.consistency`): a run holds one load, so its closing- and opening-branch
+  estimates may differ only by the rig front end's own friction (learned on the
+  training folders); their disagreement over the folder's runs, at several loads,
+  tells the groups that split the branches (efficiency, Coulomb friction and its
+  change along the stroke), zero-shot too.
 * **Per instrument, identified on the calibration run** (:func:`calibrate`): a
   Bayesian update of the forward model's coefficients in physical groups (gain,
-  efficiency, Coulomb friction, spring, zeros, viscous), each regularised towards the
+  efficiency, Coulomb friction, friction map, spring, zeros, viscous; with the session
+  consistency's rows when a session is given), each regularised towards the
   training folders' value with a prior width (a stated tolerance, widened to the
   spread between training folders), the calibration run's residual treated as
   correlated noise plus a run-level offset per friction branch (the run-to-run
   friction scatter seen in training, which one run cannot tell from a parameter).
   What transfers and is never refitted: the model's structure, the Dahl width,
-  thresholds, filters and observer (the fixed settings), the gain and efficiency
-  except through their narrow priors.
+  thresholds, filters and observer (the fixed settings), the gain except through its
+  narrow prior.
 
 Scoring target. Zero-shot: the jaw torque sensor as recorded (the rig firmware tares
 it at the start of each session, header ``torque0AverageTorque``), with the sign of
@@ -51,6 +59,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from grip_force_ros.rig import constants as C
+from grip_force_ros.rig.consistency import FrontEnd, fit_front_end, session_residuals
 from grip_force_ros.rig.estimator import (POSITION_RANGE, CableFrictionObserver, EstimatorError,
                                           ObserverSettings, causal_lowpass, causal_velocity)
 from grip_force_ros.rig.reader import RigDataError, RigRun, data_root, read_runs
@@ -63,8 +72,11 @@ TARE_OUTLIER_A = 0.05
 
 
 #: The transfer model: the one-folder observer's settings plus the load-dependent
-#: efficiency (the training folders together span 10-100 % loads).
-TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True)
+#: efficiency (the training folders together span 10-100 % loads) and a Coulomb friction
+#: that changes linearly along the disk stroke (friction map, Legendre P1): in
+#: ``Tool_4_Maryland_L_4`` it falls by 28 mN*m at the jaw from the open to the closed end,
+#: in ``L_2`` by 9 mN*m (docs/real_data.md, "The wide-load floor").
+TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True, friction_map_order=1)
 
 
 # -- folders: read, orient, tare ---------------------------------------------------------------
@@ -338,6 +350,11 @@ class CalibrationGroup:
         Unit of the group's parameters.
     meaning : str
         What it is physically.
+    splits_branches : bool
+        The group moves the closing and opening friction branches apart (efficiency,
+        Coulomb friction and its map): the session consistency, which compares the two
+        branches, informs it. The others move both branches together (gain, zeros,
+        spring, viscous) and are left to the calibration run.
     """
 
     name: str
@@ -346,23 +363,31 @@ class CalibrationGroup:
     prior_std: float
     unit: str
     meaning: str
+    splits_branches: bool = False
 
 
 #: The per-instrument groups. Prior widths are engineering tolerances: motor torque
 #: constant and pulley radii (Maxon datasheet +-5 %, here +-3 % on their product),
 #: friction efficiency of cable over pulleys (+-30 % of the direction-dependent part),
-#: Coulomb friction from pretension (+-15 %), zeros left after the current tare and the
-#: jaw sensor zero found against the resisting motor (+-5 mA: 5 mN*m at the jaw), spring
-#: from cable pretension (+-5 mA per Legendre coefficient), viscous friction (+-2 mA*s/rad).
+#: Coulomb friction from pretension (+-15 %), its change along the stroke (the same
+#: +-15 % of the 0.08 A Coulomb level: +-12 mA on the P1 coefficient), zeros left after
+#: the current tare and the jaw sensor zero found against the resisting motor (+-5 mA:
+#: 5 mN*m at the jaw), spring from cable pretension (+-5 mA per Legendre coefficient),
+#: viscous friction (+-2 mA*s/rad).
 GROUPS = (
     CalibrationGroup('gain', ('alpha0', 'alpha1', 'alpha1_quad'), 'scale', 0.03, '1 (relative)',
                      'loss-free current-to-jaw-torque gain G: motor torque constant x gear x '
                      'pulley ratios (all torque terms scale together)'),
     CalibrationGroup('efficiency', ('alpha1', 'alpha1_quad'), 'scale', 0.30, '1 (relative)',
                      'direction-dependent (tension-proportional) cable friction: efficiency eta '
-                     'and its fall with load'),
+                     'and its fall with load', splits_branches=True),
     CalibrationGroup('coulomb', ('coulomb',), 'scale', 0.15, '1 (relative)',
-                     'load-independent friction from cable pretension (Coulomb)'),
+                     'load-independent friction from cable pretension (Coulomb)',
+                     splits_branches=True),
+    CalibrationGroup('friction_map', ('friction_P1',), 'shift', 0.012, 'A',
+                     'change of the Coulomb friction along the disk stroke (cable pretension '
+                     'varying with the stroke), Legendre P1: half the closed-minus-open change',
+                     splits_branches=True),
     CalibrationGroup('spring', ('spring_P1', 'spring_P2'), 'shift', 0.005, 'A',
                      'position spring over the stroke (cable pretension, jaw), Legendre P1, P2'),
     CalibrationGroup('zeros', ('offset',), 'shift', 0.005, 'A',
@@ -376,11 +401,17 @@ GROUP_NAMES = tuple(g.name for g in GROUPS)
 #: Units of the forward-model coefficients (I in A, tau in N*m, v in rad/s).
 COEFFICIENT_UNITS = {'alpha0': 'A/(N*m)', 'alpha1': 'A/(N*m)', 'alpha2': 'A/(N*m)',
                      'alpha1_quad': 'A/(N*m)^2', 'offset': 'A', 'coulomb': 'A',
-                     'coulomb_slow': 'A', 'spring': 'A', 'viscous': 'A*s/rad'}
+                     'coulomb_slow': 'A', 'spring': 'A', 'friction': 'A', 'viscous': 'A*s/rad'}
 #: Units of the interpretable parameters (:func:`.estimator._physical`).
 PHYSICAL_UNITS = {'gain_Nm_per_A': 'N*m/A', 'efficiency': '1', 'efficiency_at_100mNm': '1',
                   'offset_Nm': 'N*m', 'coulomb_Nm': 'N*m', 'viscous_Nms_per_rad': 'N*m*s/rad',
-                  'spring_span_Nm': 'N*m'}
+                  'spring_span_Nm': 'N*m', 'coulomb_change_Nm': 'N*m'}
+
+
+def coefficient_unit(name: str) -> str:
+    """Return the unit of a forward-model coefficient (``spring_P2``, ``friction_P1``: their family's)."""
+    family, _, order = name.rpartition('_P')
+    return COEFFICIENT_UNITS.get(family if family and order.isdigit() else name, '')
 
 
 @dataclass
@@ -455,6 +486,10 @@ class TrainedModel:
         per resisting-motor command, fitted on the training runs with one intercept
         per folder) and each training folder's sensor zero ``zeros_Nm`` (its
         intercept; removed from its jaw torque before the fit).
+    front_end_steps : FrontEnd or None
+        The front end's closing-minus-opening jaw torque against the load and the
+        consistency noise (:func:`.consistency.fit_front_end`), for the session
+        consistency of a test folder.
     """
 
     estimator: CableFrictionObserver
@@ -465,6 +500,7 @@ class TrainedModel:
     max_torque_Nm: float
     front_end: dict = field(default_factory=dict)
     cache: dict = field(default_factory=dict, repr=False)
+    front_end_steps: FrontEnd | None = None
 
 
 #: Load (N*m) at which the efficiency group's spread between training folders is measured.
@@ -556,7 +592,8 @@ def train(folders: Sequence[Folder], settings: ObserverSettings | None = None) -
         priors[g.name] = max(g.prior_std, spread)
     noise = noise_model(est, runs, cache)
     max_torque = float(max(np.max(r.jaw_torque) for r in runs))
-    return TrainedModel(est, list(folders), noise, priors, per_folder, max_torque, front, cache)
+    return TrainedModel(est, list(folders), noise, priors, per_folder, max_torque, front, cache,
+                        fit_front_end(est, runs, cache))
 
 
 # -- calibration -------------------------------------------------------------------------------
@@ -585,6 +622,11 @@ class Calibration:
         Estimate before the first sliding sample of a run (calibration runs' mean).
     shrunk : float
         Factor (0..1] the update was scaled by to keep every branch slope physical.
+    physical : dict
+        Interpretable parameters before and after (:func:`.estimator._physical`).
+    consistency : dict or None
+        With a session: its runs and the consistency residual (units of the training
+        scatter, RMS over runs and statistics) before and after the update.
     """
 
     estimator: CableFrictionObserver
@@ -596,11 +638,11 @@ class Calibration:
     prior_torque_Nm: float
     shrunk: float
     physical: dict
+    consistency: dict | None = None
 
     def to_json(self) -> dict:
         """Return the calibration as plain JSON types, with units."""
-        units = {k: COEFFICIENT_UNITS.get(k.split('_P')[0] if k.startswith('spring_P') else k, '')
-                 for k in self.coefficients}
+        units = {k: coefficient_unit(k) for k in self.coefficients}
         return {'runs': list(self.runs), 'groups': self.groups,
                 'coefficients': self.coefficients, 'coefficient_units': units,
                 'physical': self.physical,
@@ -608,7 +650,8 @@ class Calibration:
                 'target_sign': self.target_sign,
                 'target_zero_Nm': round(self.target_zero_Nm, 7),
                 'prior_torque_Nm': round(self.prior_torque_Nm, 6),
-                'update_shrunk_to': round(self.shrunk, 4)}
+                'update_shrunk_to': round(self.shrunk, 4),
+                'session_consistency': self.consistency}
 
 
 def _alias(cache: dict, copy, original) -> list:
@@ -626,65 +669,72 @@ def _alias(cache: dict, copy, original) -> list:
 
 
 def _physical_ok(coef: dict, max_torque: float) -> bool:
-    """Every branch slope dI/dtau stays positive (0 < eta < 1 locally) over 0..max torque."""
+    """Check the physics: positive branch slopes, and Coulomb friction positive along the stroke.
+
+    Every branch slope dI/dtau stays positive (0 < eta < 1 locally) over 0..max torque, and
+    the Coulomb friction stays positive everywhere along the stroke (|P1 term| < level).
+    """
     tau = np.linspace(0.0, max_torque, 50)
     split = coef.get('alpha1', 0.0) + 2.0 * coef.get('alpha1_quad', 0.0) * tau
     closing, opening = coef['alpha0'] + split, coef['alpha0'] - split
     return bool(np.all(opening > 0.05 * coef['alpha0']) and np.all(closing >= opening)
-                and coef.get('coulomb', 1.0) > 0)
+                and coef.get('coulomb', 1.0) - abs(coef.get('friction_P1', 0.0)) > 0)
 
 
-def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
-              groups: Sequence[str] = GROUP_NAMES, target_sign: int | None = None) -> Calibration:
-    """Update the per-instrument groups on calibration runs (their jaw torque is read).
+@dataclass
+class Session:
+    """The runs of a test folder whose motor side the calibration may read (every run).
 
-    Bayesian linear regression of the forward model's residual on the calibration
-    runs' sliding samples: one column per group parameter (a scale column for
-    ``scale`` groups, one per coefficient for ``shift`` groups), two run-offset
-    columns (closing and opening branch) per calibration run with the training
-    runs' scatter as their prior (marginalised: never applied), prior widths
-    :attr:`TrainedModel.priors`, noise :class:`NoiseModel`. The update is scaled back
-    if it would make a branch slope unphysical.
+    Holds the session consistency residuals at the trained coefficients and their
+    derivatives along each group parameter, computed once (:func:`_session_jacobian`).
 
-    Parameters
+    Attributes
     ----------
-    model : TrainedModel
-        The fit on the training folders (its groups' values are the priors).
-    cal_runs : sequence of RigRun
-        Oriented, tared runs of the test folder whose jaw torque may be read.
-    groups : sequence of str
-        Groups to calibrate (others keep the training value).
-    target_sign : int, optional
-        Sign of the jaw torque sensor; by default fixed on the calibration runs
-        (the sign of their mean jaw torque: the jaw holds a closing torque).
-
-    Returns
-    -------
-    Calibration
+    runs : list of RigRun
+        Oriented, tared runs; only their motor-side columns are read.
     """
-    if not cal_runs:
-        raise EstimatorError('calibrate needs at least one run')
-    unknown = set(groups) - set(GROUP_NAMES)
-    if unknown:
-        raise EstimatorError(f'unknown calibration groups {sorted(unknown)}; one of {GROUP_NAMES}')
-    est, cache, noise = model.estimator, model.cache, model.noise
-    if target_sign is None:
-        mean_tau = np.mean([np.mean(r.jaw_torque) for r in cal_runs])
-        target_sign = 1 if mean_tau >= 0 else -1
-    gain = model.front_end.get('gain_Nm_per_A', float('nan'))
-    target_zero = float(np.mean([target_sign * np.mean(r.jaw_torque)
-                                 - gain * abs(float(np.mean(r.load_command)))
-                                 for r in cal_runs])) if np.isfinite(gain) else 0.0
-    coef = est.coefficients
+
+    runs: list
+    _jacobians: dict = field(default_factory=dict, repr=False)
+
+
+#: Gauss-Newton steps of the session consistency (chord method: the derivatives at the
+#: trained coefficients, the residuals re-evaluated at each step).
+CONSISTENCY_STEPS = 3
+#: Finite-difference step of the session consistency derivatives, in prior widths.
+CONSISTENCY_EPS = 0.3
+
+
+def _group_parameters(coef: dict, names: list, groups: Sequence[str], priors: dict) -> list:
+    """(group, parameter label, direction in coefficient space, prior std) of each parameter."""
+    out = []
+    for g in GROUPS:
+        present = [k for k in g.coefficients if k in coef]
+        if g.name not in groups or not present:
+            continue
+        if g.kind == 'scale':                     # one relative factor on the group's terms
+            v = np.zeros(len(names))
+            for k in present:
+                v[names.index(k)] = coef[k]
+            out.append((g.name, 'scale', v, priors[g.name]))
+        else:                                     # each coefficient shifted (its unit)
+            for k in present:
+                v = np.zeros(len(names))
+                v[names.index(k)] = 1.0
+                out.append((g.name, k, v, priors[g.name]))
+    return out
+
+
+def _calibration_rows(est: CableFrictionObserver, cache: dict, cal_runs: Sequence[RigRun],
+                      target_sign: int, target_zero: float, theta: np.ndarray):
+    """Forward-model rows of the calibration runs: (design, residual, branch of each row)."""
     names = list(est.fit_result.names)
-    theta = np.array([coef[k] for k in names])
     rows, resid, branches = [], [], []
     for run in cal_runs:
         signed = replace(run, jaw_torque=target_sign * run.jaw_torque - target_zero)
         est._design(run, cache)                   # the original's signals, cached first
         added = _alias(cache, signed, run)
-        rnames, a, y, _ = est._rows(signed, cache)
-        assert rnames == names
+        _, a, y, _ = est._rows(signed, cache)
         resid.append(y - a @ theta)
         # one run holds one load: its torque columns enter at the run's mean torque, so the
         # gain and efficiency groups move only the branch levels at that load (what a run
@@ -704,50 +754,132 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
         branches.append(np.sign(s_sl))
         for key in added:
             cache.pop(key, None)
-    a_all = np.vstack(rows)
-    r_all = np.concatenate(resid)
-    cols, prior, updates, labels = [], [], [], []
-    for g in GROUPS:
-        if g.name not in groups:
+    return np.vstack(rows), np.concatenate(resid), branches
+
+
+def _session_jacobian(model: TrainedModel, session: Session, params: list) -> tuple:
+    """Session consistency residuals at the trained coefficients and their derivatives.
+
+    One column per parameter of ``params`` (finite differences of :data:`CONSISTENCY_EPS`
+    prior widths along its direction), cached on the session by parameter label; zero
+    for a group that moves both branches together (``splits_branches`` False): the
+    consistency compares the branches and does not inform it.
+    """
+    est = model.estimator
+    names = list(est.fit_result.names)
+    theta = est.fit_result.values
+    if 'base' not in session._jacobians:
+        session._jacobians['base'] = session_residuals(est, session.runs, model.front_end_steps,
+                                                       model.cache)
+    base = session._jacobians['base']
+    cols = []
+    splits = {g.name for g in GROUPS if g.splits_branches}
+    for gname, label, v, prior in params:
+        key = (gname, label)
+        if gname not in splits:
+            cols.append(np.zeros(base.size))
             continue
-        present = [k for k in g.coefficients if k in coef]
-        if not present:
-            continue
-        if g.kind == 'scale':
-            v = np.zeros(len(names))
-            for k in present:
-                v[names.index(k)] = coef[k]
-            cols.append(a_all @ v)
-            prior.append(model.priors[g.name])
-            updates.append(v)
-            labels.append((g.name, 'scale'))
-        else:
-            for k in present:
-                v = np.zeros(len(names))
-                v[names.index(k)] = 1.0
-                cols.append(a_all[:, names.index(k)])
-                prior.append(model.priors[g.name])
-                updates.append(v)
-                labels.append((g.name, k))
-    n_update = len(cols)
-    start = 0
-    for br in branches:                      # run-level offsets per branch, marginalised
-        for side in (1, -1):
-            col = np.zeros(r_all.size)
-            col[start:start + br.size] = (br == side)
-            cols.append(col)
-            prior.append(max(noise.run_offset_std_A, 1e-6))
-        start += br.size
-    if n_update == 0:
-        delta, post_std = np.zeros(0), np.zeros(0)
-    else:
-        x = np.column_stack(cols)
+        if key not in session._jacobians:
+            eps = CONSISTENCY_EPS * prior
+            moved = est.with_coefficients(dict(zip(names, theta + eps * v)))
+            session._jacobians[key] = (session_residuals(moved, session.runs, model.front_end_steps,
+                                                         model.cache) - base) / eps
+        cols.append(session._jacobians[key])
+    return base, np.column_stack(cols) if cols else np.zeros((base.size, 0))
+
+
+def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
+              groups: Sequence[str] = GROUP_NAMES, target_sign: int | None = None,
+              session: Session | None = None) -> Calibration:
+    """Update the per-instrument groups on calibration runs and on the session's motor side.
+
+    Bayesian linear regression of the forward model's residual on the calibration
+    runs' sliding samples (their jaw torque is read): one column per group parameter
+    (a scale column for ``scale`` groups, one per coefficient for ``shift`` groups), two
+    run-offset columns (closing and opening branch) per calibration run with the
+    training runs' scatter as their prior (marginalised: never applied), prior widths
+    :attr:`TrainedModel.priors`, noise :class:`NoiseModel`. With a ``session``, the
+    consistency of every run's two friction branches (:mod:`.consistency`, motor side
+    only) adds one row per statistic and run, in units of the training scatter,
+    linearised at the trained coefficients (:data:`CONSISTENCY_STEPS` chord steps). The
+    update is scaled back if it would make a branch slope unphysical.
+
+    Parameters
+    ----------
+    model : TrainedModel
+        The fit on the training folders (its groups' values are the priors).
+    cal_runs : sequence of RigRun
+        Oriented, tared runs of the test folder whose jaw torque may be read; may be
+        empty with a ``session`` (zero-shot: motor side only).
+    groups : sequence of str
+        Groups to calibrate (others keep the training value).
+    target_sign : int, optional
+        Sign of the jaw torque sensor; by default fixed on the calibration runs
+        (the sign of their mean jaw torque: the jaw holds a closing torque), +1 (the
+        header's convention) without calibration runs.
+    session : Session, optional
+        The test folder's runs whose motor side the update may read.
+
+    Returns
+    -------
+    Calibration
+    """
+    if not cal_runs and session is None:
+        raise EstimatorError('calibrate needs a calibration run or a session')
+    unknown = set(groups) - set(GROUP_NAMES)
+    if unknown:
+        raise EstimatorError(f'unknown calibration groups {sorted(unknown)}; one of {GROUP_NAMES}')
+    est, cache, noise = model.estimator, model.cache, model.noise
+    if target_sign is None:
+        mean_tau = np.mean([np.mean(r.jaw_torque) for r in cal_runs]) if cal_runs else 1.0
+        target_sign = 1 if mean_tau >= 0 else -1
+    gain = model.front_end.get('gain_Nm_per_A', float('nan'))
+    target_zero = float(np.mean([target_sign * np.mean(r.jaw_torque)
+                                 - gain * abs(float(np.mean(r.load_command)))
+                                 for r in cal_runs])) if cal_runs and np.isfinite(gain) else 0.0
+    coef = est.coefficients
+    names = list(est.fit_result.names)
+    theta = np.array([coef[k] for k in names])
+    params = _group_parameters(coef, names, groups, model.priors)
+    n_update = len(params)
+    prior = [p[3] for p in params]
+    blocks = []                                   # (design, residual, weight) of each row set
+    if cal_runs:
+        a_all, r_all, branches = _calibration_rows(est, cache, cal_runs, target_sign, target_zero,
+                                                   theta)
+        cols = [a_all @ v for _, _, v, _ in params]
+        start = 0
+        for br in branches:                      # run-level offsets per branch, marginalised
+            for side in (1, -1):
+                col = np.zeros(r_all.size)
+                col[start:start + br.size] = (br == side)
+                cols.append(col)
+                prior.append(max(noise.run_offset_std_A, 1e-6))
+            start += br.size
         weight = (C.SAMPLE_PERIOD / noise.correlation_s) / noise.white_std_A ** 2
-        precision = weight * (x.T @ x) + np.diag(1.0 / np.square(prior))
-        cov = np.linalg.inv(precision)
-        full = cov @ (weight * (x.T @ r_all))
-        delta, post_std = full[:n_update], np.sqrt(np.diag(cov))[:n_update]
-    step = sum((d * u for d, u in zip(delta, updates)), np.zeros(len(names)))
+        blocks.append((np.column_stack(cols), r_all, weight))
+    precision = np.diag(1.0 / np.square(prior))
+    rhs = np.zeros(len(prior))
+    for x, r, w in blocks:
+        precision += w * (x.T @ x)
+        rhs += w * (x.T @ r)
+    full = np.linalg.solve(precision, rhs) if n_update else np.zeros(len(prior))
+    consistency = None
+    if session is not None and n_update and model.front_end_steps is not None:
+        base, jac = _session_jacobian(model, session, params)
+        jac = np.column_stack([jac, np.zeros((jac.shape[0], len(prior) - n_update))])
+        consistency = {'runs': len(session.runs), 'rms_before': float(np.sqrt(np.mean(base ** 2)))}
+        full, current = np.zeros(len(prior)), base
+        for _ in range(CONSISTENCY_STEPS):       # chord steps: rows c(full) + J (delta - full) = 0
+            full = np.linalg.solve(precision + jac.T @ jac, rhs + jac.T @ (jac @ full - current))
+            step = sum((d * p[2] for d, p in zip(full[:n_update], params)), np.zeros(len(names)))
+            moved = est.with_coefficients(dict(zip(names, theta + step)))
+            current = session_residuals(moved, session.runs, model.front_end_steps, cache)
+        consistency['rms_after'] = float(np.sqrt(np.mean(current ** 2)))
+        precision = precision + jac.T @ jac
+    cov = np.linalg.inv(precision) if n_update else np.zeros((0, 0))
+    delta, post_std = full[:n_update], np.sqrt(np.diag(cov))[:n_update]
+    step = sum((d * p[2] for d, p in zip(delta, params)), np.zeros(len(names)))
     shrink = 1.0
     while shrink > 1e-3 and not _physical_ok(dict(zip(names, theta + shrink * step)),
                                              model.max_torque_Nm):
@@ -756,10 +888,10 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
         shrink = 0.0
     new = theta + shrink * step
     prior_torque = float(np.mean([target_sign * np.mean(r.jaw_torque) - target_zero
-                                  for r in cal_runs]))
+                                  for r in cal_runs])) if cal_runs else est.prior_torque
     calibrated = est.with_coefficients(dict(zip(names, new)), prior_torque=prior_torque)
     report: dict = {}
-    for (gname, what), d, sd in zip(labels, delta, post_std):
+    for (gname, what, _, _), d, sd in zip(params, delta, post_std):
         g = next(gr for gr in GROUPS if gr.name == gname)
         entry = report.setdefault(gname, {'unit': g.unit, 'kind': g.kind, 'meaning': g.meaning,
                                           'prior_std': model.priors[gname], 'parameters': {}})
@@ -770,7 +902,7 @@ def calibrate(model: TrainedModel, cal_runs: Sequence[RigRun], *,
                     'calibrated': float(calibrated.fit_result.physical[k][0])}
                 for k in est.fit_result.physical}
     return Calibration(calibrated, [r.file or r.name for r in cal_runs], report, coefficients,
-                       int(target_sign), target_zero, prior_torque, shrink, physical)
+                       int(target_sign), target_zero, prior_torque, shrink, physical, consistency)
 
 
 # -- choosing the calibration run ------------------------------------------------------------------
@@ -808,13 +940,8 @@ DEFAULT_RULE = ('lower median of the folder\'s sine frequencies, of its resistin
 
 
 # -- scoring ---------------------------------------------------------------------------------------
-def _rmse(pred: np.ndarray, target: np.ndarray) -> tuple[float, int]:
-    err = pred - target
-    return float(np.sum(err * err)), int(err.size)
-
-
 #: Seconds at the start of a run left out of the session prior (the estimate there is the prior).
-SESSION_PRIOR_SKIP_S = 1.0
+SESSION_PRIOR_SKIP_S = C.STARTUP_S
 
 
 def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
@@ -859,26 +986,42 @@ def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int =
 
     The target is ``target_sign * jaw_torque - target_zero`` (N*m). ``session_prior``:
     the start of each run at the folder's mean estimate (:func:`predict_session`),
-    else at the estimator's own prior.
+    else at the estimator's own prior. Also the RMSE after each run's first
+    :data:`.constants.STARTUP_S` and the start-up's part: the samples before each run's
+    first sliding sample (the estimate is the start-up value there) and their share of
+    the squared error.
     """
     if session_prior:
         preds, prior = predict_session(est, runs, cache)
     else:
         preds, prior = [est.predict(run, cache=cache) for run in runs], est.prior_torque
     se_total, n_total, per_run = 0.0, 0, []
+    se_late = n_late = se_start = n_start = 0.0
     for run, pred in zip(runs, preds):
-        se, n = _rmse(pred, target_sign * run.jaw_torque - target_zero)
+        err = pred - (target_sign * run.jaw_torque - target_zero)
+        se, n = float(np.sum(err * err)), int(err.size)
         se_total += se
         n_total += n
         per_run.append({'file': run.file or run.name, 'rmse': math.sqrt(se / n)})
+        late = run.t - run.t[0] >= C.STARTUP_S
+        se_late += float(np.sum(err[late] ** 2))
+        n_late += int(late.sum())
+        sliding = np.flatnonzero(est.inversion(run, cache=cache)[1] > 0)
+        first = int(sliding[0]) if sliding.size else err.size
+        se_start += float(np.sum(err[:first] ** 2))
+        n_start += first
     return {'heldout_rmse': math.sqrt(se_total / n_total), 'per_run': per_run,
-            'startup_estimate_Nm': prior}
+            'startup_estimate_Nm': prior,
+            'heldout_rmse_after_startup': math.sqrt(se_late / max(n_late, 1)),
+            'startup': {'fraction_of_samples': n_start / n_total,
+                        'share_of_squared_error': se_start / se_total if se_total else 0.0}}
 
 
 def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NAMES,
-          candidates: Sequence[RigRun] | None = None) -> dict:
+          candidates: Sequence[RigRun] | None = None, session: Session | None = None) -> dict:
     """Held-out RMSE with every single run of ``test`` as the calibration run in turn.
 
+    ``session``: the test folder's motor side in the update as well (:func:`calibrate`).
     Returns mean, worst and best over the candidates, each candidate's figure, and
     the worst single scored run over all candidates (N*m).
     """
@@ -887,7 +1030,7 @@ def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NA
     rows = []
     worst_run = {'rmse': -1.0}
     for cal in candidates:
-        calib = calibrate(model, [cal], groups=groups)
+        calib = calibrate(model, [cal], groups=groups, session=session)
         scored = [r for r in test.runs if r is not cal]
         res = score(calib.estimator, scored, calib.target_sign, cache,
                     target_zero=calib.target_zero_Nm)
@@ -901,25 +1044,38 @@ def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NA
 
 
 def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
-             sweep_candidates: Sequence[RigRun] | None = None) -> list[dict]:
+             sweep_candidates: Sequence[RigRun] | None = None,
+             session: Session | None = None) -> list[dict]:
     """Held-out RMSE with each group calibrated alone, and with all but one.
 
     On the given calibration run(s), and (when ``sweep_candidates``) the mean over
-    those candidates as the single calibration run.
+    those candidates as the single calibration run. With a ``session``, every row
+    updates on the calibration run and the session consistency together, and two rows
+    more take one source away: ``all, calibration run only`` and ``all, session
+    consistency only`` (the calibration run then fixes only the sensor's sign and zero).
     """
-    configs = [('none (zero-shot)', ())] + [(f'only {g}', (g,)) for g in GROUP_NAMES] + \
-        [(f'all but {g}', tuple(x for x in GROUP_NAMES if x != g)) for g in GROUP_NAMES] + \
-        [('all', GROUP_NAMES)]
+    configs = [('none (zero-shot)', (), session)] + \
+        [(f'only {g}', (g,), session) for g in GROUP_NAMES] + \
+        [(f'all but {g}', tuple(x for x in GROUP_NAMES if x != g), session) for g in GROUP_NAMES] + \
+        [('all', GROUP_NAMES, session)]
+    if session is not None:
+        configs += [('all, calibration run only', GROUP_NAMES, None),
+                    ('all, session consistency only', GROUP_NAMES, 'consistency only')]
     cal_ids = {id(r) for r in cal_runs}
     scored = [r for r in test.runs if id(r) not in cal_ids]
     out = []
-    for label, groups in configs:
-        calib = calibrate(model, cal_runs, groups=groups)
+    for label, groups, source in configs:
+        if source == 'consistency only':
+            jig = calibrate(model, cal_runs, groups=())                 # sign and zero only
+            est = calibrate(model, [], groups=groups, session=session).estimator
+            sign, zero = jig.target_sign, jig.target_zero_Nm
+        else:
+            calib = calibrate(model, cal_runs, groups=groups, session=source)
+            est, sign, zero = calib.estimator, calib.target_sign, calib.target_zero_Nm
         row = {'groups': label, 'calibrated': list(groups),
-               'heldout_rmse': score(calib.estimator, scored, calib.target_sign, model.cache,
-                                     target_zero=calib.target_zero_Nm)['heldout_rmse']}
-        if sweep_candidates:
-            sw = sweep(model, test, groups=groups, candidates=sweep_candidates)
+               'heldout_rmse': score(est, scored, sign, model.cache, target_zero=zero)['heldout_rmse']}
+        if sweep_candidates and source != 'consistency only':
+            sw = sweep(model, test, groups=groups, candidates=sweep_candidates, session=source)
             row['sweep_mean'] = sw['mean']
             row['sweep_worst'] = sw['worst']
         out.append(row)
@@ -929,7 +1085,7 @@ def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
 def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[str] = (),
              groups: Sequence[str] = GROUP_NAMES, with_sweep: bool = False,
              with_ablation: bool = False, settings: ObserverSettings | None = None,
-             progress=None) -> dict:
+             consistency: bool = True, progress=None) -> dict:
     """Run the whole transfer evaluation, JSON-ready (the ``grip-force realdata --train`` result).
 
     Parameters
@@ -946,7 +1102,11 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     with_sweep, with_ablation : bool
         Also every single calibration run in turn / the group ablation.
     settings : ObserverSettings, optional
-        Observer settings of the fit (default: the estimator's defaults).
+        Observer settings of the fit (default: :data:`TRANSFER_SETTINGS`).
+    consistency : bool
+        Update on the session consistency of the test folder's runs (motor side only,
+        :mod:`.consistency`) as well, zero-shot and calibrated; False: the calibration
+        run alone, and zero-shot the trained model as it is.
     progress : callable, optional
         ``progress(message)`` at each stage.
     """
@@ -961,6 +1121,7 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     model = train(trains, settings)
     est, cache = model.estimator, model.cache
     zero_shot_sign = 1
+    session = Session(test.runs) if consistency else None
     cal_runs: list = []
     for key in calibrate_runs:
         run = default_calibration_run(test.runs) if key == 'auto' else test.run(key)
@@ -969,7 +1130,8 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     cal_ids = {id(r) for r in cal_runs}
     scored = [r for r in test.runs if id(r) not in cal_ids]
     say(f'scoring {len(scored)} runs of {test.name}')
-    zero = score(est, scored, zero_shot_sign, cache)
+    self_calibrated = calibrate(model, [], groups=groups, session=session) if session else None
+    zero = score(self_calibrated.estimator if session else est, scored, zero_shot_sign, cache)
     result = {
         'train': [_folder_json(f) for f in trains],
         'test': _folder_json(test),
@@ -983,7 +1145,14 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
                   'calibration_priors': model.priors,
                   'noise': vars(model.noise), 'training_max_torque_Nm': model.max_torque_Nm,
                   'front_end_reference': model.front_end,
+                  'front_end_steps': model.front_end_steps.to_json(),
                   'prior_torque_Nm': est.prior_torque},
+        'session_consistency': {
+            'used': session is not None,
+            'zero_shot_update': ({'groups': self_calibrated.groups,
+                                  'consistency': self_calibrated.consistency,
+                                  'physical': self_calibrated.physical}
+                                 if self_calibrated else None)},
         'target': {
             'zero_shot': 'jaw torque sensor as recorded (firmware tare at session start), sign '
                          'of the header spindle convention (right spindle negated as upstream)',
@@ -994,11 +1163,13 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
             'samples': 'every sample of every scored run (start-up included)',
             'startup': 'before the first sliding sample of a run the estimate is the mean '
                        'estimate of the folder\'s runs after their first second (motor side, '
-                       'first pass)'},
+                       'first pass)',
+            'session': 'every run\'s motor side (never its jaw side) may move the calibration '
+                       'groups through the consistency of its two friction branches'},
     }
     if cal_runs:
         say('calibrating on ' + ', '.join(r.file or r.name for r in cal_runs))
-        calib = calibrate(model, cal_runs, groups=groups)
+        calib = calibrate(model, cal_runs, groups=groups, session=session)
         res = score(calib.estimator, scored, calib.target_sign, cache,
                     target_zero=calib.target_zero_Nm)
         result['calibration'] = calib.to_json()
@@ -1007,25 +1178,28 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
         result['heldout_rmse'] = res['heldout_rmse']
         result['per_run'] = res['per_run']
         result['zero_shot_heldout_rmse'] = zero['heldout_rmse']
-        result['startup_estimate_Nm'] = res['startup_estimate_Nm']
     else:
         result['calibration'] = None
+        res = zero
         result['heldout_rmse'] = zero['heldout_rmse']
         result['per_run'] = zero['per_run']
-        result['startup_estimate_Nm'] = zero['startup_estimate_Nm']
+    result['startup_estimate_Nm'] = res['startup_estimate_Nm']
+    result['heldout_rmse_after_startup'] = res['heldout_rmse_after_startup']
+    result['startup'] = res['startup']
     result['heldout_rmse_mNm'] = round(result['heldout_rmse'] * 1e3, 3)
     result['worst_run'] = max(result['per_run'], key=lambda p: p['rmse'])
     result['beats_published'] = bool(result['heldout_rmse'] <= C.PUBLISHED_RMSE_NM)
     if with_sweep:
         say(f'sweep: each of the {len(test.runs)} runs as the calibration run')
-        result['sweep'] = sweep(model, test, groups=groups)
+        result['sweep'] = sweep(model, test, groups=groups, session=session)
         result['sweep']['default_rule_run'] = default_calibration_run(test.runs).file
     if with_ablation:
         say('ablation of the calibration groups')
         base = cal_runs or [default_calibration_run(test.runs)]
         result['ablation'] = {'calibration_runs': [r.file for r in base],
                               'rows': ablation(model, test, base,
-                                               sweep_candidates=test.runs if with_sweep else None)}
+                                               sweep_candidates=test.runs if with_sweep else None,
+                                               session=session)}
     result['runtime_s'] = round(time.perf_counter() - started, 2)
     return result
 
