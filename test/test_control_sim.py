@@ -51,11 +51,13 @@ def test_needle_grasp_holds_the_target_force(paper, sensor):
     assert target == pytest.approx(min(paper.grip_force_max, paper.max_grip_force))
     assert hold[:, 5].mean() == pytest.approx(target, rel=0.03)           # load cell
     free = log[(log[:, 0] > 0.05) & (log[:, 0] < 0.3)]
-    # jaw follows (rad): the gains hold from 100 to 1500 Hz states (docs/control.md), so the jaw
-    # loop's crossover is ~6 Hz; while the master closes at 1.6 rad/s the drum damping
-    # (6e-3 N*m*s/rad at ~1 rad/s, 3.4 mA through 1.77 N*m/A) needs an error of 3.4 mA /
-    # jaw_kp 0.0755 A/rad = 0.045 rad, on top of the 0.2 rad the jaw starts away from its target
-    assert np.sqrt(np.mean((free[:, 2] - free[:, 3]) ** 2)) < 0.07
+    # jaw follows (rad): at 1 kHz states the jaw gains are the 1 kHz design (the schedule leaves
+    # them as designed at gain_design_rate; crossover ~29 Hz). While the master closes at 1.6
+    # rad/s the drum damping (6e-3 N*m*s/rad at ~1 rad/s, 3.4 mA through 1.77 N*m/A) needs an
+    # error of 3.4 mA / jaw_kp 0.369 A/rad = 0.009 rad and the sim's stick-slip pulleys about as
+    # much again (measured 0.015 rad rms, seed 3); 0.03 rad is the bound the 1 kHz design met
+    # before issue 11.6 (the slow 100 Hz-only gains needed 0.07)
+    assert np.sqrt(np.mean((free[:, 2] - free[:, 3]) ** 2)) < 0.03
     assert np.all(log[-50:, 7] == 0)                                       # released: free again
     assert np.max(np.abs(np.diff(log[:, 6]))) <= paper.max_current_slew * PERIOD + 1e-12
 

@@ -21,29 +21,63 @@ def _fmt(x: float) -> str:
     return 'inf' if not math.isfinite(x) else f'{x:.1f}'
 
 
-def plot_steps(params, path, title: str = '', model=None) -> None:
-    """Write the step-response figure (PNG) of :func:`grip_force_ros.control.tune.step_responses`."""
+def figure_rates(params) -> tuple[float, ...]:
+    """State rates (Hz) of the step figure: the expected one and the slowest of the range."""
+    from grip_force_ros.params.controller import STATE_RATE_MIN
+    return tuple(sorted({float(params.expected_state_rate), STATE_RATE_MIN}, reverse=True))
+
+
+def plot_steps(params, path, title: str = '', model=None) -> dict:
+    """Write the step-response figure (PNG) of :func:`grip_force_ros.control.tune.step_responses`.
+
+    One curve per loop at each rate of :func:`figure_rates` (solid: the first, dashed: the
+    next), each with the gains the controller runs there (the schedule). Returns the 5%
+    settling times (s): rate (Hz) -> curve name -> s.
+    """
     from grip_force_ros.control.tune import settling_time, step_responses
     from grip_force_ros.plotting import pyplot
     plt = pyplot()
-    steps = step_responses(params, model=model)
-    fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    for name, (t, y) in steps.items():
-        ax = ax_j if name.startswith('jaw') else ax_f
-        ax.plot(t * 1e3, y, label=f'{name}; 5% settling {settling_time(t, y) * 1e3:.0f} ms')
-    ax_f.axhline(1.0, color='k', lw=0.5, ls='--')
-    ax_j.axhline(1.0, color='k', lw=0.5, ls='--')
+    fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 8), sharex=True)
+    settling = {}
+    for rate, style in zip(figure_rates(params), ('-', '--')):
+        steps = step_responses(params, model=model, rate=rate, duration=0.3)
+        settling[rate] = {name: settling_time(t, y) for name, (t, y) in steps.items()}
+        for k, (name, (t, y)) in enumerate(steps.items()):
+            ax = ax_j if name.startswith('jaw') else ax_f
+            ax.plot(t * 1e3, y, style, color=f'C{k}', drawstyle='steps-post',
+                    label=f'{rate:g} Hz, {name}; 5% settling {settling[rate][name] * 1e3:.0f} ms')
+    for ax in (ax_f, ax_j):
+        ax.axhline(1.0, color='k', lw=0.5, ls='--')
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
     ax_f.set_ylabel('grip force / target (-)')
     ax_j.set_ylabel('jaw angle / target (-)')
     ax_j.set_xlabel('time (ms)')
-    ax_f.legend(fontsize=8)
-    ax_j.legend(fontsize=8)
-    ax_f.set_title(title or 'closed-loop unit step responses (nominal linear plant, 1 kHz PID)')
-    ax_f.grid(alpha=0.3)
-    ax_j.grid(alpha=0.3)
+    ax_f.set_title(title or 'closed-loop unit step responses (nominal linear plant, scheduled gains)')
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return settling
+
+
+def _rate_lines(result) -> list[str]:
+    """One line per state rate: the schedule's scales, worst margins, nominal crossovers."""
+    loops = ('force_sensor', 'force_estimate', 'jaw')
+    head = (f'{"rate Hz":>8}{"scale F":>9}{"scale J":>9}'
+            + ''.join(f'{loop + " GM/PM":>24}' for loop in loops) + f'{"xover F/J Hz":>14}  stable')
+    lines = [head]
+    for rate in sorted({r.rate_hz for r in result.reports}):
+        rs = [r for r in result.reports if r.rate_hz == rate]
+        scale = {loop: next(r.gain_scale for r in rs if r.loop == loop) for loop in loops}
+        xover = {loop: next(r.crossover_hz for r in rs if r.loop == loop and r.variant == 'nominal')
+                 for loop in loops}
+        worst = {loop: result.worst(loop, rate) for loop in loops}
+        cells = ''.join(f'{_fmt(worst[loop][0]) + " dB / " + _fmt(worst[loop][1]):>20} deg'
+                        for loop in loops)
+        lines.append(f'{rate:>8g}{scale["force_sensor"]:>9.3f}{scale["jaw"]:>9.3f}{cells}'
+                     f'{xover["force_sensor"]:>8.1f} / {xover["jaw"]:<4.1f}  '
+                     f'{"yes" if all(r.stable for r in rs) else "NO"}')
+    return lines
 
 
 def run(args) -> int:
@@ -59,33 +93,35 @@ def run(args) -> int:
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     png = out_dir / f'tune_{params.instrument_name}.png'
-    plot_steps(tuned, png, title=(f'{params.instrument_name}: unit step responses '
-                                  '(nominal linear plant, 1 kHz PID)'))
-    steps = tune.step_responses(tuned)
-    settling = {name: tune.settling_time(t, y) for name, (t, y) in steps.items()}
+    rates = ' and '.join(f'{r:g} Hz' for r in figure_rates(tuned))
+    settling = plot_steps(tuned, png, title=(f'{params.instrument_name}: unit step responses at {rates} '
+                                             'states\n(nominal linear plant, scheduled gains)'))
     ok = all(r.stable and r.gain_margin_db >= tune.CLAIM_GM_DB and r.phase_margin_deg >= tune.CLAIM_PM_DEG
              for r in result.reports)
+    expected = float(params.expected_state_rate)
     if args.json:
         doc = result.to_dict()
         doc.update(instrument=params.instrument_name, config=str(args.config), plot=str(png),
-                   settling_time_5pct_s=settling, margins_met=ok)
+                   settling_time_5pct_s=settling[expected],
+                   settling_time_5pct_s_by_rate={f'{r:g}': v for r, v in settling.items()},
+                   margins_met=ok)
         print(json.dumps(doc, indent=1))
         return 0 if ok else 1
-    print(f'{params.instrument_name} ({args.config}), control period {result.period * 1e3:.3g} ms')
+    print(f'{params.instrument_name} ({args.config}), states expected at {expected:g} Hz')
     print('gains in the YAML (analysed):' if args.analyse_only
-          else 'designed gains (controller parameters, paste into the YAML):')
+          else 'designed gains and schedule (controller parameters, paste into the YAML):')
     for name, value in result.gains.items():
         print(f'    {name}: {value:g}')
-    print(f'{"loop":<16}{"plant":<16}{"GM dB":>7}{"PM deg":>8}{"xover Hz":>10}{"BW Hz":>8}  stable')
-    for r in result.reports:
-        print(f'{r.loop:<16}{r.variant:<16}{_fmt(r.gain_margin_db):>7}{_fmt(r.phase_margin_deg):>8}'
-              f'{r.crossover_hz:>10.1f}{r.bandwidth_hz:>8.1f}  {"yes" if r.stable else "NO"}')
+    print(f'the controller runs at {expected:g} Hz: {result.schedule.describe()}')
+    print('worst case over the plant variants at each state rate, scheduled gains:')
+    print('\n'.join(_rate_lines(result)))
     for loop in ('force_sensor', 'force_estimate', 'jaw'):
         gm, pm = result.worst(loop)
         print(f'worst {loop}: GM {_fmt(gm)} dB, PM {_fmt(pm)} deg '
               f'(claimed >= {tune.CLAIM_GM_DB:g} dB, >= {tune.CLAIM_PM_DEG:g} deg)')
-    for name, value in settling.items():
-        print(f'5% settling, {name}: {value * 1e3:.0f} ms')
+    for rate, times in settling.items():
+        for name, value in times.items():
+            print(f'5% settling at {rate:g} Hz, {name}: {value * 1e3:.0f} ms')
     print(f'step plot: {png}')
     print('margins met' if ok else 'MARGINS NOT MET')
     return 0 if ok else 1

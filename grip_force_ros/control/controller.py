@@ -9,6 +9,7 @@ from grip_force_ros.control.force_map import ForceMap
 from grip_force_ros.control.inputs import LATE_FACTOR, SOURCES, ControlInputs, source_timeouts
 from grip_force_ros.control.limits import CurrentLimiter
 from grip_force_ros.control.pid import PID
+from grip_force_ros.control.schedule import scheduled_gains
 from grip_force_ros.model.dvrk_jaw import command_current_limit
 
 #: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
@@ -97,7 +98,9 @@ class GripController:
     the clock going backwards, or an interval longer than ``watchdog_timeout`` (the
     controller was stalled): that step is safe, and the safe ramp advances by the nominal
     period. In the ``dvrk`` interface the current limit is also that of the tool's jaw
-    effort limit (:func:`~grip_force_ros.model.dvrk_jaw.command_current_limit`).
+    effort limit (:func:`~grip_force_ros.model.dvrk_jaw.command_current_limit`). The PID
+    gains are the designed ones scheduled on ``expected_state_rate``
+    (:func:`~grip_force_ros.control.schedule.scheduled_gains`; :attr:`gains`).
     """
 
     def __init__(self, params, model=None, *, resume_ramp_time: float = RESUME_RAMP_TIME):
@@ -167,12 +170,14 @@ class GripController:
         self.current_limit = command_current_limit(params)            # A
         self.limiter = CurrentLimiter(self.current_limit, params.max_current_slew, self.period)
         bound = 2.0 * self.current_limit + 1e-3                       # A, integrator guard
-        self.force_pid = PID(params.force_kp, params.force_ki, params.force_kd,
-                             params.force_derivative_filter_time, self.period,
+        # the designed gains scheduled on the expected state rate (control/schedule.py)
+        self.gains = gains = scheduled_gains(params)
+        self._gain_status = {'gain_schedule': gains.describe(),
+                             'gain_scale': f'force {gains.force_scale:.3f}, jaw {gains.jaw_scale:.3f}'}
+        self.force_pid = PID(*gains.force, self.period,
                              params.anti_windup_tracking_time, sign=1.0, integral_limit=bound,
                              bumpless_time=params.bumpless_transfer_time)
-        self.jaw_pid = PID(params.jaw_kp, params.jaw_ki, params.jaw_kd,
-                           params.jaw_derivative_filter_time, self.period,
+        self.jaw_pid = PID(*gains.jaw, self.period,
                            params.anti_windup_tracking_time, sign=-1.0, integral_limit=bound,
                            bumpless_time=params.bumpless_transfer_time)
 
@@ -191,14 +196,15 @@ class GripController:
             self.command = math.copysign(self.current_limit, self.command)
 
     def status(self, inputs: ControlInputs | None = None) -> dict:
-        """Key/value strings for /diagnostics (state, counters, limits, rejected inputs)."""
+        """Key/value strings for /diagnostics (state, counters, limits, rejected inputs, gain schedule)."""
         out = {'mode': self.mode.value, 'current_command_A': f'{self.command:.4f}',
                'estimated_force_N': f'{self.estimated_force:.3f}', 'periods': str(self.steps),
                'periods_with_limit_hit': str(self.limit_steps),
                'consecutive_safe_periods': str(self.safe_steps),
                'reasons': '; '.join(self.last_reasons) or 'ok',
                'object_kind': self.object_kind,
-               'feedback': 'force sensor' if self.use_sensor else 'model estimate'}
+               'feedback': 'force sensor' if self.use_sensor else 'model estimate',
+               **self._gain_status}
         out['late_inputs'] = str(sum(self.late_counts.values()))
         for source, count in self.late_counts.items():
             if count:

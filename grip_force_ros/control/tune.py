@@ -16,12 +16,15 @@ Plant (continuous time, linearised around a grip at half the current limit):
 
 The controller is the discrete PID of :class:`grip_force_ros.control.pid.PID` exactly
 (forward-Euler integrator, backward-Euler filtered derivative), with one period of
-computation delay, at the period of the instrument states it steps on. The controller steps
-on the measured time between states, and the same gains must hold from
-``STATE_RATE_MIN`` to ``STATE_RATE_MAX`` (100 .. 1500 Hz; params/controller.py): the design
-runs at the slowest rate (:data:`DESIGN_RATE`, the hardest: the longest hold and delay), and
-:func:`analyse` checks every loop at both ends of the range and at the instrument's
-``expected_state_rate``. Three loops are analysed:
+computation delay, at the period of the instrument states it steps on. The gains are
+designed at the instrument's ``gain_design_rate`` (1 kHz: the crtk profile's state rate)
+and must hold there and at every faster rate of the range; below it the controller runs them
+through the gain schedule (:mod:`grip_force_ros.control.schedule`), whose knees
+:func:`schedule_knees` finds: the smallest knee of each loop that keeps the design margins
+at every rate of :data:`GRID_RATES` below the design rate. :func:`analyse` reports every
+loop with the scheduled gains at every rate of the grid (``STATE_RATE_MIN`` ..
+``STATE_RATE_MAX``, 100 .. 1500 Hz, params/controller.py), the instrument's
+``expected_state_rate`` and ``gain_design_rate`` included. Three loops are analysed:
 
 - ``force_sensor``: force PID on the load-cell force (the mechanical plant above);
 - ``force_estimate``: force PID on the model estimate from the measured current (current
@@ -33,8 +36,8 @@ x0.8 and x1.2, friction x0.8 and x1.2, and for the force loops the pulleys' unlo
 (the stick band's other edge, where the force moves 1/lambda^2 times faster with the current
 than on the loading edge, docs/control.md)} keeps gain margin >= 6 dB and phase margin >= 45
 deg (design targets a little above: :data:`DESIGN_GM_DB`, :data:`DESIGN_PM_DEG`), and the
-force gains serve both force loops. Among those, the design with the highest nominal
-crossover frequency wins.
+force gains serve both force loops. Among those, the design with the shortest settling,
+then the highest nominal crossover frequency, wins (:func:`_search`).
 """
 from __future__ import annotations
 
@@ -44,6 +47,7 @@ from itertools import product
 
 import numpy as np
 
+from grip_force_ros.control.schedule import GAIN_KEYS, scheduled_gains
 from grip_force_ros.params.controller import STATE_RATE_MAX, STATE_RATE_MIN
 
 
@@ -59,8 +63,15 @@ DESIGN_MS = 2.0
 #: Rise time of the ramped target in the step figure (s): a master closing in 25 ms is fast.
 RAMP_TIME = 0.025
 
-#: The state rate the gains are designed at (Hz): the slowest of the range, the hardest.
-DESIGN_RATE = STATE_RATE_MIN
+#: State rates (Hz) at which the schedule is checked: across the range, denser where the
+#: crossover moves most (below the knees); analyse adds the expected and the design rate.
+GRID_RATES = (STATE_RATE_MIN, 125.0, 150.0, 200.0, 250.0, 300.0, 400.0, 500.0, 600.0, 800.0,
+              1000.0, 1250.0, STATE_RATE_MAX)
+#: Knee candidates of the schedule (Hz): the E12 series from 100 Hz to 100 kHz (a knee far
+#: above the range makes the crossover proportional to the rate); the smallest that keeps
+#: the design margins wins (the most bandwidth at the slow rates).
+KNEES = tuple(float(f'{m * 10.0 ** e:.3g}') for e in (2, 3, 4)
+              for m in (1.0, 1.2, 1.5, 1.8, 2.2, 2.7, 3.3, 3.9, 4.7, 5.6, 6.8, 8.2)) + (1.0e5,)
 #: Plant variants of the force loops only: name -> edge of the pulleys' stick band.
 EDGE_VARIANTS = {'unloading edge': 'unloading'}
 #: Plant variants: name -> (cable stiffness scale, friction coefficient scale).
@@ -211,12 +222,14 @@ def discrete_plant(d: PlantData, loop: str, period: float):
 
 
 def pid_tf(kp: float, ki: float, kd: float, filter_time: float, period: float):
-    """Discrete transfer function of :class:`PID` (error -> output), python-control TF."""
+    """Discrete transfer function of :class:`PID` (error -> output), python-control TF.
+
+    ``kp + ki T / (z - 1) + kd (z - 1) / ((tf + T) z - tf)`` over one denominator
+    (:func:`_pid_polys`), T = ``period``.
+    """
     import control
-    z = control.tf([1.0, 0.0], [1.0], period)
-    integral = ki * period / (z - 1)
-    derivative = kd * (z - 1) / ((filter_time + period) * z - filter_time)
-    return kp + integral + derivative
+    num, den = _pid_polys(kp, ki, kd, filter_time, period)
+    return control.tf(num, den, period)
 
 
 # ---------------------------------------------------------------------- fast frequency grid
@@ -277,7 +290,7 @@ def _margins_grid(loop_resp: np.ndarray, w: np.ndarray):
 # ---------------------------------------------------------------------- design
 @dataclass
 class LoopReport:
-    """Margins of one loop on one plant variant."""
+    """Margins of one loop on one plant variant at one state rate, with the scheduled gains."""
 
     loop: str
     variant: str
@@ -287,30 +300,47 @@ class LoopReport:
     crossover_hz: float
     bandwidth_hz: float
     stable: bool
+    gain_scale: float = 1.0     # -, the schedule's crossover scale of this loop at rate_hz
 
 
 @dataclass
 class TuneResult:
-    """Designed gains and the analysis of every loop and plant variant."""
+    """Designed gains (with the schedule's parameters) and the analysis of every loop.
+
+    ``schedule``: the gains the controller runs at the instrument's ``expected_state_rate``
+    (:class:`~grip_force_ros.control.schedule.ScheduledGains`).
+    """
 
     gains: dict
     reports: list = field(default_factory=list)
     period: float = 1e-3
+    schedule: object = None
 
-    def worst(self, loop: str) -> tuple[float, float]:
-        """Worst (GM dB, PM deg) of a loop over the plant variants."""
-        rs = [r for r in self.reports if r.loop == loop]
+    def worst(self, loop: str, rate: float | None = None) -> tuple[float, float]:
+        """Worst (GM dB, PM deg) of a loop over the plant variants (and rates, or at ``rate``)."""
+        rs = [r for r in self.reports if r.loop == loop and rate in (None, r.rate_hz)]
         return min(r.gain_margin_db for r in rs), min(r.phase_margin_deg for r in rs)
 
     def to_dict(self) -> dict:
+        """JSON-ready: the gains, the schedule at the expected rate, every report."""
         out = {'gains': self.gains, 'control_period_s': self.period,
                'state_rates_hz': sorted({r.rate_hz for r in self.reports}),
                'claimed': {'gain_margin_db': CLAIM_GM_DB, 'phase_margin_deg': CLAIM_PM_DEG},
                'loops': {}}
+        if self.schedule is not None:
+            sch = self.schedule
+            out['gain_schedule'] = {
+                'gain_design_rate_hz': sch.design_rate, 'expected_state_rate_hz': sch.rate,
+                'scale': {'force': sch.force_scale, 'jaw': sch.jaw_scale},
+                'effective_gains': sch.as_params(),
+                'scale_by_rate': {f'{rate:g}': {r.loop: r.gain_scale for r in self.reports
+                                                if r.rate_hz == rate}
+                                  for rate in out['state_rates_hz']}}
         for r in self.reports:
             out['loops'].setdefault(r.loop, {})[f'{r.variant} @ {r.rate_hz:g} Hz'] = {
                 'gain_margin_db': _finite(r.gain_margin_db), 'phase_margin_deg': _finite(r.phase_margin_deg),
-                'crossover_hz': r.crossover_hz, 'bandwidth_hz': r.bandwidth_hz, 'stable': r.stable}
+                'crossover_hz': r.crossover_hz, 'bandwidth_hz': r.bandwidth_hz, 'stable': r.stable,
+                'gain_scale': r.gain_scale}
         return out
 
 
@@ -402,32 +432,95 @@ def _refine(responses, w, period, start, rounds=2, feedforward=(0.0,), also=()):
     return best
 
 
+def variant_data(params, model=None) -> dict:
+    """Plant numbers of every variant: :data:`VARIANTS`, then :data:`EDGE_VARIANTS`."""
+    out = {name: plant_data(params, model, s, f) for name, (s, f) in VARIANTS.items()}
+    out.update({name: plant_data(params, model, edge=e) for name, e in EDGE_VARIANTS.items()})
+    return out
+
+
+def _loop_plants(data: dict, group: str) -> list:
+    """Return the (loop, PlantData) pairs of a gain group.
+
+    'force': both force loops on every variant and edge; 'jaw': the jaw loop on every
+    variant of :data:`VARIANTS`.
+    """
+    if group == 'force':
+        return [(loop, d) for loop in ('force_sensor', 'force_estimate') for d in data.values()]
+    return [('jaw', data[name]) for name in VARIANTS]
+
+
+def _plant_group(data: dict, group: str, period: float, n: int = 300):
+    """``(plants, w, period)``: the discrete plants of a gain group at ``period`` (s)."""
+    w = _freq_grid(period, n)
+    return [_Plant(discrete_plant(d, loop, period), w, period)
+            for loop, d in _loop_plants(data, group)], w, period
+
+
+def schedule_knees(params, model=None, data: dict | None = None) -> dict:
+    """Find the knee (Hz) of each loop's gain schedule.
+
+    The smallest of :data:`KNEES` that keeps the design margins with the scheduled gains at
+    every rate of :data:`GRID_RATES` below ``gain_design_rate``, on every plant variant (and
+    the unloading edge for the force loop).
+
+    Returns
+    -------
+    dict
+        ``{'force_schedule_knee': Hz, 'jaw_schedule_knee': Hz}``.
+
+    Raises
+    ------
+    ValueError
+        No knee up to 100 kHz (crossover proportional to the rate) keeps the margins: the
+        gains need a lower ``gain_design_rate``.
+    """
+    design_rate = params.gain_design_rate
+    data = variant_data(params, model) if data is None else data
+    slower = [r for r in GRID_RATES if r < design_rate]
+    out = {}
+    for group in ('force', 'jaw'):
+        checks = [(r, _plant_group(data, group, 1.0 / r)) for r in slower]
+        key = f'{group}_schedule_knee'
+        for knee in KNEES:
+            p = params.replace(**{key: knee})
+            if all(_meets(*getattr(scheduled_gains(p, r), group), plants, w, period,
+                          DESIGN_GM_DB, DESIGN_PM_DEG, DESIGN_MS)
+                   for r, (plants, w, period) in checks):
+                out[key] = knee
+                break
+        else:
+            raise ValueError(f'no {group} gain schedule with a knee up to {KNEES[-1]:g} Hz keeps the '
+                             f'margins below the design rate {design_rate:g} Hz: design at a lower '
+                             "'gain_design_rate'")
+    return out
+
+
 def design(params, model=None) -> TuneResult:
-    """Design force and jaw PID gains for an instrument; see the module docstring.
+    """Design force and jaw PID gains and their schedule for an instrument (module docstring).
+
+    The gains are designed at ``gain_design_rate`` and must meet the margins unscaled at the
+    faster rates of :data:`GRID_RATES` too; then :func:`schedule_knees` finds the schedule.
 
     Returns
     -------
     TuneResult
         ``gains`` holds the controller parameter names (force_kp, force_ki, force_kd,
-        force_derivative_filter_time, jaw_kp, jaw_ki, jaw_kd, jaw_derivative_filter_time).
+        force_derivative_filter_time, jaw_kp, jaw_ki, jaw_kd, jaw_derivative_filter_time,
+        gain_design_rate, force_schedule_knee, jaw_schedule_knee).
     """
-    period = 1.0 / DESIGN_RATE
+    rate = params.gain_design_rate
+    period = 1.0 / rate
     w = _freq_grid(period, 500)
-    variants = {name: plant_data(params, model, s, f) for name, (s, f) in VARIANTS.items()}
-    edges = {name: plant_data(params, model, edge=e) for name, e in EDGE_VARIANTS.items()}
-    nominal = variants['nominal']
+    data = variant_data(params, model)
+    nominal = data['nominal']
     gain = nominal.force_per_amp                                   # N/A
 
-    force_plants = [(loop, d) for loop in ('force_sensor', 'force_estimate')
-                    for d in list(variants.values()) + list(edges.values())]
-    force_resp = [_Plant(discrete_plant(d, loop, period), w, period) for loop, d in force_plants]
-    # the same plants at the other state rates of the range: the margins must hold there too
-    others = [1.0 / r for r in analysis_rates(params) if r != DESIGN_RATE]
-    grids = {p2: _freq_grid(p2, 300) for p2 in others}
-    force_also = [([_Plant(discrete_plant(d, loop, p2), grids[p2], p2) for loop, d in force_plants],
-                   grids[p2], p2) for p2 in others]
-    jaw_also = [([_Plant(discrete_plant(d, 'jaw', p2), grids[p2], p2) for d in variants.values()],
-                 grids[p2], p2) for p2 in others]
+    force_resp = _plant_group(data, 'force', period, 500)[0]
+    # the same plants at the faster rates of the range: the gains run unscaled there
+    faster = [1.0 / r for r in GRID_RATES if r > rate]
+    force_also = [_plant_group(data, 'force', p2) for p2 in faster]
+    jaw_also = [_plant_group(data, 'jaw', p2) for p2 in faster]
     # gains are scaled by 1/gain so the grid fits any instrument
     inv = 1.0 / gain
     best = _search(force_resp, w, period,
@@ -437,11 +530,11 @@ def design(params, model=None) -> TuneResult:
                    tf_grid=[0.5e-3, 2e-3], feedforward=(0.7 * inv, 1.3 * inv), also=force_also)
     if best is None:
         raise ValueError('no force PID on the design grid meets the margins on every plant variant '
-                         'and state rate')
+                         f'at {rate:g} Hz and above')
     force = _refine(force_resp, w, period, best, feedforward=(0.7 * inv, 1.3 * inv),
                     also=force_also)
 
-    jaw_resp = [_Plant(discrete_plant(d, 'jaw', period), w, period) for d in variants.values()]
+    jaw_resp = _plant_group(data, 'jaw', period, 500)[0]
     jaw_gain = (nominal.torque_per_amp / nominal.drum_radius * nominal.drive_radius
                 * nominal.jaw_side_gain)                           # N*m/A at the jaw
     inv_j = nominal.drum_inertia * (nominal.drum_radius / nominal.drive_radius) / jaw_gain
@@ -452,38 +545,43 @@ def design(params, model=None) -> TuneResult:
                    tf_grid=[0.5e-3, 2e-3], also=jaw_also)
     if best is None:
         raise ValueError('no jaw PID on the design grid meets the margins on every plant variant '
-                         'and state rate')
+                         f'at {rate:g} Hz and above')
     jaw = _refine(jaw_resp, w, period, best, also=jaw_also)
 
-    gains = {'force_kp': force[0], 'force_ki': force[1], 'force_kd': force[2],
-             'force_derivative_filter_time': force[3],
-             'jaw_kp': jaw[0], 'jaw_ki': jaw[1], 'jaw_kd': jaw[2],
-             'jaw_derivative_filter_time': jaw[3]}
+    gains = dict(zip(GAIN_KEYS['force'] + GAIN_KEYS['jaw'], force + jaw))
     gains = {k: float(f'{v:.3g}') for k, v in gains.items()}
-    return TuneResult(gains=gains, reports=analyse(params.replace(**gains), model).reports,
-                      period=period)
+    gains['gain_design_rate'] = float(rate)
+    gains.update(schedule_knees(params.replace(**gains), model, data))
+    return analyse(params.replace(**gains), model)
 
 
 # ---------------------------------------------------------------------- analysis
+def _controller_tf(params, loop: str, rate: float):
+    """Return the PID (python-control TF) the controller runs in ``loop`` at ``rate`` Hz (scheduled)."""
+    gains = scheduled_gains(params, rate)
+    return pid_tf(*(gains.jaw if loop == 'jaw' else gains.force), 1.0 / rate)
+
+
+def _variant(params, variant: str, model=None) -> PlantData:
+    """Plant numbers of one variant (a key of :data:`VARIANTS` or :data:`EDGE_VARIANTS`)."""
+    if variant in EDGE_VARIANTS:
+        return plant_data(params, model, edge=EDGE_VARIANTS[variant])
+    s, f = VARIANTS[variant]
+    return plant_data(params, model, s, f)
+
+
 def loop_transfer(params, loop: str, variant: str = 'nominal', model=None,
                   rate: float | None = None):
-    """Discrete open loop L(z) = PID(z) * z^-1 * plant(z) with the gains in ``params``.
+    """Discrete open loop L(z) = PID(z) * z^-1 * plant(z), the gains scheduled at ``rate``.
 
-    ``rate``: the state rate (Hz) the PID steps at (default ``expected_state_rate``);
-    ``variant``: a key of :data:`VARIANTS` or (force loops) :data:`EDGE_VARIANTS`.
+    ``rate``: the state rate (Hz) the PID steps at (default ``expected_state_rate``); the
+    gains are the controller's at that rate (:func:`~grip_force_ros.control.schedule.
+    scheduled_gains`). ``variant``: a key of :data:`VARIANTS` or (force loops)
+    :data:`EDGE_VARIANTS`.
     """
-    period = 1.0 / (rate or params.expected_state_rate)
-    if variant in EDGE_VARIANTS:
-        d = plant_data(params, model, edge=EDGE_VARIANTS[variant])
-    else:
-        s, f = VARIANTS[variant]
-        d = plant_data(params, model, s, f)
-    if loop == 'jaw':
-        c = pid_tf(params.jaw_kp, params.jaw_ki, params.jaw_kd, params.jaw_derivative_filter_time, period)
-    else:
-        c = pid_tf(params.force_kp, params.force_ki, params.force_kd,
-                   params.force_derivative_filter_time, period)
-    return c * discrete_plant(d, loop, period)
+    rate = float(rate or params.expected_state_rate)
+    return (_controller_tf(params, loop, rate)
+            * discrete_plant(_variant(params, variant, model), loop, 1.0 / rate))
 
 
 def margins(loop_tf, period: float, n: int = 1500) -> tuple[float, float, float, float]:
@@ -546,8 +644,9 @@ def _bandwidth_hz(closed, period) -> float:
 
 
 def analysis_rates(params) -> tuple[float, ...]:
-    """State rates (Hz) :func:`analyse` checks: both ends of the range and the expected rate."""
-    return tuple(sorted({STATE_RATE_MIN, float(params.expected_state_rate), STATE_RATE_MAX}))
+    """State rates (Hz) :func:`analyse` checks: :data:`GRID_RATES`, the expected and the design rate."""
+    return tuple(sorted(set(GRID_RATES) | {float(params.expected_state_rate),
+                                           float(params.gain_design_rate)}))
 
 
 def loop_variants(loop: str) -> tuple[str, ...]:
@@ -559,29 +658,37 @@ def analyse(params, model=None, loops=('force_sensor', 'force_estimate', 'jaw'),
             rates=None) -> TuneResult:
     """Margins (python-control), crossover and closed-loop bandwidth of each loop and variant.
 
-    At every state rate of ``rates`` (Hz; default :func:`analysis_rates`).
+    At every state rate of ``rates`` (Hz; default :func:`analysis_rates`), each with the
+    gains the controller runs there (the schedule of ``params``).
     """
     import control
+    data = variant_data(params, model)
     reports = []
     for rate in (rates or analysis_rates(params)):
         period = 1.0 / rate
+        sch = scheduled_gains(params, rate)
         for loop in loops:
+            c = _controller_tf(params, loop, rate)
             for variant in loop_variants(loop):
-                lt = loop_transfer(params, loop, variant, model, rate=rate)
+                lt = c * discrete_plant(data[variant], loop, period)
                 gm_db, pm, _, wp = margins(lt, period)
                 closed = control.feedback(lt, 1)
                 stable = bool(np.all(np.abs(control.poles(closed)) < 1.0))
                 reports.append(LoopReport(loop, variant, rate, gm_db, pm,
                                           wp / (2 * math.pi) if math.isfinite(wp) else 0.0,
-                                          _bandwidth_hz(closed, period), stable))
+                                          _bandwidth_hz(closed, period), stable,
+                                          sch.jaw_scale if loop == 'jaw' else sch.force_scale))
     period = 1.0 / params.expected_state_rate
-    gains = {k: params[k] for k in ('force_kp', 'force_ki', 'force_kd', 'force_derivative_filter_time',
-                                    'jaw_kp', 'jaw_ki', 'jaw_kd', 'jaw_derivative_filter_time')}
-    return TuneResult(gains=gains, reports=reports, period=period)
+    gains = {k: params[k] for k in GAIN_KEYS['force'] + GAIN_KEYS['jaw']
+             + ('gain_design_rate', 'force_schedule_knee', 'jaw_schedule_knee')}
+    return TuneResult(gains=gains, reports=reports, period=period, schedule=scheduled_gains(params))
 
 
-def step_responses(params, duration: float = 0.2, model=None) -> dict:
+def step_responses(params, duration: float = 0.2, model=None, rate: float | None = None) -> dict:
     """Closed-loop responses to a unit target step (nominal plant), python-control.
+
+    At the state rate ``rate`` (Hz; default ``expected_state_rate``), with the gains the
+    controller runs there (scheduled).
 
     Returns
     -------
@@ -591,19 +698,18 @@ def step_responses(params, duration: float = 0.2, model=None) -> dict:
         'force_sensor (PID only)', and 'jaw' (PID only).
     """
     import control
-    period = 1.0 / params.expected_state_rate
+    rate = float(rate or params.expected_state_rate)
+    period = 1.0 / rate
     d = plant_data(params, model)
     out = {}
     t = np.arange(0.0, duration, period)
     for loop in ('force_sensor', 'force_estimate', 'jaw'):
         plant = discrete_plant(d, loop, period)
-        lt = loop_transfer(params, loop, 'nominal', model)
-        closed = control.feedback(lt, 1)
+        c = _controller_tf(params, loop, rate)
+        closed = control.feedback(c * plant, 1)
         if loop == 'jaw':
             out['jaw (PID only)'] = control.step_response(closed, T=t)
             continue
-        c = pid_tf(params.force_kp, params.force_ki, params.force_kd,
-                   params.force_derivative_filter_time, period)
         ff = 1.0 / (d.force_per_amp if loop == 'force_sensor' else d.estimate_gain)
         with_ff = control.feedback(plant, c) * (ff + c)        # y = P (ff + C) / (1 + P C) r
         out[f'{loop} (feedforward + PID)'] = control.step_response(with_ff, T=t)

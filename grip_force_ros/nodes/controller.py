@@ -128,6 +128,7 @@ class ControllerNode(Node):
             f'{params.control_rate:.0f} Hz, feedback '
             f"{'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
             f'object {params.object_kind}')
+        self.get_logger().info(self.controller.gains.describe())
 
     # ------------------------------------------------------------------ time
     def now(self) -> float:

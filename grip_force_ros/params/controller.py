@@ -1,7 +1,8 @@
 """Controller parameters (group 'controller'). Owned by control/; see docs/control.md.
 
 Gains are per instrument: ``grip-force tune --config X.yaml`` designs them on a
-linear plant model and the instrument YAMLs carry the result. The defaults here
+linear plant model at ``gain_design_rate``, with the knees of their schedule on the state
+rate (control/schedule.py), and the instrument YAMLs carry the result. The defaults here
 are the design for the paper's needle driver (``config/paper_needle_driver.yaml``).
 """
 from grip_force_ros.objects import OBJECTS
@@ -32,7 +33,8 @@ CONTROLLER = [
     _P('expected_state_rate', 'double', 1000.0, 'Hz',
        'Rate of the instrument state the controller steps on (instrument/actuator/measured_js; '
        'dvrk: <arm>/jaw/measured_js, 100 Hz by default). The PID, filters and slew limit step '
-       'on the measured time between states; the gains are shown stable from '
+       'on the measured time between states; the gains are scheduled on this rate '
+       '(gain_design_rate) and shown stable from '
        f'{STATE_RATE_MIN:g} to {STATE_RATE_MAX:g} Hz (docs/control.md), and the node refuses '
        'to start outside that range. A step interval longer than watchdog_timeout is a fault.',
        min=STATE_RATE_MIN, max=STATE_RATE_MAX, read_only=True, group=_G),
@@ -107,27 +109,49 @@ CONTROLLER = [
     _P('grip_release_hysteresis', 'double', 0.02, 'rad',
        'The master must open this far past the contact angle to leave grip for free motion.',
        min=0.0, max=0.5, group=_G),
+    # --- gain schedule on the state rate (control/schedule.py) ------------------------------
+    _P('gain_design_rate', 'double', 1000.0, 'Hz',
+       'State rate the force_* and jaw_* gains are designed at (grip-force tune). At an '
+       'expected_state_rate below it the controller shrinks each loop\'s crossover by the gain '
+       'schedule (force_schedule_knee, jaw_schedule_knee; docs/control.md); at and above it the '
+       'gains run as designed.', min=STATE_RATE_MIN, max=STATE_RATE_MAX, group=_G),
+    _P('force_schedule_knee', 'double', 680.0, 'Hz',
+       'Knee of the force loop\'s gain schedule: the state rate at which the sampling (one '
+       'period of delay and the hold) costs as much phase at the crossover as the plant\'s own '
+       'lag. Below gain_design_rate the crossover scales by (1/knee + 1/gain_design_rate) / '
+       '(1/knee + 1/expected_state_rate); from grip-force tune.', min=10.0, max=1.0e5, group=_G),
+    _P('jaw_schedule_knee', 'double', 820.0, 'Hz',
+       'Knee of the jaw loop\'s gain schedule (as force_schedule_knee); from grip-force tune.',
+       min=10.0, max=1.0e5, group=_G),
     # --- force loop (grip) -----------------------------------------------------------------
-    _P('force_kp', 'double', 0.00589, 'A/N',
-       'Proportional gain of the force loop.', min=0.0, max=10.0, group=_G),
-    _P('force_ki', 'double', 1.1, 'A/(N*s)',
-       'Integral gain of the force loop.', min=0.0, max=1000.0, group=_G),
+    _P('force_kp', 'double', 0.00883, 'A/N',
+       'Proportional gain of the force loop, at gain_design_rate (scheduled below it).',
+       min=0.0, max=10.0, group=_G),
+    _P('force_ki', 'double', 5.52, 'A/(N*s)',
+       'Integral gain of the force loop, at gain_design_rate (scheduled below it).',
+       min=0.0, max=1000.0, group=_G),
     _P('force_kd', 'double', 0.0, 'A*s/N',
-       'Derivative gain of the force loop (on the filtered measurement).',
+       'Derivative gain of the force loop (on the filtered measurement), at gain_design_rate '
+       '(scheduled below it).',
        min=0.0, max=1.0, group=_G),
     _P('force_derivative_filter_time', 'double', 0.0005, 's',
-       'Time constant of the first-order filter of the force derivative.',
+       'Time constant of the first-order filter of the force derivative, at gain_design_rate (below '
+       'it the filter keeps its number of state periods).',
        min=1e-4, max=1.0, group=_G),
     # --- jaw angle loop (free motion) ------------------------------------------------------
-    _P('jaw_kp', 'double', 0.0755, 'A/rad',
-       'Proportional gain of the jaw angle loop in free motion.', min=0.0, max=100.0, group=_G),
+    _P('jaw_kp', 'double', 0.369, 'A/rad',
+       'Proportional gain of the jaw angle loop in free motion, at gain_design_rate (scheduled '
+       'below it).', min=0.0, max=100.0, group=_G),
     _P('jaw_ki', 'double', 0.0354, 'A/(rad*s)',
-       'Integral gain of the jaw angle loop.', min=0.0, max=10000.0, group=_G),
-    _P('jaw_kd', 'double', 0.000472, 'A*s/rad',
-       'Derivative gain of the jaw angle loop (on the filtered measurement).',
+       'Integral gain of the jaw angle loop, at gain_design_rate (scheduled below it).',
+       min=0.0, max=10000.0, group=_G),
+    _P('jaw_kd', 'double', 0.00059, 'A*s/rad',
+       'Derivative gain of the jaw angle loop (on the filtered measurement), at gain_design_rate '
+       '(scheduled below it).',
        min=0.0, max=10.0, group=_G),
     _P('jaw_derivative_filter_time', 'double', 0.002, 's',
-       'Time constant of the first-order filter of the jaw angle derivative.',
+       'Time constant of the first-order filter of the jaw angle derivative, at gain_design_rate '
+       '(below it the filter keeps its number of state periods).',
        min=1e-4, max=1.0, group=_G),
     _P('anti_windup_tracking_time', 'double', 0.01, 's',
        'Back-calculation anti-windup: the integrator tracks the limited command with this '
