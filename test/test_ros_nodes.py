@@ -274,7 +274,10 @@ def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path)
     resumed = np.flatnonzero(mode[thaw:] == 'grip')
     assert resumed.size, 'control did not resume after the inputs came back'
     k = resumed[0] + thaw
-    slew_step = params.max_current_slew * period
-    assert abs(command[k] - command[k - 1]) <= slew_step * (1 + 1e-9)
+    # the controller steps on the measured time between states (issue 11), so a step after
+    # a late state may move the current by the slew limit times that longer step (seen at
+    # load 13: a 1.39 ms step, 0.139 A at 100 A/s)
+    allowed = params.max_current_slew * np.maximum(np.diff(now), period) * (1 + 1e-9)
+    assert abs(command[k] - command[k - 1]) <= allowed[k - 1]
     jumps = np.abs(np.diff(command[k - 5:k + 200]))
-    assert np.max(jumps) <= slew_step * (1 + 1e-9)
+    assert np.all(jumps <= allowed[k - 5:k - 5 + jumps.size])
