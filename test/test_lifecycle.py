@@ -1,8 +1,9 @@
 """The managed controller and its services with the real ros2 CLI (issue 14.3, 14.4).
 
-``sim_instrument`` and ``controller`` run as ``ros2 run`` processes; this test process plays
-the master (a gripper angle the test sets: open, or closed on the needle) and records what
-the controller and the sim publish. ``ros2 lifecycle get|set|nodes``, ``ros2 service
+``sim_instrument`` and ``controller`` run as ``ros2 run`` processes, the master as ``ros2
+topic pub`` of a gripper angle the test sets (open, or closed on the needle: a light process
+of its own, so that it stays on time on a loaded machine, which this recording test process
+does not); this process records what the controller and the sim publish. ``ros2 lifecycle get|set|nodes``, ``ros2 service
 call`` and ``ros2 param get`` are the user's commands.
 """
 from __future__ import annotations
@@ -21,7 +22,7 @@ from sensor_msgs.msg import JointState
 from _ros_tools import ROOT, require_ros_tools, retry, ros_env, run, start, stop, stop_daemon
 from grip_force_ros import topics
 from grip_force_ros.faults.probe import LimitMonitor
-from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, joint_state
+from grip_force_ros.nodes.common import RECORD_QOS
 from grip_force_ros.nodes.harness import RosRunner, wait_until
 from grip_force_ros.params import load_params_file, read_params_yaml
 
@@ -34,30 +35,23 @@ OPEN, CLOSED = 0.8, 0.0            # rad, master gripper angle
 CURRENT_NOISE = PARAMS.current_noise_std
 
 
-class MasterAndRecorder(Node):
-    """Publishes the master gripper angle at 250 Hz; records commands, currents, forces, status."""
+class Recorder(Node):
+    """Records the controller's commands, the sim's currents, the estimated force, the status."""
 
     def __init__(self, **kwargs):
         super().__init__('lifecycle_test_probe', **kwargs)
-        self.angle = OPEN
         self.commands: list[tuple[float, float, float]] = []   # (receipt s, stamp s, A)
         self.currents: list[tuple[float, float]] = []          # (receipt s, sim's measured A)
         self.forces: list[float] = []                          # N, the controller's estimate
         self.status: list[str] = []                            # the controller's messages
-        self._master = self.create_publisher(JointState, topics.MASTER_JS, STATE_PUB_QOS)
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE,
                                  lambda m: self.forces.append(m.wrench.force.z), RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, RECORD_QOS)
-        self.create_timer(1.0 / 250.0, self._tick)
 
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
-
-    def _tick(self) -> None:
-        self._master.publish(joint_state(self.get_clock().now().to_msg(), [topics.MASTER_JOINT],
-                                         [self.angle], [0.0]))
 
     def _on_command(self, msg) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
@@ -82,7 +76,8 @@ def rig(tmp_path):
     procs = []
 
     class Rig:
-        probe: MasterAndRecorder
+        probe: Recorder
+        _master = None
 
         def ros2_run(self, name, *args):
             proc = start('ros2', 'run', 'grip_force_ros', name, '--ros-args', '--params-file',
@@ -94,6 +89,17 @@ def rig(tmp_path):
             return self.ros2_run('controller', '-p', f'calibration_file:={tmp_path / "cal.yaml"}',
                                  *args)
 
+        def master(self, angle):
+            """Publish the master gripper ``angle`` (rad) at 250 Hz, stamped, from now on."""
+            if self._master is not None:
+                stop(self._master, signal.SIGINT, group=True)
+            msg = (f'{{header: auto, name: [{topics.MASTER_JOINT}], position: [{angle}], '
+                   'velocity: [0.0]}')
+            self._master = start('ros2', 'topic', 'pub', '-r', '250', '-p', '0',
+                                 f'/{topics.MASTER_JS}', 'sensor_msgs/msg/JointState', msg,
+                                 log=tmp_path / 'master.log', env=env)
+            procs.append(self._master)
+
         def log(self, name):
             return (tmp_path / f'{name}.log').read_text()
 
@@ -101,7 +107,7 @@ def rig(tmp_path):
     rig.env, rig.tmp = env, tmp_path
     rig.ros2_run('sim_instrument', '-p', 'force_sensor_offset:=0.3', '-p', 'friction_scale:=0.8')
     ros = RosRunner()
-    rig.probe = ros.add(MasterAndRecorder)
+    rig.probe = ros.add(Recorder)
     ros.start()
     try:
         yield rig
@@ -182,7 +188,7 @@ def slew_violations(commands):
 
 def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
     probe, env = rig.probe, rig.env
-    probe.angle = CLOSED
+    rig.master(CLOSED)
     ctl = rig.controller()
     assert wait_gripping(probe), (probe.status[-3:], probe.forces[-3:], rig.log('controller'))
     got = lifecycle(env, 'get', '/controller')
@@ -236,7 +242,7 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
 
 def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
     probe, env, tmp = rig.probe, rig.env, rig.tmp
-    probe.angle = OPEN
+    rig.master(OPEN)
     # a wrong current-sensor zero to begin with: the tare must find the sim's (0 A)
     rig.controller('-p', 'current_sensor_offset:=0.05')
     assert wait_until(lambda: probe.mode() == 'free', 60.0), (probe.status[-3:],
@@ -277,7 +283,7 @@ def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
 
 def test_autostart_false_waits_unconfigured_without_command(rig):
     probe, env = rig.probe, rig.env
-    probe.angle = OPEN
+    rig.master(OPEN)
     # and without a load cell: the controller listens on a topic nobody publishes
     ctl = rig.controller('-p', 'autostart:=false',
                          '-r', f'{topics.MEASURED_FORCE}:=grip/no_load_cell')
