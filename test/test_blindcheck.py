@@ -2,9 +2,13 @@
 import numpy as np
 import pytest
 
-from grip_force_ros.diagnosis.blind import BLIND_EFFECTS, BlindCase, cases, generate_log, run_blindcheck
-from grip_force_ros.diagnosis.effects import EFFECT_NAMES
+from grip_force_ros.diagnosis.blind import (BLIND_EFFECTS, CI_SEEDS, DEVELOPMENT_SEEDS, HELD_OUT_SEEDS,
+                                            NONE_PLANTS, BlindCase, cases, generate_log, is_right,
+                                            plant_params, run_blindcheck)
+from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS
+from grip_force_ros.effects import REGISTRY
 from grip_force_ros.logs import normalise_log
+from grip_force_ros.params import make_params
 
 CONTRACT = {'t', 'current', 'motor_angle', 'wrist_angle', 'jaw_angle', 'grip_force', 'object'}
 
@@ -41,6 +45,60 @@ def test_the_sets_cover_every_effect_pairs_and_effect_free_logs():
         assert any(len(t) == 2 for t in truths)
     assert len({c.effects for c in full if len(c.truth) == 1 and c.truth != ('none',)}) \
         == 3 * len(BLIND_EFFECTS)
+
+
+def test_the_seed_ranges_are_disjoint_and_share_no_log():
+    """Development, held-out and CI seeds: separate ranges, and their blind sets no log seed."""
+    ranges = (set(DEVELOPMENT_SEEDS), set(HELD_OUT_SEEDS), set(CI_SEEDS))
+    assert not (ranges[0] & ranges[1]) and not (ranges[0] & ranges[2]) and not (ranges[1] & ranges[2])
+    log_seeds = [{c.seed for s in r for c in cases(seed=s)} for r in ranges]
+    assert not (log_seeds[0] & log_seeds[1]) and not (log_seeds[1] & log_seeds[2])
+    assert len(HELD_OUT_SEEDS) >= 5
+
+
+def test_no_plant_matches_its_yaml_and_strengths_sit_off_the_grid():
+    yaml = make_params()
+    full = cases(quick=False, seed=0)
+    none_cases = [c for c in full if c.truth == ('none',)]
+    assert [(dict(c.plant)['pulley_friction_coefficient'], dict(c.plant)['cable_modulus'])
+            for c in none_cases] == list(NONE_PLANTS)
+    for c in full:
+        plant = dict(c.plant)
+        assert set(plant) == {'pulley_friction_coefficient', 'cable_modulus', 'torque_constant',
+                              'wrist_finger_coupling'}
+        assert 0.92 <= plant['torque_constant'] <= 1.08 and plant['torque_constant'] != 1.0
+        p = plant_params(c)
+        assert p.friction_scale == plant['pulley_friction_coefficient']
+        assert p.stiffness_scale == plant['cable_modulus']
+        assert p.torque_constant == pytest.approx(yaml.torque_constant * plant['torque_constant'])
+        assert c.plant_values(yaml)['pulley_friction_coefficient'] == pytest.approx(
+            yaml.pulley_friction_coefficient * plant['pulley_friction_coefficient'])
+        for name, strength in c.effects:     # around a registry level, never on it
+            assert strength not in REGISTRY[name].strengths
+            assert any(0.8 - 1e-9 <= strength / level <= 1.25 + 1e-9 for level in REGISTRY[name].strengths)
+        grids = {v for e in EFFECTS.values() for v in e.grid}
+        for name, value in c.extras:         # time constants and rest angles off the diagnosis' grids
+            assert value not in grids
+    # the mismatches of the blind set: friction 0.85 / 1.15 and stiffness 0.8 / 1.2 among effect logs too
+    frictions = {dict(c.plant)['pulley_friction_coefficient'] for c in full if c.truth != ('none',)}
+    assert {0.85, 1.0, 1.15} <= frictions
+
+
+def test_a_pair_is_right_only_when_both_effects_are_named():
+    both = {'effect': 'backlash', 'effects': ['backlash', 'sensor_delay']}
+    assert is_right(('backlash', 'sensor_delay'), both)
+    assert not is_right(('backlash', 'sensor_delay'), {'effect': 'backlash', 'effects': ['backlash']})
+    assert is_right(('backlash',), {'effect': 'backlash', 'effects': ['backlash', 'sensor_delay']})
+    assert not is_right(('backlash',), {'effect': 'sensor_delay', 'effects': ['sensor_delay', 'backlash']})
+    assert is_right(('none',), {'effect': 'none', 'effects': ['none']})
+
+
+def test_the_plant_mismatch_reaches_the_sim():
+    """Same excitation: a plant with its friction 15 % above the YAML gives another grip force."""
+    plain = generate_log(BlindCase((), 5, (), ()), duration=3.0)
+    rough = generate_log(BlindCase((), 5, (), (('pulley_friction_coefficient', 1.15),)), duration=3.0)
+    np.testing.assert_array_equal(plain['current'], rough['current'])
+    assert not np.allclose(plain['grip_force'], rough['grip_force'])
 
 
 @pytest.mark.slow

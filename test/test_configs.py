@@ -54,10 +54,12 @@ def test_paper_config_is_table_1():
     assert (p.torque_constant, p.gear_ratio, p.drum_mass, p.jaw_mass) == (1.44, 1.23, 0.0025, 0.001)
 
 
-def _bad_copy(tmp_path, key, value):
-    text = (ROOT / 'config' / 'paper_needle_driver.yaml').read_text()
-    text, n = re.subn(rf'(\s{key}:) [^#\n]*', rf'\1 {value} ', text)
-    assert n == 1
+def _bad_copy(tmp_path, key, value, config='paper_needle_driver', **more):
+    """A copy of ``config`` with ``key: value`` (and ``more`` keys) changed."""
+    text = (ROOT / 'config' / f'{config}.yaml').read_text()
+    for k, v in {key: value, **more}.items():
+        text, n = re.subn(rf'(\s{k}:) [^#\n]*', rf'\1 {v} ', text)
+        assert n == 1, k
     bad = tmp_path / 'bad.yaml'
     bad.write_text(text)
     return bad
@@ -110,3 +112,58 @@ def test_config_directory_can_be_overridden(tmp_path, monkeypatch):
     assert files.instrument_path('bench_rig') == tmp_path / 'bench_rig.yaml'
     with pytest.raises(FileNotFoundError, match=str(tmp_path)):
         files.instrument_path('long_jaw_grasper')                  # the override replaces config/
+
+
+# ------------------------------------------------------------------ physical validation
+ALL = INSTRUMENTS + ['maryland_forceps']
+
+
+@pytest.mark.parametrize('name', ALL)
+def test_every_shipped_instrument_could_be_built(name):
+    """Cable stress at the current limit below the cable's strength, the chain efficiency in
+    (0, 1], a jaw torque that closes: the shipped files pass the check that refuses others."""
+    from grip_force_ros.model.physical import cable_load, physical_problems
+    params = load_params_file(ROOT / 'config' / f'{name}.yaml')
+    assert physical_problems(params) == []
+    load = cable_load(params)
+    assert load['stress'] <= params.cable_yield_strength
+    assert load['drum_tension'] == pytest.approx(params.gear_ratio * params.torque_constant
+                                                 * params.max_current / params.drum_radius)
+
+
+def test_an_overstressed_cable_is_refused_by_params_check(tmp_path, capsys):
+    """The four-pulley driver as it was first shipped: a 0.3 mm cable under 221 N at 0.5 A."""
+    bad = _bad_copy(tmp_path, 'cable_radius', '0.00015', config='four_pulley_needle_driver')
+    assert cli_main(['params', '--check', str(bad)]) == 1
+    out = capsys.readouterr().out
+    assert 'could not be built' in out and '3.13 GPa' in out and '1.08 GPa' in out
+    assert 'cable radius >= 0.255 mm' in out and 'max_current <= 0.172 A' in out
+    # the same file with a lower current limit passes
+    fixed = _bad_copy(tmp_path, 'cable_radius', '0.00015', config='four_pulley_needle_driver',
+                      max_current='0.17')
+    assert cli_main(['params', '--check', str(fixed)]) == 0
+
+
+def test_a_jaw_torque_of_the_wrong_sign_and_a_bad_efficiency_are_refused(monkeypatch):
+    from grip_force_ros.model import ModelError
+    from grip_force_ros.model import physical
+    params = load_params_file(ROOT / 'config' / 'paper_needle_driver.yaml')
+    # mu 0.3 on the paper's pulleys: lambda_n 0.43 < the static resistance fraction 0.5
+    lossy = params.replace(pulley_friction_coefficient=0.3)
+    with pytest.raises(ModelError, match='jaw torque of the wrong sign at rest.*lambda_n = 0.4'):
+        physical.check_physical(lossy)
+    monkeypatch.setattr(physical._friction, 'chain_efficiency', lambda *a, **k: 0.0)
+    with pytest.raises(ModelError, match=r'chain efficiency lambda_n = 0.0 at rest: .*\(0, 1\]'):
+        physical.check_physical(params)
+
+
+def test_a_node_refuses_to_start_on_an_instrument_that_could_not_be_built(tmp_path):
+    import subprocess
+    import sys
+    bad = _bad_copy(tmp_path, 'cable_radius', '0.00015', config='four_pulley_needle_driver')
+    done = subprocess.run([sys.executable, '-m', 'grip_force_ros.nodes.sim_instrument',
+                           '--ros-args', '--params-file', str(bad)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert 'refusing to start' in done.stderr and 'could not be built' in done.stderr
+    assert 'Traceback' not in done.stderr

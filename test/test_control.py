@@ -396,3 +396,112 @@ def test_rejection_counters_stay_bounded(params):
     assert sum(inp.rejected.values()) == 5000 + 4999
     assert len(inp.rejected) <= 3
     assert inp.rejected['instrument: jaw angle # rad outside [#, #]'] == 5000
+
+
+# --------------------------------------------------------------------------- late vs lost
+def test_each_input_has_its_own_watchdog_and_feedback_never_outlives_the_set_point():
+    from grip_force_ros.control.inputs import TIMEOUT_PARAMS
+    from grip_force_ros.params import SPECS, ParameterError
+    assert set(TIMEOUT_PARAMS) == {'master', 'instrument', 'actuator', 'force'}
+    assert all(n in SPECS and SPECS[n].unit == 's' for n in TIMEOUT_PARAMS.values())
+    p = make_params({})
+    assert p.watchdog_timeout == p.actuator_watchdog_timeout == 0.03      # the dVRK's drive link
+    assert p.master_watchdog_timeout > p.watchdog_timeout
+    for name in ('watchdog_timeout', 'actuator_watchdog_timeout', 'force_watchdog_timeout'):
+        with pytest.raises(ParameterError, match=f"'{name}' 0.2 s is longer than 'master_watchdog"):
+            make_params({name: 0.2})
+        with pytest.raises(ParameterError, match='two control periods'):
+            make_params({name: 0.003, 'control_rate': 500.0})
+    make_params({'watchdog_timeout': 0.2, 'master_watchdog_timeout': 0.2})   # equal is fine
+
+
+def test_interval_estimate_follows_the_stream_and_ignores_stalls_and_bursts():
+    from grip_force_ros.control.inputs import next_interval
+    interval = math.nan
+    for _ in range(50):
+        interval = next_interval(interval, 4e-3)            # a 250 Hz master
+    assert interval == pytest.approx(4e-3)
+    assert next_interval(interval, 0.5) < 1.31 * interval    # one stall: clipped to 4x, gain 0.1
+    assert next_interval(interval, math.nan) == interval and next_interval(interval, 0.0) == interval
+    for _ in range(150):
+        interval = next_interval(interval, 4e-4)            # a 10x burst
+    from grip_force_ros.control.inputs import LATE_FACTOR
+    late = 0
+    for _ in range(12):                                     # back to 250 Hz
+        late += 4e-3 > LATE_FACTOR * interval
+        interval = next_interval(interval, 4e-3)
+    assert late <= 5 and 4e-3 < LATE_FACTOR * interval      # normal gaps late for 5 samples only
+
+
+def test_a_late_master_is_counted_and_the_hold_goes_on_with_its_last_value(params):
+    """A 250 Hz master that stalls 60 ms (late: > 3 of its 4 ms intervals, < its 100 ms
+    watchdog): grip goes on, no safe period, one late episode once it is back."""
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    t = 0.0
+    for k in range(400):                       # 0.4 s of grip, master every 4th period
+        t = k * PERIOD
+        if k % 4 == 0:
+            inp.set_master(t, 0.0)
+        inp.set_instrument(t, 0.0, 0.04)
+        inp.set_actuator(t, ctrl.command)
+        out = ctrl.step(t, inp)
+    assert out.mode == 'grip'
+    target = out.target_force
+    for k in range(1, 61):                     # 60 ms without the master
+        now = t + k * PERIOD
+        inp.set_instrument(now, 0.0, 0.04)
+        inp.set_actuator(now, ctrl.command)
+        out = ctrl.step(now, inp)
+        assert out.mode == 'grip' and out.target_force == target
+    assert ctrl.late_counts['master'] == 0     # counted when the episode ends
+    now += PERIOD
+    inp.set_master(now, 0.0)
+    inp.set_instrument(now, 0.0, 0.04)
+    inp.set_actuator(now, ctrl.command)
+    out = ctrl.step(now, inp)
+    assert out.mode == 'grip'
+    assert ctrl.late_counts == {'master': 1, 'instrument': 0, 'actuator': 0, 'force': 0}
+    oldest = now - PERIOD - 0.396              # the last step before it, on the 0.396 s sample
+    assert ctrl.late_max_age['master'] == pytest.approx(oldest, abs=1e-9)
+    status = ctrl.status(inp)
+    assert status['late_inputs'] == '1' and status['late_master'] == '1'
+    assert float(status['late_master_max_ms']) == pytest.approx(oldest * 1e3, abs=0.05)
+
+
+def test_a_lost_master_trips_its_own_watchdog_and_is_not_counted_late(params):
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    _, t = run_grip(ctrl, inp, n=300, master=0.0)
+    last = inp.master_time
+    modes = []
+    for k in range(130):
+        now = t + k * PERIOD
+        inp.set_instrument(now, 0.0, 0.04)
+        inp.set_actuator(now, ctrl.command)
+        out = ctrl.step(now, inp)
+        modes.append(out.mode)
+    first_safe = t + modes.index('safe') * PERIOD
+    assert -1e-9 <= first_safe - (last + params.master_watchdog_timeout) <= 2 * PERIOD
+    assert all(m == 'grip' for m in modes[:modes.index('safe')])    # held until then
+    feed(inp, t + 130 * PERIOD, 0.0, 0.04, ctrl.command)
+    ctrl.step(t + 130 * PERIOD, inp)
+    assert ctrl.late_counts['master'] == 0     # lost, not late: the safe state reported it
+    assert ctrl.late_max_age['master'] == 0.0  # nor its age
+
+
+def test_a_stale_actuator_trips_at_its_own_timeout(params):
+    params = params.replace(actuator_watchdog_timeout=0.01)
+    ctrl = GripController(params)
+    inp = ctrl.new_inputs()
+    _, t = run_grip(ctrl, inp, n=300, master=0.0)
+    last = inp.actuator_time
+    for k in range(20):
+        now = t + k * PERIOD
+        inp.set_master(now, 0.0)
+        inp.set_instrument(now, 0.0, 0.04)
+        out = ctrl.step(now, inp)
+        if out.mode == 'safe':
+            break
+    assert any('stale actuator input' in r and '> 10.0 ms' in r for r in out.reasons)
+    assert now - (last + 0.01) <= 2 * PERIOD

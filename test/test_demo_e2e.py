@@ -17,14 +17,32 @@ pytestmark = [
 ]
 
 
-#: Demo runs tried until one is not spoiled by a starved node (a loaded CI machine).
+#: Sensorless hold on a plant that matches its YAML (the demo's default): the load cell's
+#: mean may differ from the target by the model's residual, expected within ~2 % (the
+#: closed loop on the same sim without ROS: +1.0 %, docs/control.md; test_ros_nodes: -1.6
+#: to +0.2 %), bound 3 %: the stick band's state can be 1-3 % off after a move, and this
+#: 4 s task moves 2.5x faster than the 10 s default. RMS: that mean plus the load cell's
+#: own noise (0.02 N = 0.5 % of 4 N) and the ripple the current noise (2 mA) makes through
+#: dF/dI ~ 14 N/A (0.03 N = 0.7 %): sqrt(3^2 + 0.5^2 + 0.7^2) % = 3.1 %, bound 4 %.
+HOLD_MEAN_TOLERANCE = 0.03
+HOLD_RMS_TOLERANCE = 0.04
+#: Pull-out force = (sqrt(2) + 1) mu' x the grip estimate (the paper's needle held in three
+#: points, mu' = 0.15): 0.362 x 4 N = 1.45 N while the master holds the target; 5 % for the
+#: estimate's excursions at the pull phase's start (the estimate holds within 1 % after).
+PULL_OUT_TOLERANCE = 0.05
+
+#: A run spoiled in its hold phase (an input lost for longer than its watchdog timeout, or a
+#: topic silent for 100 ms: docs/demo.md) is redone at most twice; a third spoiled run fails
+#: the hold test with the causes of all three. A late input (control went on) spoils nothing.
 ATTEMPTS = 3
 
 
 @pytest.fixture(scope='module')
 def demo_run(tmp_path_factory):
+    """(output folder, result JSON, problems of each spoiled attempt) of the last run."""
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    for _ in range(ATTEMPTS):
+    spoiled = []
+    for attempt in range(ATTEMPTS):
         out = tmp_path_factory.mktemp('demo')
         proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
                                '4', '--json', '--quiet', '--out', str(out)],
@@ -33,12 +51,14 @@ def demo_run(tmp_path_factory):
         result = json.loads(proc.stdout)
         if not result['problems']:
             break
-    return out, result
+        spoiled.append(f"attempt {attempt + 1}: {'; '.join(result['problems'])} (load average "
+                       f'{os.getloadavg()[0]:.1f})')
+    return out, result, spoiled
 
 
 def test_bag_holds_every_topic_and_rosbags_reads_it(demo_run):
     from rosbags.highlevel import AnyReader
-    out, result = demo_run
+    out, result, _ = demo_run
     bag = out / 'bag'
     assert result['bag'] == str(bag) and (bag / 'metadata.yaml').exists()
     with AnyReader([bag]) as reader:
@@ -47,13 +67,20 @@ def test_bag_holds_every_topic_and_rosbags_reads_it(demo_run):
         reader.deserialize(first[2], first[0].msgtype)
     assert set(counts) == {'/' + t.lstrip('/') for t in topics.RECORDED}
     assert all(counts[t] > 0 for t in counts), counts
-    # ~1 kHz sensor and command streams over the whole task
-    assert counts['/instrument/actuator/measured_js'] > 2000
-    assert counts['/grip/target_force'] > 2000
+    # the 1 kHz streams over the whole task: ~4000-6000 states and commands on a quiet machine
+    # (the task and its start and tail), fewer when the nodes are starved (2052 states, 1867
+    # commands at load 14: the sim then steps longer periods, states overtake each other;
+    # or more commands than states, 4435 vs 2508, when the controller's fallback timer
+    # answers late states). Reported, not judged; the recording is: at least 100 a second.
+    print(f"recorded in a {result['duration']:.1f} s task: {counts} "
+          f'(load average {os.getloadavg()[0]:.1f})')
+    for stream in ('/instrument/actuator/measured_js', '/instrument/actuator/servo_jf',
+                   '/grip/target_force'):
+        assert counts[stream] > 100 * result['duration'], (stream, counts)
 
 
 def test_plot_and_results_are_written(demo_run):
-    out, result = demo_run
+    out, result, _ = demo_run
     plot = out / 'summary.png'
     assert result['plot'] == str(plot)
     assert plot.read_bytes()[:4] == b'\x89PNG' and plot.stat().st_size > 30_000
@@ -64,15 +91,18 @@ def test_plot_and_results_are_written(demo_run):
 
 
 def test_hold_force_reaches_the_target(demo_run):
-    _, result = demo_run
-    if result['problems']:
-        pytest.skip(f'{ATTEMPTS} demo runs all spoiled by a starved node (machine overloaded): '
-                    f"{result['problems'][0]}")
+    _, result, spoiled = demo_run
+    assert not result['problems'], f'{ATTEMPTS} demo runs spoiled: ' + ' | '.join(spoiled)
+    # late inputs and safe-state entries are reported apart; none of the latter in this run
+    assert set(result['late_inputs']) >= {'total'} and result['metrics']['late_inputs'] >= 0
+    hold = result['phases']['hold']
+    assert not [e for e in result['safe_state_entries'] if hold[0] <= e['t'] <= hold[1]]
     m = result['metrics']
-    assert m['target_force'] > 1.0                               # N: the grasp did squeeze
-    assert abs(m['hold_error_mean']) < 0.1 * m['target_force']   # sensorless, same plant
-    assert m['hold_error_rms'] < 0.15 * m['target_force']
-    assert m['pull_out_force'] > 0.0
+    assert m['target_force'] == pytest.approx(4.0)               # N: grip_force_max, master closed
+    assert abs(m['hold_error_mean']) < HOLD_MEAN_TOLERANCE * m['target_force'], m
+    assert m['hold_error_rms'] < HOLD_RMS_TOLERANCE * m['target_force'], m
+    expected_pull_out = (2 ** 0.5 + 1) * 0.15 * m['target_force']
+    assert m['pull_out_force'] == pytest.approx(expected_pull_out, rel=PULL_OUT_TOLERANCE), m
 
 
 def test_ctrl_c_stops_every_node(tmp_path):
@@ -82,9 +112,14 @@ def test_ctrl_c_stops_every_node(tmp_path):
 
     import psutil
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    # A suite started as a background job (`./dev test ... &`, nohup, CI runners) inherits
+    # SIGINT ignored, and Python then keeps it ignored: the demo would run its whole task
+    # (found by loaded runs: exit 0 after 29.6 s). The demo gets SIGINT's default, as in a
+    # terminal.
     demo = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
                              '20', '--quiet', '--out', str(tmp_path / 'run')],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 60
         children = []
@@ -92,13 +127,21 @@ def test_ctrl_c_stops_every_node(tmp_path):
             children = psutil.Process(demo.pid).children(recursive=True)
             time.sleep(0.2)
         assert len(children) >= 3, 'the three nodes never started'
+        names = [' '.join(c.cmdline()[:2]) for c in children if c.is_running()]
         time.sleep(2.0)
+        sent = time.monotonic()
         demo.send_signal(signal.SIGINT)
-        _, err = demo.communicate(timeout=30)
+        try:
+            out, err = demo.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            demo.kill()
+            out, err = demo.communicate()
     finally:
         if demo.poll() is None:
             demo.kill()
-    assert demo.returncode == 130, err[-2000:]
+    assert demo.returncode == 130, (
+        f'exit {demo.returncode} {time.monotonic() - sent:.1f} s after SIGINT; children {names}; '
+        f'stderr: {err[-1500:]!r}; stdout: {out[-1500:]!r}')
     assert 'interrupted' in err
     gone, alive = psutil.wait_procs(children, timeout=5)
     assert not alive, [p.pid for p in alive]

@@ -247,3 +247,43 @@ def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
     for extra in ([], ['--compare-instruments']):
         assert cli_main(['demo', '--out', str(tmp_path), *extra]) == 2
         assert 'is not empty' in capsys.readouterr().err
+
+
+def test_late_inputs_and_safe_state_entries_are_reported_apart():
+    """Cumulative late counts on /diagnostics -> the ones within the task window, per source;
+    a safe-state entry (a lost input) is a separate list."""
+    def status(mode, **late):
+        values = {'mode': mode, 'reasons': 'ok', 'late_inputs': str(sum(
+            int(v) for k, v in late.items() if not k.endswith('_ms')))}
+        values.update({f'late_{k}': str(v) for k, v in late.items()})
+        return [{'name': 'grip_force_ros: controller', 'level': 0, 'message': '', 'values': values}]
+    diagnostics = [
+        (9.0, status('safe')),                                        # before the task: starting
+        (9.5, status('free', master=2, master_max_ms=14.0)),          # 2 late before the task
+        (11.0, status('grip', master=3, master_max_ms=30.5)),
+        (12.0, status('grip', master=4, master_max_ms=30.5, actuator=1, actuator_max_ms=4.2)),
+        (12.5, [{'name': 'grip_force_ros: controller', 'level': 2, 'message': 'safe',
+                 'values': {'mode': 'safe', 'reasons': 'stale instrument input: 31.0 ms old > 30.0 ms',
+                            'late_master': '4', 'late_actuator': '1'}}]),
+        (30.0, status('grip', master=9, master_max_ms=40.0)),         # after the task
+    ]
+    late = analysis.late_inputs(diagnostics, (0.0, 5.0), offset=10.0)
+    assert late == {'total': 3, 'master': {'count': 2, 'max_ms': 30.5},
+                    'actuator': {'count': 1, 'max_ms': 4.2}}
+    safe = analysis.safe_state_entries(diagnostics, (0.0, 5.0), offset=10.0)
+    assert [e['t'] for e in safe] == [2.5] and 'stale instrument' in safe[0]['reason']
+    assert analysis.late_inputs([], (0.0, 5.0)) == {'total': 0}
+
+
+def test_a_run_is_spoiled_by_a_loss_in_the_hold_or_the_pull_test_only():
+    windows = {'close': (0.5, 1.3), 'hold': (1.3, 2.8), 'pull': (2.8, 4.3), 'release': (4.3, 5.0)}
+    clean = {'target_force': 4.0, 'largest_gap_hold': 0.004, 'largest_gap_pull': 0.004,
+             'safe_events': [{'t': 0.9, 'reason': 'stale master input'},       # closing
+                             {'t': 4.6, 'reason': 'stale master input'}]}      # release
+    assert analysis.run_problems(clean, windows) == []
+    pull = dict(clean, safe_events=[{'t': 3.0, 'reason': 'stale actuator input: 31.0 ms old'}])
+    assert analysis.run_problems(pull, windows) == [
+        'safe state at 3.00 s (pull phase): stale actuator input: 31.0 ms old']
+    silent = dict(clean, largest_gap_pull=0.283)
+    assert analysis.run_problems(silent, windows) == [
+        'a topic went silent for 283 ms during the pull phase']

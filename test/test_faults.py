@@ -57,6 +57,8 @@ def test_mutators():
     assert len(stamps) == 10 and stamps == sorted(stamps) and len(set(stamps)) == 10
     assert max(stamps) == pytest.approx(100.0) and min(stamps) > 99.999
     frozen = frozen_stamp()
+    assert frozen(dict(SAMPLE, stamp=7.0), 9)[0]['stamp'] == 7.0     # a window starting at k 9
+    assert frozen(dict(SAMPLE, stamp=8.0), 10)[0]['stamp'] == 7.0
     assert [frozen(dict(SAMPLE, stamp=t), k)[0]['stamp'] for k, t in enumerate((1.0, 2.0, 3.0))] \
         == [1.0, 1.0, 1.0]
 
@@ -98,11 +100,33 @@ def _assert_report(report, n_cases):
 
 @pytest.mark.ros
 def test_faultcheck_whole_catalogue_on_real_nodes():
-    """Every case against the real controller node (~20 s; grip-force faultcheck)."""
-    from grip_force_ros.faults.runner import run_faultcheck
+    """Every case against the real controller node, the cases that involve the instrument
+    against the shipped sim_instrument process too, then the negative control (~1.5-2 min;
+    grip-force faultcheck)."""
+    from grip_force_ros.faults.defects import DEFECTS
+    from grip_force_ros.faults.runner import involves_instrument, run_faultcheck
     report = run_faultcheck()
-    _assert_report(report, len(catalogue()))
+    on_process = [c.name for c in catalogue() if involves_instrument(c)]
+    _assert_report(report, len(catalogue()) + len(on_process))
     by_name = {d['name']: d for d in report['details']}
+    # every case that involves the instrument ran against the sim_instrument process as well
+    assert len(on_process) >= 30
+    for name in on_process:
+        assert by_name[f'{name}@sim_instrument']['plant'] == 'sim_instrument'
+    # "sim restart" there is a real one: the process killed (SIGKILL) and a new one started
+    for name in ('sim_restart@sim_instrument', 'sim_restart_clock_reset@sim_instrument'):
+        process = by_name[name]['sim_process']
+        assert process['exit_code'] == -9 and process['new_pid'] != process['killed_pid']
+        assert 1 <= by_name[name]['controller_steps_after_timeout'] <= 2, by_name[name]
+    # negative control: every deliberately broken build is caught by at least one case
+    negative = report['negative_control']
+    assert negative['cases'] == len(DEFECTS) >= 4
+    assert negative['caught'] == negative['cases'], negative['defects']
+    assert {d['defect'] for d in negative['defects']} >= {'current_limit_off', 'slew_limit_off',
+                                                          'watchdog_off', 'nan_passed_through'}
+    # a load cell stuck at 0 N winds the force loop up to the current limit, which holds
+    stuck = by_name['force_sensor_stuck_at_zero']
+    assert stuck['peak_command'] == pytest.approx(stuck['max_current'], rel=1e-9)
     # the watchdog trips within two control periods after the timeout, on every input
     for name in ('silence_master', 'silence_instrument', 'silence_actuator',
                  'silence_force_sensor', 'frozen_stamp_actuator'):
@@ -151,5 +175,21 @@ def test_faultcheck_cli_json():
     assert done.returncode == 0, done.stderr[-2000:]
     report = json.loads(done.stdout)
     assert {k: report[k] for k in ('cases', 'passed', 'crashes', 'limit_violations', 'failures')} \
-        == {'cases': 3, 'passed': 3, 'crashes': 0, 'limit_violations': 0, 'failures': []}
-    assert sorted(d['name'] for d in report['details']) == sorted(cmd[-3:])
+        == {'cases': 4, 'passed': 4, 'crashes': 0, 'limit_violations': 0, 'failures': []}
+    assert sorted(d['name'] for d in report['details']) == sorted(
+        cmd[-3:] + ['silence_actuator@sim_instrument'])
+    assert report['negative_control'] == {'cases': 0, 'caught': 0, 'defects': []}   # --only
+
+
+def test_a_defect_cannot_be_injected_outside_the_negative_control():
+    """The test-only switch: no broken build outside the fault check's own session."""
+    from grip_force_ros.faults.defects import DEFECTS, break_controller, negative_control_session
+    from grip_force_ros.nodes.controller import read_joints
+    with pytest.raises(RuntimeError, match='negative control'):
+        break_controller(object(), 'watchdog_off')
+    with negative_control_session(), pytest.raises(ValueError, match='unknown defect'):
+        break_controller(object(), 'brakes_off')
+    for defect in DEFECTS.values():           # each names cases of the catalogue
+        assert defect.cases and set(defect.cases) <= {c.name for c in catalogue()}
+    from grip_force_ros.nodes import controller as node_module
+    assert node_module.read_joints is read_joints     # nothing left patched

@@ -20,7 +20,7 @@ MAY_IMPORT = {
     'sim': {'objects', 'effects', 'model', 'params'},
     'identify': {'objects', 'effects', 'model', 'params'},
     'rig': {'plotting'},
-    'diagnosis': {'objects', 'effects', 'model', 'sim', 'logs', 'params', 'plotting'},
+    'diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'plotting'},
     'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
     'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting',
                 'topics'},

@@ -3,8 +3,8 @@
 ``sim_instrument`` and ``controller`` run as ``ros2 run`` processes, the master as ``ros2
 topic pub`` of a gripper angle the test sets (open, or closed on the needle: a light process
 of its own, so that it stays on time on a loaded machine, which this recording test process
-does not); this process records what the controller and the sim publish. ``ros2 lifecycle get|set|nodes``, ``ros2 service
-call`` and ``ros2 param get`` are the user's commands.
+does not); this process records what the controller and the sim publish. ``ros2 lifecycle
+get|set|nodes``, ``ros2 service call`` and ``ros2 param get`` are the user's commands.
 """
 from __future__ import annotations
 

@@ -129,7 +129,7 @@ def test_fitted_inverse_equals_the_bracketed_scalar_solve():
 
 def test_fitted_inverse_still_refuses_unreachable_forces():
     m = GripForceModel(FOUR)
-    peak = max(m._torque_scalar(i, 0.0) for i in np.linspace(1.2, 1.4, 201))     # N*m, at ~1.29 A
+    peak = max(m._torque_scalar(i, 0.0) for i in np.linspace(1.0, 2.5, 1501))    # N*m, at ~1.58 A
     with pytest.raises(Exception, match='beyond the largest'):
         m.inverse(np.array([0.1, 1.01 * peak / m._tip]), 0.0, 0.0, 'needle')
     assert math.isfinite(float(m.inverse(np.array([0.99 * peak / m._tip]), 0.0, 0.0, 'needle')[0]))
@@ -169,8 +169,15 @@ def test_samples_outside_the_tables_raise_no_numpy_warnings():
 @given(mu=st.floats(0.03, 0.3), gain=st.floats(-5.0, -1.3), max_current=st.floats(0.05, 5.0),
        seed=st.integers(0, 2 ** 31))
 @example(mu=0.2397755385726311, gain=-3.0, max_current=0.5, seed=0)
+@example(mu=0.23828125, gain=-5.0, max_current=1.0, seed=0)   # lambda_n only 0.4 % above 0.5
 def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max_current, seed):
-    """Random friction, tension gain (1e-5..0.05 1/N) and current range: tables or not, the same answers."""
+    """Random friction, tension gain (1e-5..0.05 1/N) and current range: tables or not, the same answers.
+
+    ``gain`` is the log10 of ``tension_friction_gain`` (-5: 1e-5 1/N, a positive gain). With
+    mu near 0.24 the paper's chain efficiency lambda_n is barely above the static resistance
+    fraction (0.5): a physical, if useless, instrument (0.17 N of grip at 0.5 A), where the
+    jaw torque r_n F0 (lambda_n - 0.5) is the small difference of two large terms.
+    """
     m = GripForceModel(make_params().replace(pulley_friction_coefficient=mu,
                                              tension_friction_gain=10.0 ** gain, max_current=max_current))
     assert m._one_dimensional
@@ -190,10 +197,15 @@ def test_any_nonlinear_instrument_equals_the_exact_chain_and_solve(mu, gain, max
     slope = np.array([(m._torque_scalar(i * (1 + 1e-7), 0.1) - m._torque_scalar(i, 0.1)) / (i * 1e-7)
                       for i in expect])
     condition = force * m._tip / (expect * slope)
+    # and the torque M = r_n F0 (lambda_n - fraction) turns a relative error of the fitted
+    # lambda_n into lambda_n / (lambda_n - fraction) times as much of M (found by hypothesis:
+    # mu 0.238, lambda_n 0.5015 at 1.46 A, 260x; the tables' lambda_n was within 2.2e-15)
+    lam = exact_efficiency(m, expect)
+    cancellation = lam / (lam - m.resistance_fraction)
     # plus a floor of 1e-14 of the current range: the cubics are fitted over the whole range,
     # so near 0 A their error is a few ulps of max_current, not of the sample (found by
     # hypothesis: 8e-16 A at 2.7 mA with max_current 0.5 A)
-    allowed = 1e-13 * (1.0 + condition) * expect + 1e-14 * max_current
+    allowed = 1e-13 * (1.0 + condition) * cancellation * expect + 1e-14 * max_current
     assert np.all(np.abs(m.inverse(force, 0.1, 0.0, 'needle') - expect) <= allowed)
     scalar = np.array([m.current_for_force_scalar(float(f), 0.1, 0.0) for f in force])
     assert np.all(np.abs(scalar - expect) <= allowed)
@@ -223,7 +235,9 @@ def test_table_errors_and_their_figure(tmp_path):
     errors = table_errors(m, np.linspace(0.01, 1.0, 60))
     assert errors['efficiency'].max() <= m.EFFICIENCY_FIT_TOLERANCE
     assert errors['inverse'].max() <= m.CURRENT_FIT_TOLERANCE
-    assert FOUR.max_current < errors['table_end_current'] < 1.0
+    # the inverse table covers the current range (to 2 max_current = 1 A; with the 0.3 mm cable
+    # of issue 13 it stopped short of the torque peak, before 1 A)
+    assert FOUR.max_current < errors['table_end_current'] <= 2 * FOUR.max_current * (1 + 1e-12)
     # M concave, far from the peak
     assert np.all((errors['condition'] >= 1.0) & (errors['condition'] < 10.0))
     path = plot_table_errors('config/four_pulley_needle_driver.yaml', tmp_path / 'e.png', samples=40)

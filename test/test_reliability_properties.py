@@ -55,11 +55,17 @@ def tunable(rng):
     }
     keys = list(values)
     chosen = rng.choice(len(keys), size=int(rng.integers(1, len(keys) + 1)), replace=False)
-    return {keys[i]: values[keys[i]] for i in chosen}
+    out = {keys[i]: values[keys[i]] for i in chosen}
+    if 'watchdog_timeout' in out:   # the four watchdogs as a set: no feedback one above the master's
+        feedback = [out['watchdog_timeout']] + [float(rng.choice([0.002, 0.03, 0.5])) for _ in range(2)]
+        out.update(actuator_watchdog_timeout=feedback[1], force_watchdog_timeout=feedback[2],
+                   master_watchdog_timeout=max(max(feedback), float(rng.choice([0.03, 0.1, 1.0]))))
+    return out
 
 
 def test_tunables_are_not_read_only_and_limits_are():
-    for name in ('force_kp', 'grip_force_max', 'watchdog_timeout', 'object_kind'):
+    for name in ('force_kp', 'grip_force_max', 'watchdog_timeout', 'master_watchdog_timeout',
+                 'actuator_watchdog_timeout', 'force_watchdog_timeout', 'object_kind'):
         assert not SPECS[name].read_only
     for name in ('max_current', 'max_current_slew', 'max_grip_force', 'control_rate'):
         assert SPECS[name].read_only

@@ -83,7 +83,7 @@ def test_each_state_is_answered_at_once_and_the_timer_stays_quiet(node):
     ticks = [('tick', start + (k + 0.3) * period) for k in range(200)]   # timer phase 0.3
     _run(ctl, clock, states + ticks)
     assert steps == [t for _, t in states], 'one step per state, at its arrival'
-    assert ctl.steps == {'on_state': 200, 'on_timer': 0}
+    assert ctl.steps == {'on_state': 200, 'on_timer': 0, 'deferred_after_stall': 0}
     assert ctl.last_output is not None
     assert ctl.timing['late'] == 0
 
@@ -114,7 +114,29 @@ def test_every_state_is_stepped_on_and_the_timer_keeps_half_a_period_away(node):
     _run(ctl, clock, [('tick', t0 + 1.9 * period), ('tick', t0 + 2.0 * period),
                       ('tick', t0 + 3.0 * period)])
     assert steps[2:] == [t0 + 1.9 * period, t0 + 3.0 * period]
-    assert ctl.steps == {'on_state': 2, 'on_timer': 2}
+    assert ctl.steps == {'on_state': 2, 'on_timer': 2, 'deferred_after_stall': 0}
+
+
+def test_a_stall_of_this_process_is_not_taken_for_a_lost_input(node):
+    """The process is not scheduled for 40 ms (longer than the 30 ms watchdog): when it runs
+    again, the timer tick that comes first does not step on the old inputs; the state that
+    came in meanwhile is stepped on. When no state comes, the tick a period later steps
+    (and the watchdog acts)."""
+    ctl, clock, steps = node
+    period = ctl._period
+    t0 = clock.now
+    deliver = [('state', t0 + k * period) for k in range(50)] + \
+        [('tick', t0 + (k + 0.5) * period) for k in range(50)]
+    _run(ctl, clock, deliver)
+    stall_end = t0 + 90 * period                                   # 40 periods later
+    _run(ctl, clock, [('tick', stall_end), ('state', stall_end + 0.01 * period)])
+    assert ctl.steps['deferred_after_stall'] == 1
+    assert stall_end not in steps and steps[-1] == stall_end + 0.01 * period   # the state's
+    # a stall and no state at all: the next regular tick steps
+    later = stall_end + 50 * period
+    _run(ctl, clock, [('tick', later), ('tick', later + period)])
+    assert ctl.steps['deferred_after_stall'] == 2
+    assert steps[-1] == later + period
 
 
 def test_a_cancelled_timer_stops_the_loop(node):
@@ -141,7 +163,8 @@ def test_steps_keep_their_spacing_under_jitter(node, seed):
               for k in range(n) if rng.random() > 0.02]
     ticks = [('tick', start + (k + phase) * period) for k in range(n)]
     timer_steps = _run(ctl, clock, states + ticks)
-    assert ctl.steps == {'on_state': len(states), 'on_timer': len(timer_steps)}
+    assert ctl.steps == {'on_state': len(states), 'on_timer': len(timer_steps),
+                         'deferred_after_stall': 0}
     assert len(steps) == len(states) + len(timer_steps)
     state_times = sorted(t for _, t in states)
     previous_step = {b: a for a, b in zip(steps, steps[1:])}

@@ -8,6 +8,7 @@ process has its own ROS_DOMAIN_ID (conftest.py).
 """
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -143,15 +144,31 @@ def test_needle_grasp_reaches_target_force_with_load_cell_feedback(tmp_path):
     t_grip = now[grip_rows[0]]
     reached = meas_t[(meas_t > t_grip) & (np.abs(meas_f - target) < 0.05 * target)]
     assert reached.size and reached[0] - t_grip < 1.5, 'target force not reached within 1.5 s'
-    # the loop really ran at its rate: median period 1 ms
-    periods = np.diff(now[rec.column('mode') != 'safe'])
-    assert np.median(periods) == pytest.approx(1e-3, rel=0.2)
+    # the loop steps once per actuator state: its median period is the sim's median state
+    # interval (1 ms on a quiet machine; a loaded one delays the sim's timer and both grow
+    # alike: 1.25 ms at load 9); a controller stepping on its timer besides, or skipping
+    # states, would differ. The period itself is reported, not judged (machine-dependent).
+    running = rec.column('mode') != 'safe'
+    periods = np.diff(now[running])
+    states = np.diff(np.unique(rec.column('actuator_time')[running]))
+    print(f'median control period {np.median(periods) * 1e3:.3f} ms, median actuator state '
+          f'interval {np.median(states) * 1e3:.3f} ms (load average {os.getloadavg()[0]:.1f})')
+    assert np.median(periods) == pytest.approx(np.median(states), rel=0.2)
+
+
+#: Sensorless hold on a plant that matches its YAML: the load cell's mean may differ from the
+#: target by the model's residual. Expected within ~2 % (docs/control.md: +1.0 % for the same
+#: grasp on the same sim without ROS; three runs here: -1.6 %, -0.1 %, +0.2 %); bound 3 %:
+#: after a move the stick band's state can be 1-3 % off, because
+#: the sim's drum tension lags gear*K*I/r0 (drum inertia, cable compliance). The load cell's
+#: own noise (0.02 N std) averages to ~1e-3 N over the hold's > 500 samples.
+SENSORLESS_HOLD_TOLERANCE = 0.03
 
 
 def test_needle_grasp_sensorless_tracks_its_estimate(tmp_path):
     """Without a sensor the loop closes on the model estimate: the estimate must hold the
-    target. How close the load cell comes is the model's accuracy (printed; the instrument
-    comparison of `grip-force demo --compare-instruments` judges it)."""
+    target, and with the plant as its YAML says the load cell must too, within the model's
+    residual (:data:`SENSORLESS_HOLD_TOLERANCE`)."""
     params = load_params_file(CONFIG)
     rec = run_loop(tmp_path, 5.5, controller={'force_sensor_enabled': False},
                    master={'trajectory': 'needle_grasp'})
@@ -163,6 +180,7 @@ def test_needle_grasp_sensorless_tracks_its_estimate(tmp_path):
     print(f'sensorless hold: estimate {estimate.mean():.3f} N, load cell {force.mean():.3f} N, '
           f'target {target:.3f} N')
     assert np.isfinite(force).all() and force.size > 100
+    assert abs(force.mean() - target) < SENSORLESS_HOLD_TOLERANCE * target, (force.mean(), target)
 
 
 def _summary(rec):

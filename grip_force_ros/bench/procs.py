@@ -6,18 +6,15 @@ No rclpy in this module (the parent never joins the DDS domain it measures).
 """
 from __future__ import annotations
 
-import fcntl
 import os
 import queue
-import tempfile
 import threading
 import time
-from pathlib import Path
 from typing import Sequence
 
 import psutil
 
-from grip_force_ros.nodes.processes import NodeProcess
+from grip_force_ros.nodes.processes import NodeProcess, ProcessError, held_domains, reserve_domains
 
 
 class BenchError(RuntimeError):
@@ -29,13 +26,14 @@ DEFAULT_DOMAINS = range(200, 233)
 
 
 class DomainLock:
-    """An exclusive ROS_DOMAIN_ID for one bench run (a lock file per domain).
+    """An exclusive ROS_DOMAIN_ID for one bench run.
 
-    Bench runs on one machine never share a domain: each holds ``flock`` on
-    ``<tmp>/grip_force_bench_domain_<id>.lock`` while it runs. When the
-    environment sets ``ROS_DOMAIN_ID`` that domain is the only candidate (the
-    user's choice, e.g. a CI job's own domain); otherwise the first free one of
-    ``candidates``.
+    Held through :func:`grip_force_ros.nodes.processes.reserve_domains` (a lock file
+    per domain, the package's one way to hold a domain), so bench runs, test suites
+    and demos on one machine never share a domain. When the environment sets
+    ``ROS_DOMAIN_ID`` that domain is the only candidate (the user's choice, e.g. a CI
+    job's own domain; a test suite's, which this process already holds, is used as
+    it is); otherwise the first free one of ``candidates``.
     """
 
     def __init__(self, candidates: Sequence[int] | None = None):
@@ -44,26 +42,25 @@ class DomainLock:
             candidates = [int(env)] if env not in (None, '') else list(DEFAULT_DOMAINS)
         self.candidates = list(candidates)
         self.domain_id: int | None = None
-        self._file = None
+        self._reservation = None
 
     def __enter__(self) -> int:
-        for domain in self.candidates:
-            path = Path(tempfile.gettempdir()) / f'grip_force_bench_domain_{domain}.lock'
-            f = open(path, 'w')
-            try:
-                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                f.close()
-                continue
-            self._file, self.domain_id = f, domain
-            return domain
-        raise BenchError(f'no free ROS domain among {self.candidates} (other bench runs hold them)')
+        own = [d for d in self.candidates if d in held_domains()]
+        if len(self.candidates) == 1 and own:      # this process's own domain (a test's)
+            self.domain_id = own[0]
+            return self.domain_id
+        try:
+            self._reservation = reserve_domains(1, candidates=self.candidates)
+        except ProcessError:
+            raise BenchError(f'no free ROS domain among {self.candidates} '
+                             '(other runs hold them, or their DDS ports are bound)') from None
+        self.domain_id = self._reservation.domain_id
+        return self.domain_id
 
     def __exit__(self, *exc) -> None:
-        if self._file is not None:
-            fcntl.flock(self._file, fcntl.LOCK_UN)
-            self._file.close()
-            self._file = None
+        if self._reservation is not None:
+            self._reservation.release()
+            self._reservation = None
 
 
 def realtime(priority: int):

@@ -30,6 +30,8 @@ COMMANDS = {
     'faultcheck': 'faultcheck',
     'soak': 'soak',
     'bench': 'bench',
+    'load': 'load',
+    'loadcheck': 'loadcheck',
 }
 
 

@@ -92,9 +92,15 @@ def print_report(result: dict, stream=sys.stdout) -> None:
       f"{_fmt(m.get('pull_grip_force'))} (load cell)\n")
     w(f"estimate vs cell  rms {_fmt(m.get('estimate_error_rms'))} over the steady hold\n")
     w(f"peak current      {_fmt(m.get('peak_current'), '.3f', ' A')}\n")
+    late = result.get('late_inputs') or {}
+    by_source = ', '.join(f"{k} {v['count']} (oldest {v['max_ms']:.1f} ms)"
+                          for k, v in late.items() if k != 'total')
+    w(f"late inputs       {late.get('total', 0)} during the task"
+      + (f': {by_source}; control went on with the last values' if by_source else '') + '\n')
     events = result.get('safe_state_entries') or []
     w(f"safe state        {len(events)} entr{'y' if len(events) == 1 else 'ies'} during the task"
-      + (f" (first at {events[0]['t']:.2f} s: {events[0]['reason']})" if events else '') + '\n')
+      + (f" (first at {events[0]['t']:.2f} s: {events[0]['reason']})" if events else '')
+      + (' (an input lost: older than its watchdog timeout)' if events else '') + '\n')
     for problem in result.get('problems') or []:
         w(f"WARNING           {problem} (a starved node: the machine is overloaded)\n")
     w(f"bag               {result['bag']} ({sum(result['messages'].values())} messages)\n")
@@ -102,7 +108,7 @@ def print_report(result: dict, stream=sys.stdout) -> None:
 
 
 def run(args) -> int:
-    from grip_force_ros.nodes.processes import ProcessError, pick_domain_ids
+    from grip_force_ros.nodes.processes import ProcessError, reserve_domains
     from grip_force_ros.params import ParameterError, load_params_file
     from grip_force_ros.params.files import instrument_path
 
@@ -138,7 +144,9 @@ def run(args) -> int:
         config = instrument_path(args.config)
         params = load_params_file(config)
         out = Path(args.out) if args.out else _default_out('demo')
-        domain = args.domain_id if args.domain_id is not None else pick_domain_ids(1)[0]
+        # a free domain, held until this run ends (no other run on the machine takes it)
+        held = reserve_domains(1) if args.domain_id is None else None
+        domain = args.domain_id if held is None else held.domain_id
         spec = RunSpec(config=config, duration=args.duration or DEMO_DURATION,
                        label=params.instrument_name, interface=args.interface, arm=args.arm,
                        master=args.master)

@@ -27,6 +27,15 @@ def add_arguments(parser) -> None:
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
 
 
+def _parameters(calibration: dict) -> str:
+    """One line: each re-identified parameter, YAML -> fitted (+- std), and those named off."""
+    parts = []
+    for name, p in calibration.get('parameters', {}).items():
+        fitted = (f"{p['fitted']:.4g} +- {p['std']:.2g}" if p.get('std') is not None else 'held')
+        parts.append(f"{name} {p['yaml']:.4g} -> {fitted}{' (off)' if p.get('off') else ''}")
+    return '; '.join(parts) or 'none fitted'
+
+
 def _summary(result: dict) -> str:
     v = result['verdict']
     lines = [f"verdict: {v['effect']}  (runner-up {v['runner_up']})",
@@ -34,6 +43,7 @@ def _summary(result: dict) -> str:
              f"{v['unit']} rms (shrink {100 * v['shrink']:.0f} %)",
              f"jaw angle gap: {v['angle_gap_before']:.4g} -> {v['angle_gap_after']:.4g} rad rms",
              f"split: {result['split'].get('description', result['split']['method'])}",
+             'parameters (YAML -> re-identified): ' + _parameters(result['calibration']),
              f"calibration: force gain {result['calibration']['force_gain']['value']:.4g}, "
              f"jaw zero {result['calibration']['jaw_angle_offset']['value']:.4g} rad",
              'where (share of the held-out gap):']

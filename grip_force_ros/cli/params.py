@@ -16,12 +16,18 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     from grip_force_ros.params import ParameterError, load_params_file, markdown_table, specs_in
     if args.check:
+        from grip_force_ros.model import ModelError
+        from grip_force_ros.model.physical import cable_load, check_physical
         try:
             p = load_params_file(args.check)
-        except ParameterError as exc:
-            print(f'error: {exc}')
+            check_physical(p)
+        except (ParameterError, ModelError) as exc:
+            print(f'error: {args.check}: {exc}' if isinstance(exc, ModelError) else f'error: {exc}')
             return 1
-        print(f'{args.check}: ok ({p.instrument_name}, {len(p)} parameters)')
+        load = cable_load(p)
+        print(f"{args.check}: ok ({p.instrument_name}, {len(p)} parameters; cable "
+              f"{load['stress'] / 1e9:.2f} GPa at max_current {load['current']:g} A, "
+              f"{load['share']:.0%} of its yield strength)")
         return 0
     specs = specs_in(*(args.group or ()))
     if args.json:

@@ -6,7 +6,7 @@ import math
 from typing import NamedTuple
 
 from grip_force_ros.control.force_map import ForceMap
-from grip_force_ros.control.inputs import SOURCES, ControlInputs
+from grip_force_ros.control.inputs import LATE_FACTOR, SOURCES, ControlInputs, source_timeouts
 from grip_force_ros.control.limits import CurrentLimiter
 from grip_force_ros.control.pid import PID
 from grip_force_ros.model.dvrk_jaw import command_current_limit
@@ -128,12 +128,19 @@ class GripController:
         self.resume_force = math.inf    # N, ramped force target after safe (inf: no ramp)
         self.last_wrist = 0.0           # rad, last accepted wrist angle
         self.filtered_current = 0.0     # A, low-passed measured current (stick-band state)
+        #: late inputs (older than LATE_FACTOR sample intervals, not lost), per source:
+        #: episodes that ended with a fresh sample, and the largest age seen (s)
+        self.late_counts = dict.fromkeys(SOURCES, 0)
+        self.late_max_age = dict.fromkeys(SOURCES, 0.0)
+        self._late_now = dict.fromkeys(SOURCES, False)   # an episode is under way
+        self._late_age = dict.fromkeys(SOURCES, 0.0)     # s, the oldest age in it so far
 
     def _configure(self, params) -> None:
         """Build the map, PIDs and limiter from ``params`` (state of the loop kept by caller)."""
         self.params = params
         self.period = 1.0 / params.expected_state_rate                # s, nominal step time
-        self.watchdog_timeout = params.watchdog_timeout               # s, also the longest step
+        self.timeouts = source_timeouts(params)                       # s, per input source
+        self.watchdog_timeout = self.timeouts['instrument']           # s, also the longest step
         self.object_kind = params.object_kind
         self.use_sensor = bool(params.force_sensor_enabled)
         self.use_feedforward = bool(params.feedforward_enabled)
@@ -145,8 +152,10 @@ class GripController:
             hysteresis.reset()
             self.filtered_current = 0.0
         self.hysteresis = hysteresis
-        #: (source, fault attribute, receive-time attribute) of the inputs the loop needs
-        self._required = tuple((src, src + '_fault', src + '_time')
+        #: (source, fault attribute, receive-time attribute, interval attribute, timeout [s])
+        #: of the inputs the loop needs
+        self._required = tuple((src, src + '_fault', src + '_time', src + '_interval',
+                                self.timeouts[src])
                                for src in SOURCES
                                if src != 'force' or self.use_sensor)
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
@@ -190,6 +199,11 @@ class GripController:
                'reasons': '; '.join(self.last_reasons) or 'ok',
                'object_kind': self.object_kind,
                'feedback': 'force sensor' if self.use_sensor else 'model estimate'}
+        out['late_inputs'] = str(sum(self.late_counts.values()))
+        for source, count in self.late_counts.items():
+            if count:
+                out[f'late_{source}'] = str(count)
+                out[f'late_{source}_max_ms'] = f'{self.late_max_age[source] * 1e3:.1f}'
         if inputs is not None:
             out['rejected_inputs'] = str(sum(inputs.rejected.values()))
             for reason, count in sorted(inputs.rejected.items(), key=lambda kv: -kv[1])[:5]:
@@ -205,9 +219,9 @@ class GripController:
         """Reasons the inputs cannot be used now (empty tuple when all are good)."""
         if not _isfinite(now):
             return (f'controller clock {now!r} not finite',)
-        timeout = self.watchdog_timeout
         reasons = None
-        for source, fault_attr, time_attr in self._required:
+        late_now = self._late_now
+        for source, fault_attr, time_attr, interval_attr, timeout in self._required:
             fault = getattr(inputs, fault_attr)
             received = getattr(inputs, time_attr)
             why = None
@@ -219,11 +233,31 @@ class GripController:
                 age = now - received
                 if age > timeout:
                     why = f'stale {source} input: {age * 1e3:.1f} ms old > {timeout * 1e3:.1f} ms'
+                    late_now[source] = False      # lost, not late: the safe state says so
+                    self._late_age[source] = 0.0
                 elif age < -timeout:
                     why = f'{source} receive time {-age * 1e3:.1f} ms ahead of the controller clock'
+                elif age > LATE_FACTOR * getattr(inputs, interval_attr):   # NaN: never late
+                    self._late(source, age)
+                elif late_now[source]:            # a fresh sample ended a late episode
+                    self._late_ended(source)
             if why is not None:
                 reasons = [why] if reasons is None else reasons + [why]
         return _NO_REASONS if reasons is None else tuple(reasons)
+
+    def _late(self, source: str, age: float) -> None:
+        """Note a late input (age s): control goes on with its last value; counted when it ends."""
+        self._late_now[source] = True
+        if age > self._late_age[source]:
+            self._late_age[source] = age
+
+    def _late_ended(self, source: str) -> None:
+        """Count a late episode that a fresh sample ended (not a loss), with its oldest age."""
+        self._late_now[source] = False
+        self.late_counts[source] += 1
+        if self._late_age[source] > self.late_max_age[source]:
+            self.late_max_age[source] = self._late_age[source]
+        self._late_age[source] = 0.0
 
     # ------------------------------------------------------------------ step
     def _step_interval(self, now: float):

@@ -17,9 +17,45 @@ MAX_REJECTION_KINDS = 64
 
 #: Input sources, in the order the controller checks them.
 SOURCES = ('master', 'instrument', 'actuator', 'force')
+#: The sources an instrument (or its simulation) publishes; the master is the console.
+INSTRUMENT_SOURCES = SOURCES[1:]
+#: The schema parameter of each source's watchdog timeout (s): older than it by receive time,
+#: the input is lost and the output goes to the safe state (docs/control.md).
+TIMEOUT_PARAMS = {'master': 'master_watchdog_timeout', 'instrument': 'watchdog_timeout',
+                  'actuator': 'actuator_watchdog_timeout', 'force': 'force_watchdog_timeout'}
+#: An input older than this many of its own sample intervals (and not lost) is late: control
+#: goes on with its last value and the controller counts it (at least two samples in a row
+#: missed: one missed sample is the jitter of a 1 kHz stream on a loaded machine).
+LATE_FACTOR = 3.0
+#: Gain of the running estimate of each source's sample interval (per sample; ~10 samples).
+INTERVAL_GAIN = 0.1
+#: A gap enters the interval estimate at most this many times the estimate (a stall or a lost
+#: input moves it by 30 % at most; after a 10x burst, normal gaps count late for ~5 samples).
+INTERVAL_CLIP = 4.0
 
 _NAN = math.nan
 _isfinite = math.isfinite
+
+
+def source_timeouts(params) -> dict:
+    """Return source -> watchdog timeout (s) of a ``ParamSet`` (:data:`TIMEOUT_PARAMS`)."""
+    return {source: float(params[name]) for source, name in TIMEOUT_PARAMS.items()}
+
+
+def next_interval(interval: float, gap: float) -> float:
+    """Update a running estimate of a stream's sample interval (s) with one gap (s).
+
+    The first gap starts it (``interval`` NaN); then an exponential average with gain
+    :data:`INTERVAL_GAIN` of the gaps, each clipped to :data:`INTERVAL_CLIP` times the
+    estimate. A NaN or non-positive gap (the first sample, the same receive time) leaves it.
+    """
+    if not gap > 0.0:
+        return interval
+    if interval != interval:
+        return gap
+    if gap > INTERVAL_CLIP * interval:
+        gap = INTERVAL_CLIP * interval
+    return interval + INTERVAL_GAIN * (gap - interval)
 
 
 class ControlInputs:
@@ -66,6 +102,8 @@ class ControlInputs:
         'actuator_fault',
         # force sensor: measured grip force [N]
         'measured_force', 'force_time', 'force_stamp', 'force_fault',
+        # running estimate of each source's sample interval [s] (next_interval)
+        'master_interval', 'instrument_interval', 'actuator_interval', 'force_interval',
         'rejected',
     )
 
@@ -91,6 +129,7 @@ class ControlInputs:
             setattr(self, f'{source}_time', _NAN)    # never received
             setattr(self, f'{source}_stamp', _NAN)
             setattr(self, f'{source}_fault', None)
+            setattr(self, f'{source}_interval', _NAN)
         #: reason with its numbers replaced by '#' -> number of samples rejected for it
         #: (for /diagnostics; at most MAX_REJECTION_KINDS keys + one 'other' per source)
         self.rejected: dict[str, int] = {}
@@ -170,6 +209,7 @@ class ControlInputs:
             angle, clamped = hi, True
         self.master_angle = angle
         self.master_clamped = clamped
+        self.master_interval = next_interval(self.master_interval, receive_time - self.master_time)
         self.master_time = receive_time
         self.master_stamp = stamp
         self.master_fault = None
@@ -204,6 +244,8 @@ class ControlInputs:
         self.wrist_angle = wrist_angle
         self.jaw_angle = jaw_angle
         self.jaw_velocity = jaw_velocity
+        self.instrument_interval = next_interval(self.instrument_interval,
+                                                 receive_time - self.instrument_time)
         self.instrument_time = receive_time
         self.instrument_stamp = stamp
         self.instrument_fault = None
@@ -235,6 +277,7 @@ class ControlInputs:
         self.measured_current = measured_current
         self.motor_angle = motor_angle
         self.motor_velocity = motor_velocity
+        self.actuator_interval = next_interval(self.actuator_interval, receive_time - self.actuator_time)
         self.actuator_time = receive_time
         self.actuator_stamp = stamp
         self.actuator_fault = None
@@ -259,6 +302,7 @@ class ControlInputs:
             return self.reject('force', receive_time,
                                f'grip force {grip_force:.3f} N beyond +-{self.force_limit:.1f}')
         self.measured_force = grip_force
+        self.force_interval = next_interval(self.force_interval, receive_time - self.force_time)
         self.force_time = receive_time
         self.force_stamp = stamp
         self.force_fault = None

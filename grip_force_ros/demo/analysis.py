@@ -10,6 +10,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from grip_force_ros.control import Mode
+from grip_force_ros.control.inputs import SOURCES
 from grip_force_ros.trajectories import Trajectory
 
 #: Share of the hold phase, at its end, over which the force counts as steady.
@@ -204,6 +205,52 @@ def safe_state_entries(diagnostics, window: tuple[float, float], offset: float =
     return out
 
 
+def late_inputs(diagnostics, window: tuple[float, float], offset: float = 0.0,
+                name_part: str = 'controller') -> dict:
+    """Late inputs the controller counted within ``window`` (s, data axis), per source.
+
+    Late: older than three of its own sample intervals but not lost (control went on with
+    the last value; docs/control.md). The controller's /diagnostics carry cumulative
+    counts (``late_<source>``) and the largest age (``late_<source>_max_ms``); the counts
+    in the window are the last report in it minus the last report before it.
+
+    Parameters
+    ----------
+    diagnostics, window, offset, name_part
+        As :func:`safe_state_entries`.
+
+    Returns
+    -------
+    dict
+        ``total`` (int) and, per source with late inputs in the window, ``{'count': int,
+        'max_ms': float}`` (``max_ms``: the largest age reported within the window, ms).
+    """
+    before: dict = {}
+    last: dict = {}
+    oldest: dict = {}          # source -> largest age reported in the window (ms)
+    for t, statuses in diagnostics:
+        for status in statuses:
+            if name_part not in status['name']:
+                continue
+            values = status['values']
+            tt = t - offset
+            if tt < window[0]:
+                before = values
+            elif tt <= window[1]:
+                last = values
+                for source in SOURCES:
+                    age = values.get(f'late_{source}_max_ms')
+                    if age is not None:
+                        oldest[source] = max(oldest.get(source, 0.0), float(age))
+    out: dict = {'total': 0}
+    for source in SOURCES:
+        count = int(last.get(f'late_{source}', 0)) - int(before.get(f'late_{source}', 0))
+        if count > 0:
+            out[source] = {'count': count, 'max_ms': oldest.get(source, float('nan'))}
+            out['total'] += count
+    return out
+
+
 def largest_gap(times: np.ndarray, window: tuple[float, float]) -> float:
     """Longest interval (s) without a sample inside ``window`` (its edges count as samples)."""
     t = np.asarray(times, float)
@@ -212,21 +259,29 @@ def largest_gap(times: np.ndarray, window: tuple[float, float]) -> float:
     return float(np.max(np.diff(edges)))
 
 
-def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str]:
-    """Why a run cannot be trusted (empty if it can): stalls and safe-state entries in hold.
+#: The phases the demo's figures come from: the hold (force error, steady ratio) and the
+#: pull test (pull-out force).
+MEASURED_PHASES = ('hold', 'pull')
 
-    A loaded machine can starve a node for a while; the controller then trips its
-    watchdog. Such a run measures the machine, not the controller.
+
+def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str]:
+    """Why a run cannot be trusted (empty if it can): stalls and safe-state entries.
+
+    In the phases the figures come from (:data:`MEASURED_PHASES`). A loaded machine can
+    starve a node for a while; the controller then loses an input and enters its safe
+    state. Such a run measures the machine, not the controller.
     """
     problems = []
-    gap = metrics.get('largest_gap_hold', 0.0)
-    if gap > max_gap:
-        problems.append(f'a topic went silent for {gap * 1e3:.0f} ms during the hold phase')
-    hold = windows.get('hold')
-    for event in metrics.get('safe_events', []):
-        if hold and hold[0] <= event['t'] <= hold[1]:
-            problems.append(f"safe state at {event['t']:.2f} s: {event['reason']}")
-            break
+    for phase in MEASURED_PHASES:
+        gap = metrics.get(f'largest_gap_{phase}', 0.0)
+        if gap > max_gap:
+            problems.append(f'a topic went silent for {gap * 1e3:.0f} ms during the {phase} phase')
+        window = windows.get(phase)
+        for event in metrics.get('safe_events', []):
+            if window and window[0] <= event['t'] <= window[1]:
+                problems.append(f"safe state at {event['t']:.2f} s ({phase} phase): "
+                                f"{event['reason']}")
+                break
     if not metrics.get('target_force', 0.0) > 0:
         problems.append('no grip force target during the hold phase')
     return problems

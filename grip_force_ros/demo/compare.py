@@ -43,7 +43,7 @@ def plant_scales(index: int, plant_error: float) -> dict[str, float]:
 
     The first instrument gets the lower friction (and stiffer cable), the second the
     higher, and so on. With the shipped configs sorted by name, the lossiest one (the
-    four-pulley driver: 1.78 N at 0.5 A with +20 % friction) comes first, so every
+    four-pulley driver: 2.76 N at 0.5 A with +20 % friction) comes first, so every
     plant can still reach the 4 N target.
     """
     sign = -1.0 if index % 2 == 0 else 1.0
@@ -137,6 +137,9 @@ def _done(job: dict, result: dict) -> str:
     text = f"  {job['spec']['label']}: done ({result['wall_time']:.1f} s"
     if ratio is not None:
         text += f', steady hold force / target {ratio:.3f}'
+    late = (result.get('late_inputs') or {}).get('total')
+    if late:
+        text += f', {late} late input(s)'
     if result['spoiled_attempts']:
         text += f", {len(result['spoiled_attempts'])} spoiled run(s) redone: " \
                 f"{result['spoiled_attempts'][0]['problems'][0]}"
@@ -154,7 +157,8 @@ def _log(stream: TextIO | None, text: str) -> None:
 def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = None,
                         plant_error: float = 0.2, parallel: bool = False,
                         domain_id: int | None = None, task_duration: float = TASK_DURATION,
-                        log: TextIO | None = None) -> dict[str, Any]:
+                        log: TextIO | None = None, conditions: Sequence[str] = CONDITIONS,
+                        plot: bool = True) -> dict[str, Any]:
     """Calibrate, then run the four conditions on every instrument; return the report.
 
     Parameters
@@ -174,6 +178,11 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         Length of each run's needle-grasp task (s).
     log : text stream, optional
         Progress lines go here (default: none).
+    conditions : sequence of str
+        Which of :data:`CONDITIONS` to run after the calibration (default all; the CI test
+        of the calibrated sensorless spread runs 'controlled' only).
+    plot : bool
+        Draw ``compare.png`` (needs every condition).
 
     Returns
     -------
@@ -184,10 +193,14 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         than two) and ``runs_still_spoiled``.
     """
     from grip_force_ros.identify import calibrated_yaml, fit_instrument
-    from grip_force_ros.nodes.processes import pick_domain_ids
+    from grip_force_ros.nodes.processes import reserve_domains
     from grip_force_ros.logs import read_log
     from grip_force_ros.params import load_params_file
 
+    unknown = [c for c in conditions if c not in CONDITIONS]
+    if unknown or not conditions:
+        raise ValueError(f'conditions {list(conditions)}: each one of {CONDITIONS}')
+    conditions = [c for c in CONDITIONS if c in conditions]
     started = time.monotonic()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -198,8 +211,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     n = len(configs)
     if domain_id is not None:
         domains = list(range(domain_id, domain_id + n))
-    else:
-        domains = pick_domain_ids(n)
+    else:   # free domains, held until this function returns (no other run takes them)
+        held = reserve_domains(n)
+        domains = held.ids
     scales = [plant_scales(k, plant_error) for k in range(n)]
     gain = naive_gain(configs[0])
     _log(log, f'compare: {n} instruments {names}, plants off by {plant_error:.0%} '
@@ -210,7 +224,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     # feedback), slow ramps up: the pulley friction stays in its loading direction. A force
     # loop would overshoot and settle from above, where the stick-slip friction holds a
     # different tension than the model describes.
-    _log(log, 'stage 1/5: calibration grasps (current staircase on the load cell)')
+    _log(log, f'stage 1/{len(conditions) + 1}: calibration grasps (current staircase on the load cell)')
     jobs = []
     for k, config in enumerate(configs):
         params = load_params_file(config)
@@ -253,8 +267,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         return base
 
     runs: dict[str, list[dict]] = {}
-    for stage, condition in enumerate(CONDITIONS, start=2):
-        _log(log, f'stage {stage}/5: {condition}')
+    for stage, condition in enumerate(conditions, start=2):
+        _log(log, f'stage {stage}/{len(conditions) + 1}: {condition}')
         jobs = [{'spec': spec_for(condition, k),
                  'out_dir': str(out_dir / names[k] / condition), 'domain_id': domains[k],
                  'analyse': True, 'plot': True} for k in range(n)]
@@ -264,24 +278,26 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     for k in range(n):
         per = {'name': names[k], 'config': str(configs[k]), 'plant': scales[k],
                'calibration': calibrations[k], 'runs': {}}
-        for condition in CONDITIONS:
+        for condition in conditions:
             r = runs[condition][k]
             m = r['metrics'] or {}
             per['runs'][condition] = {
                 'steady_ratio': m.get('steady_ratio'), 'target_force': m.get('target_force'),
                 'measured_force': m.get('measured_force'),
                 'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag'],
-                'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts']}
+                'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts'],
+                'late_inputs': r.get('late_inputs') or {},
+                'safe_state_entries': len(r.get('safe_state_entries') or [])}
         instruments.append(per)
-    report: dict[str, Any] = {'instruments': instruments}
-    for condition in CONDITIONS:
+    report: dict[str, Any] = {'instruments': instruments, 'conditions': list(conditions)}
+    for condition in conditions:
         report[f'spread_{condition}'] = spread(
             [i['runs'][condition]['steady_ratio'] for i in instruments])
         clean = [i['runs'][condition]['steady_ratio'] for i in instruments
                  if not i['runs'][condition]['problems']]
         report[f'spread_{condition}_unspoiled'] = spread(clean) if len(clean) >= 2 else None
     report['runs_still_spoiled'] = [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
-                                    for i in instruments for c in CONDITIONS
+                                    for i in instruments for c in conditions
                                     if i['runs'][c]['problems']]
     report['naive_current_closed'] = gain
     report['plant_error'] = plant_error
@@ -289,8 +305,10 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     report['wall_time'] = time.monotonic() - started
     report['out_dir'] = str(out_dir)
     _json_safe(report)
-    from grip_force_ros.demo.plot import compare_plot
-    report['plot'] = str(compare_plot(report, out_dir / 'compare.png'))
+    report['plot'] = None
+    if plot and list(conditions) == list(CONDITIONS):
+        from grip_force_ros.demo.plot import compare_plot
+        report['plot'] = str(compare_plot(report, out_dir / 'compare.png'))
     (out_dir / 'compare.json').write_text(json.dumps(report, indent=1))
     return report
 
@@ -310,16 +328,17 @@ def _json_safe(obj: Any) -> Any:
 
 def format_report(report: dict[str, Any]) -> str:
     """Format a table: steady hold force / target per instrument and condition, then the spreads."""
-    lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in CONDITIONS)]
+    conditions = report.get('conditions', CONDITIONS)
+    lines = [f"{'instrument':28s}" + ''.join(f'{c:>14s}' for c in conditions)]
     for inst in report['instruments']:
         cells = []
-        for c in CONDITIONS:
+        for c in conditions:
             v = inst['runs'][c]['steady_ratio']
             cells.append(f'{v:14.3f}' if v is not None else f"{'n/a':>14s}")
         lines.append(f"{inst['name']:28s}" + ''.join(cells))
     lines.append(f"{'spread (max - min)':28s}" + ''.join(
         f"{report[f'spread_{c}']:14.3f}" if report[f'spread_{c}'] is not None else f"{'n/a':>14s}"
-        for c in CONDITIONS))
+        for c in conditions))
     for item in report.get('runs_still_spoiled') or []:
         lines.append(f'spoiled by a starved node after {ATTEMPTS} attempts: {item}')
     lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "

@@ -133,6 +133,7 @@ class RunResult:
     plot: Path | None = None
     timing: dict = field(default_factory=dict)
     safe_events: list = field(default_factory=list)
+    late_inputs: dict = field(default_factory=dict)
     problems: list = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
@@ -150,6 +151,7 @@ class RunResult:
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
             'metrics': self.metrics, 'safe_state_entries': self.safe_events,
+            'late_inputs': self.late_inputs,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
@@ -427,12 +429,14 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     events = analysis.safe_state_entries(diagnostics, (0.0, result.trajectory.duration), start)
     result.metrics['safe_state_entries'] = len(events)
     result.safe_events = events
-    if 'hold' in windows:
-        hold = windows['hold']
-        result.metrics['largest_gap_hold'] = max(
-            analysis.largest_gap(series[t]['t'] - start, hold)
-            for t in (names.target_force, names.measured_force, names.instrument_js,
-                      names.actuator_js))
+    result.late_inputs = analysis.late_inputs(diagnostics, (0.0, result.trajectory.duration), start)
+    result.metrics['late_inputs'] = result.late_inputs['total']
+    for phase in analysis.MEASURED_PHASES:     # where the figures come from
+        if phase in windows:
+            result.metrics[f'largest_gap_{phase}'] = max(
+                analysis.largest_gap(series[t]['t'] - start, windows[phase])
+                for t in (names.target_force, names.measured_force, names.instrument_js,
+                          names.actuator_js))
     result.problems = analysis.run_problems({**result.metrics, 'safe_events': events}, windows)
     if plot:
         from grip_force_ros.demo.plot import summary_plot

@@ -20,7 +20,7 @@ grid; the coefficients are linear least squares. Each effect's shape:
 |---|---|---|---|
 | pivot_coulomb_friction | contact * G * dir(drive torque), or contact * G * dir(motor angle) with the nominal held while stuck | dir(jaw_model) | friction torque, or motor play width |
 | viscous_friction | contact * jaw_velocity | - | - |
-| cable_hysteresis | nominal * dir(log jaw tension), or nominal * dir(motor angle) | - | relative width, or motor play width |
+| cable_hysteresis | nominal * dir(log jaw tension) on stiff objects and nominal * dir(motor angle) on tissue (two coefficients), or nominal * dir(motor angle) | - | relative width and motor width, or motor play width |
 | backlash | - | tanh(current / width) | width |
 | tension_dependent_friction | nominal * current, nominal * current^2 | - | - |
 | viscoelastic_creep | lowpass_tau(nominal) | - | tau |
@@ -50,6 +50,7 @@ import numpy as np
 
 from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
 from grip_force_ros.effects import DIAGNOSED, NONE
+from grip_force_ros.objects import OBJECTS
 
 #: The effects the diagnosis fits, in the registry's order (``none`` is the verdict when
 #: no effect is needed).
@@ -62,6 +63,7 @@ __all__ = ['EFFECT_NAMES', 'EFFECTS', 'NONE', 'Design', 'Effect', 'stroke_range'
 class Design:
     """Regressors of one effect at one grid value, for one frame."""
 
+    #: the base columns (n, k): the nominal and its derivatives by the re-identified parameters
     force_base: np.ndarray
     force_cols: list = field(default_factory=list)
     angle_cols: list = field(default_factory=list)
@@ -96,6 +98,16 @@ ANGLE_PER_TORQUE = 1.0
 #: Full widths (rad of motor angle) of the play whose output is the friction direction when it
 #: follows the drive motion (pivot_coulomb_friction, cable_hysteresis on a sliding jaw).
 MOTOR_PLAY_WIDTHS = (0.005, 0.02, 0.05)
+#: Widths (rad of motor angle) of the drive's direction that a hysteresis follows where the jaw
+#: moves with a soft load (tissue).
+SOFT_PLAY_WIDTHS = (0.02, 0.1)
+#: Object code of the soft contact (the jaw moves with its load).
+_TISSUE = OBJECTS.index('tissue')
+
+
+def _base(f):
+    """Return the base columns of a frame: the nominal and its parameter derivatives (set by the engine)."""
+    return f['base'] if 'base' in f else f['nominal'][:, None]
 
 
 def _cached(f, key, make):
@@ -121,7 +133,7 @@ def _coulomb(f, grid_value):
         # current, so the transmitted load is the one of the last sliding sample
         force_dir, sliding = _cached(f, ('play_sliding_motor', width),
                                      lambda: play_sliding(f['motor'], width))
-        base = _cached(f, ('held_nominal', width), lambda: hold_where_stuck(f['nominal'], sliding))
+        base = _cached(f, ('held_base', width), lambda: hold_where_stuck(_base(f), sliding))
         angle_dir = _cached(f, ('play_jaw_model', width),
                             lambda: play(f['jaw_model'], width))
         return Design(base, [f['contact'] * f['gain'] * force_dir], [angle_dir])
@@ -130,52 +142,61 @@ def _coulomb(f, grid_value):
     force_dir = _cached(f, ('play_torque', tau), lambda: play(f['torque'], 2.0 * tau))
     angle_dir = _cached(f, ('play_jaw_model', 2.0 * tau / ANGLE_PER_TORQUE),
                         lambda: play(f['jaw_model'], 2.0 * tau / ANGLE_PER_TORQUE))
-    return Design(f['nominal'], [f['contact'] * f['gain'] * force_dir], [angle_dir])
+    return Design(_base(f), [f['contact'] * f['gain'] * force_dir], [angle_dir])
 
 
 def _viscous(f, _):
-    return Design(f['nominal'], [f['contact'] * f['jaw_velocity']])
+    return Design(_base(f), [f['contact'] * f['jaw_velocity']])
 
 
 def _hysteresis(f, grid_value):
-    source, width = grid_value
+    source, width = grid_value[:2]
+    soft = f['object'] == _TISSUE
     if source == 'motor_angle':
         # friction proportional to the cable tension, its direction following the drive motion
         # with memory: a transmission efficiency that differs between driving and back-driving
-        return Design(f['nominal'], [f['nominal'] * _motor_direction(f, width)])
-    # Dahl loop: a moment proportional to the tension, flipping after a relative tension change
-    log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
-    direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
-    return Design(f['nominal'], [f['nominal'] * direction])
+        direction = soft_direction = _motor_direction(f, width)
+    else:
+        # Dahl loop: a moment proportional to the tension, flipping after a relative change of the
+        # tension where the jaw is blocked (a stiff object: the moment goes into the grip); where
+        # the jaw moves with its load (a soft object: the stuck cable takes most of the moment),
+        # it shows with the direction of the drive's motion, with its own size and sign
+        log_tension = np.log(np.maximum(np.abs(f['jaw_tension']), 1e-3))
+        direction = _cached(f, ('play_log_tension', width), lambda: play(log_tension, width))
+        soft_direction = _motor_direction(f, grid_value[2])
+    return Design(_base(f), [f['nominal'] * np.where(soft, 0.0, direction),
+                             f['nominal'] * np.where(soft, soft_direction, 0.0)])
 
 
 def _backlash(f, current_width):
     # the cable is taut on the side the current pulls: the jaw sits half the dead band
     # to that side of where the drum puts it; the side flips as the current changes sign
-    return Design(f['nominal'], [], [np.tanh(f['current'] / current_width)])
+    return Design(_base(f), [], [np.tanh(f['current'] / current_width)])
 
 
 def _tension(f, _):
     # efficiency falling with tension: first and second order in the current
-    return Design(f['nominal'], [f['nominal'] * f['current'], f['nominal'] * f['current'] ** 2])
+    return Design(_base(f), [f['nominal'] * f['current'], f['nominal'] * f['current'] ** 2])
 
 
 def _creep(f, tau):
-    return Design(f['nominal'], [lowpass(f['nominal'], float(f['dt']), tau, initial=0.0)])
+    return Design(_base(f), [lowpass(f['nominal'], float(f['dt']), tau, initial=0.0)])
 
 
 def _delay(f, d):
-    return Design(np.interp(f['t'] - d, f['t'], f['nominal']))
+    # the sensor sees the whole force late: every base column delayed
+    base = _base(f)
+    return Design(np.column_stack([np.interp(f['t'] - d, f['t'], base[:, j]) for j in range(base.shape[1])]))
 
 
 def _drift(f, tau):
     i_ref = float(f['max_current']) if 'max_current' in f else max(float(np.max(np.abs(f['current']))), 1e-9)
     heat = lowpass((f['current'] / i_ref) ** 2, float(f['dt']), float(tau), initial=0.0)
-    return Design(f['nominal'], [f['nominal'] * heat])
+    return Design(_base(f), [f['nominal'] * heat])
 
 
 def _offset(f, _):
-    return Design(f['nominal'], [np.ones_like(f['nominal'])])
+    return Design(_base(f), [np.ones_like(f['nominal'])])
 
 
 #: Angle signals a position spring may follow (frame key of each).
@@ -214,7 +235,7 @@ def _spring(f, source):
     legendre = np.polynomial.legendre.legvander(x, SPRING_ORDER)
     # jaw torque of the spring (N*m) -> measured column: G converts it to grip force (1 for torque)
     scale = f['contact'] * f['gain']
-    return Design(f['nominal'], [scale * legendre[:, k] for k in range(SPRING_ORDER + 1)])
+    return Design(_base(f), [scale * legendre[:, k] for k in range(SPRING_ORDER + 1)])
 
 
 def spring_summary(coefs, _grid_value=None) -> dict:
@@ -242,10 +263,12 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            ('force_per_jaw_velocity',), (),
            (('force_per_jaw_velocity', 'unit of y*s/rad', lambda c, g: c),)),
     Effect('cable_hysteresis',
-           tuple(('log_tension', v) for v in (0.02, 0.05, 0.1, 0.2))
+           tuple(('log_tension', v, m) for v in (0.02, 0.05, 0.1, 0.2) for m in SOFT_PLAY_WIDTHS)
            + tuple(('motor_angle', v) for v in MOTOR_PLAY_WIDTHS),
            'direction_state_width', '- (log_tension) or rad (motor_angle play width)', _hysteresis,
-           ('loop_fraction',), (), (('loop_fraction', '-', lambda c, g: -_rel(c, g)),)),
+           ('loop_fraction', 'loop_fraction_soft'), (),
+           (('loop_fraction', '-', lambda c, g: -_rel(c, g)),
+            ('loop_fraction_soft', '-', lambda c, g: -_rel(c, g)))),
     Effect('backlash', (0.002, 0.005, 0.01, 0.02), 'current_width', 'A', _backlash,
            (), ('dead_band',), (('dead_band', 'rad', lambda c, g: -2.0 * c),)),
     Effect('tension_dependent_friction', (None,), None, '', _tension,

@@ -2,8 +2,12 @@
 
 Steps (all fits on the training part, all judgements on the held-out part):
 
-1. nominal: the model's prediction; calibrate what a lab calibrates anyway
-   (force gain = efficiency scale, jaw-encoder zero and scale), reported apart;
+0. re-identify the instrument's own parameters (pulley friction, cable stiffness, torque
+   gain, wrist-finger coupling; :mod:`.reidentify`): a real instrument never matches its
+   YAML, and a parameter mismatch must not read as an unmodelled effect;
+1. nominal: the re-identified model's prediction; calibrate what a lab calibrates anyway
+   (force gain, jaw-encoder zero, stretch, lag), reported apart; the derivatives of the
+   nominal by the re-identified parameters stay in every fit (a local refit of them);
 2. where: the calibrated residual binned over operating regions, ranked by share
    of the held-out gap;
 3. which: every effect of :data:`EFFECTS` fitted as an augmentation, ranked by a
@@ -20,10 +24,11 @@ from typing import Sequence
 import numpy as np
 
 from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS, NONE, SPRING_ANGLES, stroke_range
-from grip_force_ros.diagnosis.fitting import (FORCE_FLOOR, PooledData, combine_designs, evaluate, full_fit,
-                                              held_out_score, lstsq, rms)
-from grip_force_ros.diagnosis.frame import (JAW_SIDE_CABLE_LENGTH, DiagnosisError, build_frame,
-                                            load_decimated, measured_of)
+from grip_force_ros.diagnosis.fitting import (FORCE_FLOOR, MAX_FIT_ROWS, PooledData, combine_designs,
+                                              evaluate, full_fit, held_out_score, lstsq, rms)
+from grip_force_ros.diagnosis.frame import (DiagnosisError, assemble_frame, cable_lengths, frame_inputs,
+                                            load_decimated, measured_of, nominal)
+from grip_force_ros.diagnosis.reidentify import Reidentified, reidentify
 from grip_force_ros.objects import OBJECTS
 
 #: Held-out score margin for naming an effect: the mean-square error (both channels
@@ -31,11 +36,28 @@ from grip_force_ros.objects import OBJECTS
 MIN_IMPROVEMENT = 0.15
 #: Penalty per fitted parameter (grid parameter included), in log mean-square error.
 PARAM_PENALTY = 0.01
+#: An effect that acts on the measured column (it has force columns) is named only when that
+#: column's held-out loss alone falls by at least this fraction: a jaw-angle residual of a few
+#: tenths of a mrad must not name a friction whose force the data do not show (an angle-only
+#: effect, backlash, is judged on the angle).
+MIN_FORCE_SUPPORT = 0.05
 #: Default split of a log into time blocks when no test logs are given.
 BLOCKS = 6
 FOLDS = 3
 
 UNITS = {'grip_force': 'N', 'jaw_torque': 'N*m'}
+#: Step (in log mu) of the nominal's derivative by the pulley friction coefficient (a central
+#: difference: wide enough to average over samples switching between stick and slip).
+FRICTION_STEP = 0.03
+#: An effect whose fit moves log(mu) by more than this through the derivative column has the
+#: friction refitted beside it (the linearisation no longer holds); at most JOINT_CANDIDATES
+#: effects (the best-scoring), in at most JOINT_ITERATIONS Gauss-Newton steps of at most
+#: JOINT_MAX_STEP each, until a step is below JOINT_TOLERANCE.
+JOINT_STEP = 0.01
+JOINT_CANDIDATES = 4
+JOINT_ITERATIONS = 4
+JOINT_MAX_STEP = 0.3
+JOINT_TOLERANCE = 0.003
 
 
 @dataclass
@@ -115,15 +137,19 @@ def _describe(effect, value, force_coefs, force_stds, angle_coefs, angle_stds, g
             out[sname] = {'value': sval, 'std': None, 'unit': sunit,
                           'note': 'derived from the fitted coefficients'}
     if effect.grid_name and isinstance(value, tuple):
-        # (which signal the direction state follows, its width)
-        source, width = value
+        # (which signal the direction state follows, its width[, the drive's width on soft objects])
+        source, width = value[:2]
         out[effect.grid_name] = {'value': width, 'std': None, 'direction_state_of': source,
                                  'unit': 'rad' if source == 'motor_angle' else
                                  ('N*m' if source == 'drive_torque' else '-'),
-                                 'note': 'picked from a grid on the training parts'}
+                                 'note': 'picked on the training parts (grid, refined between its points)'}
+        if len(value) > 2:
+            out['soft_direction_state_width'] = {'value': value[2], 'std': None,
+                                                 'direction_state_of': 'motor_angle', 'unit': 'rad',
+                                                 'note': 'picked from a grid on the training parts'}
     elif effect.grid_name:
         out[effect.grid_name] = {'value': value, 'std': None, 'unit': effect.grid_unit,
-                                 'note': 'picked from a grid on the training parts'}
+                                 'note': 'picked on the training parts (grid, refined between its points)'}
     return out
 
 
@@ -156,6 +182,13 @@ def _fold_tests(frames, n_train_logs, have_test_logs, blocks, folds):
     return [(block % folds) == k for k in range(folds)]
 
 
+def _model_of(model):
+    """Build models of other parameter sets of the same kind as ``model`` (losses kept)."""
+    from grip_force_ros.model import GripForceModel
+    losses = getattr(model, 'losses', True)
+    return lambda p: GripForceModel(p, losses=losses)
+
+
 def _default_model(params):
     """Build the nominal model of ``params`` (the schema defaults when None)."""
     from grip_force_ros.model import GripForceModel
@@ -167,24 +200,133 @@ def _default_model(params):
 
 def _prepare(train_logs, test_logs, model, analysis_rate, default_object, blocks, folds,
              jaw_side_cable_length, say):
-    """Step 0: logs -> frames (training logs first) -> the pooled :class:`PooledData` with its folds.
+    """Step 0a: logs -> inputs and frames at the YAML (training logs first) -> :class:`PooledData`.
 
     Returns
     -------
     data : PooledData
-    frames : list of dict
-        One analysis frame per log.
+    inputs : list of dict
+        The parameter-free part of each log's frame (:func:`frame_inputs`).
+    fold_tests : list of ndarray
+        Held-out mask of each fold.
     measured : str
         The measured column, 'grip_force' (N) or 'jaw_torque' (N*m).
     """
     logs = [load_decimated(x, analysis_rate) for x in train_logs + test_logs]
     measured = measured_of(logs)
     say(f'building frames of {len(logs)} log(s) at {analysis_rate:g} Hz')
-    frames = [build_frame(log, model, measured=measured, default_object=default_object,
-                          jaw_side_cable_length=jaw_side_cable_length) for log in logs]
-    _set_strokes(frames[:len(train_logs)], frames)
-    data = PooledData(frames, _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds))
-    return data, frames, measured
+    inputs = [frame_inputs(log, measured=measured, default_object=default_object) for log in logs]
+    frames = [assemble_frame(inp, model, jaw_side_cable_length=jaw_side_cable_length) for inp in inputs]
+    fold_tests = _fold_tests(frames, len(train_logs), bool(test_logs), blocks, folds)
+    return PooledData(frames, fold_tests), inputs, fold_tests, measured
+
+
+def _training_rows(data: PooledData, frames) -> list[np.ndarray]:
+    """Return the indices (within each frame) of the samples the fits may see, MAX_FIT_ROWS at most."""
+    offsets = np.cumsum([0] + [len(f['t']) for f in frames])
+    train = np.flatnonzero(data.train)
+    train = train[::max(1, int(np.ceil(train.size / MAX_FIT_ROWS)))]
+    return [train[(train >= a) & (train < b)] - a for a, b in zip(offsets[:-1], offsets[1:])]
+
+
+def _reidentified_frames(inputs, params, model_of, jaw_side_cable_length, train_count: int, steady=None,
+                         friction_column: bool = True):
+    """Step 0b: frames of the re-identified model, with the nominal's derivative by log(mu) as a base column.
+
+    The base columns of every fit are (nominal, d nominal / d log mu): the gain column refits
+    the torque gain and this one the pulley friction, locally, beside each effect. Without
+    ``friction_column`` (the friction was not identified: held at the YAML) the base is the
+    nominal alone. ``steady``: the frames' masks of usable samples to keep (so that models of
+    other frictions are judged on the same samples).
+    """
+    model = model_of(params)
+    mu = float(params.pulley_friction_coefficient)
+    frames = []
+    for k, inp in enumerate(inputs):
+        frame = assemble_frame(inp, model, jaw_side_cable_length=jaw_side_cable_length)
+        if not friction_column:
+            frame['base'] = frame['nominal'][:, None]
+        elif mu > 0.0:
+            up, down = (nominal(inp, model_of(params.replace(pulley_friction_coefficient=mu * factor)),
+                                jaw_side_cable_length=jaw_side_cable_length)['nominal']
+                        for factor in (math.exp(FRICTION_STEP), math.exp(-FRICTION_STEP)))
+            slope = (up - down) / (2.0 * FRICTION_STEP)
+        else:
+            slope = np.zeros(len(frame['t']))
+        if friction_column:
+            frame['base'] = np.column_stack([frame['nominal'], slope])
+        if steady is not None:
+            frame['steady'] = steady[k]
+        frames.append(frame)
+    _set_strokes(frames[:train_count], frames)
+    return frames
+
+
+def _joint_refit(name, value, step, data: PooledData, inputs, params, model_of, jaw_side_cable_length,
+                 train_count: int, fold_tests, yaml, modulus_follows: bool = True):
+    """Refit the friction and the gain beside one effect (``name`` None: the base alone): Gauss-Newton.
+
+    Each step rebuilds the frames at the friction, fits the effect with the base's derivative
+    column on the training samples (robust) and moves log(mu) by the derivative's coefficient /
+    the gain (starting with ``step``) and the torque constant by the gain. The cable modulus
+    moves with the torque constant (``modulus_follows``, when the jaw angle identified it): the
+    angle measured the stretch, tension / E, and the tension per ampere scales with the torque
+    constant. Returns the pooled data of the refitted
+    model (:func:`_pooled`), on the same samples as ``data``; None when a parameter goes to its
+    bound, a factor MAX_FACTOR from the ``yaml`` ParamSet's value (not identified beside this
+    effect, as in the re-identification).
+    """
+    from grip_force_ros.diagnosis.fitting import huber_lstsq
+    from grip_force_ros.diagnosis.reidentify import MAX_FACTOR
+    mu0 = float(params.pulley_friction_coefficient)                # the re-identified values
+    torque0, modulus0 = float(params.torque_constant), float(params.cable_modulus)
+    mu_yaml = float(yaml.pulley_friction_coefficient)
+    if not (mu0 > 0.0 and data.force_base_width > 1):
+        return None
+    steady = [f['steady'] for f in data.frames]
+    limit = math.log(MAX_FACTOR)
+    log_mu, scale = math.log(mu0 / mu_yaml), 1.0
+    torque_yaml = math.log(torque0 / float(yaml.torque_constant))
+    refitted = None
+    for _ in range(JOINT_ITERATIONS):
+        log_mu += min(max(step, -JOINT_MAX_STEP), JOINT_MAX_STEP)
+        if not (abs(log_mu) < limit and abs(torque_yaml + math.log(scale)) < limit):
+            return None                     # at a bound: not identified beside this effect
+        p = params.replace(pulley_friction_coefficient=mu_yaml * math.exp(log_mu),
+                           torque_constant=torque0 * scale,
+                           cable_modulus=modulus0 * (scale if modulus_follows else 1.0))
+        frames = _reidentified_frames(inputs, p, model_of, jaw_side_cable_length, train_count, steady)
+        refitted = _pooled(frames, fold_tests, p, data.force_scale)
+        Xf = refitted.base if name is None else refitted.designs(EFFECTS[name], value)[0]
+        tr = np.flatnonzero(refitted.train)
+        tr = tr[::max(1, int(np.ceil(tr.size / MAX_FIT_ROWS)))]
+        coef = huber_lstsq(Xf[tr], refitted.y[tr], refitted.force_scale)
+        gain = float(coef[0])
+        if not gain > 0.0:
+            return None
+        step = float(coef[1]) / gain
+        scale *= gain
+        if abs(step) < JOINT_TOLERANCE and abs(gain - 1.0) < JOINT_TOLERANCE:
+            break
+    if scale != float(p.torque_constant) / torque0:       # the last gain, applied
+        if not abs(torque_yaml + math.log(scale)) < limit:
+            return None
+        p = p.replace(torque_constant=torque0 * scale,
+                      cable_modulus=modulus0 * (scale if modulus_follows else 1.0))
+        frames = _reidentified_frames(inputs, p, model_of, jaw_side_cable_length, train_count, steady)
+        refitted = _pooled(frames, fold_tests, p, data.force_scale)
+    return refitted
+
+
+def _pooled(frames, fold_tests, params, force_scale: float | None = None) -> PooledData:
+    """Pool ``frames``; remember the friction and torque constant of their model (and the force scale)."""
+    data = PooledData(frames, fold_tests)
+    data.friction = float(params.pulley_friction_coefficient)
+    data.torque_constant = float(params.torque_constant)
+    data.cable_modulus = float(params.cable_modulus)
+    if force_scale is not None:
+        data.force_scale = force_scale
+    return data
 
 
 def _split(data: PooledData, frames, n_train: int, n_test: int, blocks: int, folds: int,
@@ -230,89 +372,161 @@ def _robust_force_scale(data: PooledData) -> float:
     return float(1.4826 * np.median(np.abs(r0 - np.median(r0))))
 
 
-def _calibrate(data: PooledData, rng, measured: str, jaw_side_cable_length: float):
-    """Step 1: the nominal model and what a lab calibrates anyway (force gain, jaw zero, ...).
+def _calibrate(data: PooledData, rng, measured: str, jaw_side_cable_length: float,
+               re: Reidentified, raw_gap: float):
+    """Step 1: the re-identified nominal and what a lab calibrates anyway (force gain, jaw zero, ...).
 
     Returns
     -------
     base : dict
         Held-out fit of the calibrated nominal (:func:`evaluate`).
     gain : float
-        Force gain, measured / model (-).
+        Force gain, measured / re-identified model (-).
     calibration : dict
-        The result's ``calibration`` section.
+        The result's ``calibration`` section (with the re-identified ``parameters``).
     """
-    Xf0 = data.nominal[:, None]
+    Xf0 = data.base
     Xa0 = data.angle_base
     base = evaluate(data, lambda _: (Xf0, Xa0), (None,))
     cf0, ca0, sf0, a_std, _ = full_fit(data, Xf0, Xa0, rng)
     gain, gain_std = float(cf0[0]), float(sf0[0])
-    raw_gap = rms(data.y[data.test] - data.nominal[data.test])
     calibration = {
+        **re.as_json(),
         'force_gain': {'value': gain, 'std': gain_std, 'unit': '-',
-                       'meaning': f'measured {measured} / model {measured} (efficiency scale)'},
+                       'meaning': f'measured {measured} / re-identified model {measured} (efficiency '
+                                  'scale left after the re-identification: 1 when it holds)'},
         'jaw_angle_offset': {'value': float(ca0[0]), 'std': float(a_std[0]),
                              'unit': 'rad', 'meaning': 'jaw encoder zero'},
-        'jaw_angle_per_drum_tension': {'value': float(ca0[1]), 'std': float(a_std[1]),
-                                       'unit': 'rad/N', 'meaning': 'cable stretch, drum side'},
-        'jaw_angle_per_jaw_tension': {'value': float(ca0[2]), 'std': float(a_std[2]),
-                                      'unit': 'rad/N', 'meaning': 'cable stretch, jaw side'},
         'jaw_angle_lag': {'value': float(ca0[3]), 'std': float(a_std[3]),
                           'unit': 's', 'meaning': 'jaw angle per jaw velocity (dynamic lag)'},
         'jaw_side_cable_length': {'value': jaw_side_cable_length, 'std': None, 'unit': 'm',
-                                  'meaning': 'given (not fitted): cable stiffness E*A/length seen '
-                                             'by a stuck cable'},
+                                  'meaning': 'given (not fitted; cable_length x cable_jaw_side_fraction '
+                                             'of the schema unless set): the stiffness E*A/length a '
+                                             'stuck cable shows the wrist, and the jaw side of the stretch'},
         'gap_uncalibrated': raw_gap,
-        'note': 'calibrated as a lab would (values: fit on all training samples; the held-out gaps use '
-                'per-fold fits); not counted as an unmodelled effect',
+        'gap_reidentified': rms(data.y[data.test] - data.nominal[data.test]),
+        'note': 'parameters re-identified on the training samples, then calibrated as a lab would (values: '
+                'fit on all training samples; the held-out gaps use per-fold fits); not counted as an '
+                'unmodelled effect',
     }
     return base, gain, calibration
 
 
+def _friction_step(data: PooledData) -> float:
+    """Return the move of log(mu) the base alone asks for (derivative coefficient / gain) in training."""
+    from grip_force_ros.diagnosis.fitting import huber_lstsq
+    tr = np.flatnonzero(data.train)
+    tr = tr[::max(1, int(np.ceil(tr.size / MAX_FIT_ROWS)))]
+    coef = huber_lstsq(data.base[tr], data.y[tr], data.force_scale)
+    return float(coef[1]) / float(coef[0]) if coef[0] != 0.0 else 0.0
+
+
+def _force_support(effect, fit: dict, reference: dict, force_floor_ms: float) -> bool:
+    """Whether the measured column's held-out loss supports ``effect`` (:data:`MIN_FORCE_SUPPORT`).
+
+    Always True for an effect without force columns (judged on the jaw angle).
+    """
+    if effect.angle_params and not effect.force_params:
+        return True
+    ratio = (fit['test_loss_f'] + force_floor_ms) / (reference['test_loss_f'] + force_floor_ms)
+    return ratio <= 1.0 - MIN_FORCE_SUPPORT
+
+
+def _first_named(ranking: list) -> int:
+    """Index of the verdict in the ranking: the best score whose effect the force supports, or none."""
+    return next(i for i, r in enumerate(ranking) if r['effect'] == NONE or r.get('force_support', True))
+
+
+def _fit_effect(data: PooledData, name: str, base: dict, rng, force_floor_ms: float, param_penalty: float,
+                unit: str):
+    """Fit one effect on top of ``data``'s base: its held-out fit, its ranking entry, its friction step.
+
+    The friction step is the move of log(mu) its fit asks for through the base's derivative
+    column (coefficient / gain): the first-order change of the re-identified pulley friction
+    beside this effect.
+    """
+    effect = EFFECTS[name]
+    fit = evaluate(data, lambda v: data.designs(effect, v), effect.grid)
+    value = fit['value']
+    Xf, Xa = data.designs(effect, value)
+    cf, ca, sf, sa, train_mse = full_fit(data, Xf, Xa, rng)
+    score = held_out_score(fit, base, force_floor_ms) + param_penalty * effect.n_params
+    g = float(cf[0])
+    nb = data.force_base_width
+    na = data.angle_base_width
+    params_out = _describe(effect, value, cf[nb:], sf[nb:], ca[na:], sa[na:], g, unit)
+    entry = {'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
+             'holdout_angle_rmse': math.sqrt(fit['test_mse_a']), 'train_rmse': math.sqrt(train_mse),
+             'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out,
+             'force_support': _force_support(effect, fit, base, force_floor_ms)}
+    step = float(cf[1]) / g if nb > 1 and g != 0.0 else 0.0
+    if nb > 1:
+        # the re-identified parameters beside this effect: the gain column scales the torque
+        # constant, the derivative column moves the friction (to first order)
+        entry['reidentified_beside'] = {
+            'pulley_friction_coefficient': data.friction * math.exp(step),
+            'torque_constant': data.torque_constant * g, 'cable_modulus': data.cable_modulus * g}
+    return fit, entry, step
+
+
 def _rank_effects(data: PooledData, base: dict, gain: float, rng, force_floor_ms: float,
-                  param_penalty: float, min_improvement: float, unit: str, say):
+                  param_penalty: float, min_improvement: float, unit: str, say, joint=None):
     """Step 3: every effect fitted as an augmentation, ranked by held-out score (lower is better).
+
+    Every effect is first fitted on the re-identified model, whose pulley friction it may move
+    to first order (the base's derivative column). ``joint(name, value, step)`` refits the
+    friction with an effect whose fit asks for a larger move (:data:`JOINT_STEP`; the
+    :data:`JOINT_CANDIDATES` best-scoring such effects): it returns the pooled data of the
+    model re-identified beside that effect (or None), on which the effect is then fitted
+    and scored against the same base. A friction change and an effect that resembles one
+    (a hysteresis, a stick-slip) are so told apart on the data, not by the order of the fits.
 
     Returns
     -------
     ranking : list of dict
         One entry per effect and one for ``none``, sorted by score.
     fits : dict
-        Effect name -> its held-out fit; held-out residual arrays are kept only for the
-        best effect (memory).
+        Effect name -> its held-out fit (with ``data``: the pooled data it was fitted on);
+        held-out residual arrays are kept only for the best effect (memory).
     """
-    ranking = []
+    entries = {}
     fits = {}
-    best_score = math.inf
+    steps = {}
     for name in EFFECT_NAMES:
-        effect = EFFECTS[name]
         say(f'fitting {name}')
-        fit = evaluate(data, lambda v, e=effect: data.designs(e, v), effect.grid)
-        value = fit['value']
-        Xf, Xa = data.designs(effect, value)
-        cf, ca, sf, sa, train_mse = full_fit(data, Xf, Xa, rng)
-        score = held_out_score(fit, base, force_floor_ms) + param_penalty * effect.n_params
-        # held-out residual arrays are kept only for the best effect so far (memory)
-        if score < best_score:
-            best_score = score
-            for other in fits.values():
-                other.pop('resid_f', None)
-                other.pop('resid_a', None)
-        else:
-            fit = {k: v for k, v in fit.items() if not k.startswith('resid')}
-        fits[name] = fit
-        g = float(cf[0])
-        params_out = _describe(effect, value, cf[1:], sf[1:], ca[4:], sa[4:], g, unit)
-        ranking.append({'effect': name, 'holdout_rmse': math.sqrt(fit['test_mse_f']),
-                        'holdout_angle_rmse': math.sqrt(fit['test_mse_a']),
-                        'train_rmse': math.sqrt(train_mse),
-                        'score': score, 'n_params': effect.n_params, 'gain': g, 'params': params_out})
+        fit, entries[name], steps[name] = _fit_effect(data, name, base, rng, force_floor_ms, param_penalty,
+                                                      unit)
+        fits[name] = {**fit, 'data': data}
+        _keep_residuals_of_best(fits, entries)
+    if joint is not None:
+        moving = sorted((n for n in EFFECT_NAMES if abs(steps[n]) > JOINT_STEP),
+                        key=lambda n: entries[n]['score'])
+        for name in moving[:JOINT_CANDIDATES]:
+            refitted = joint(name, fits[name]['value'], steps[name])
+            if refitted is None:
+                continue
+            say(f'fitting {name} with the pulley friction refitted beside it')
+            fit, entry, _ = _fit_effect(refitted, name, base, rng, force_floor_ms, param_penalty, unit)
+            entry['friction_refitted_beside'] = True        # not only to first order
+            entries[name] = entry
+            fits[name] = {**fit, 'data': refitted}
+            _keep_residuals_of_best(fits, entries)
+    ranking = list(entries.values())
     ranking.append({'effect': NONE, 'holdout_rmse': math.sqrt(base['test_mse_f']),
                     'holdout_angle_rmse': math.sqrt(base['test_mse_a']),
                     'train_rmse': None, 'score': math.log(1.0 - min_improvement),
                     'n_params': 0, 'gain': gain, 'params': {}})
     ranking.sort(key=lambda r: r['score'])
     return ranking, fits
+
+
+def _keep_residuals_of_best(fits: dict, entries: dict) -> None:
+    """Drop the held-out residual arrays of every fit but the best-scoring one (memory)."""
+    best = min(entries, key=lambda n: entries[n]['score'])
+    for name, fit in fits.items():
+        if name != best:
+            fit.pop('resid_f', None)
+            fit.pop('resid_a', None)
 
 
 def _second_effect(data: PooledData, winner: str, fits: dict, rng, force_floor_ms: float,
@@ -328,6 +542,7 @@ def _second_effect(data: PooledData, winner: str, fits: dict, rng, force_floor_m
         fitted beside the first on every training sample), or None when no effect passes.
     """
     say('looking for a second effect')
+    data = fits[winner].get('data', data)             # the model re-identified beside the winner
     first_design = data.designs(EFFECTS[winner], fits[winner]['value'])
 
     def pair(value, name):
@@ -341,7 +556,8 @@ def _second_effect(data: PooledData, winner: str, fits: dict, rng, force_floor_m
         fit2 = evaluate(data, lambda value, name=name: pair(value, name), EFFECTS[name].grid)
         score2 = held_out_score(fit2, fits[winner], force_floor_ms) + param_penalty * EFFECTS[name].n_params
         say(f'second effect {name}: held-out {math.sqrt(fit2["test_mse_f"]):.4g} {unit}, score {score2:.3f}')
-        if score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
+        supported = _force_support(EFFECTS[name], fit2, fits[winner], force_floor_ms)
+        if supported and score2 < math.log(1.0 - min_improvement) and (best2 is None or score2 < best2[0]):
             best2 = (score2, name, fit2)
     if best2 is None:
         return None
@@ -365,7 +581,7 @@ def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured:
     final : dict
         Held-out fit with every named effect (``base`` when none is named).
     """
-    winner = ranking[0]['effect']
+    winner = ranking[_first_named(ranking)]['effect']
     gap_before = math.sqrt(base['test_mse_f'])
     angle_before = math.sqrt(base['test_mse_a'])
     named = [] if winner == NONE else [winner]
@@ -383,11 +599,13 @@ def _verdict(base: dict, fits: dict, ranking: list, second, unit: str, measured:
                'shrink': 1.0 - gap_after / gap_before if gap_before > 0 else 0.0,
                'unit': unit, 'measured': measured,
                'angle_gap_before': angle_before, 'angle_gap_after': angle_after, 'angle_unit': 'rad',
-               'runner_up': ranking[1]['effect'],
+               'runner_up': next(r['effect'] for r in ranking if r['effect'] != winner),
                'rule': f'an effect is named when its held-out score (log ratio of the Huber loss of the '
                        f'force + log ratio of the angle MSE, +{param_penalty} per parameter) is below '
-                       f'log(1 - {min_improvement}); a second effect when it passes the same margin on '
-                       f'top of the first; gap_after is with every named effect'}
+                       f'log(1 - {min_improvement}) and, if it acts on the measured column, that '
+                       f'column\'s held-out loss alone falls by {100 * MIN_FORCE_SUPPORT:g} % '
+                       f'(force_support); a second effect when it passes the same on top of the first; '
+                       f'gap_after is with every named effect'}
     return verdict, final
 
 
@@ -406,7 +624,7 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
                   model=None, analysis_rate: float = 200.0, default_object: str = 'needle',
                   blocks: int = BLOCKS, folds: int = FOLDS,
                   min_improvement: float = MIN_IMPROVEMENT, param_penalty: float = PARAM_PENALTY,
-                  jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH,
+                  jaw_side_cable_length: float | None = None,
                   seed: int = 0, progress=None) -> Diagnosis:
     """Diagnose the gap between the model and measured logs (see :func:`diagnose`).
 
@@ -414,22 +632,45 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     the coefficients' standard deviations (one generator, drawn in step order).
     """
     model = _default_model(params) if model is None else model
+    model_of = _model_of(model)
     say = progress or (lambda msg: None)
     train_logs = list(train_logs)
     test_logs = list(test_logs or [])
     if not train_logs:
         raise DiagnosisError('no logs to diagnose')
-    data, frames, measured = _prepare(train_logs, test_logs, model, analysis_rate, default_object,
-                                      blocks, folds, jaw_side_cable_length, say)
+    jaw_side = cable_lengths(model.params, jaw_side_cable_length)[1]
+    data, inputs, fold_tests, measured = _prepare(train_logs, test_logs, model, analysis_rate, default_object,
+                                                  blocks, folds, jaw_side, say)
     unit = UNITS[measured]
-    split = _split(data, frames, len(train_logs), len(test_logs), blocks, folds, analysis_rate)
+    split = _split(data, data.frames, len(train_logs), len(test_logs), blocks, folds, analysis_rate)
     rng = np.random.default_rng(seed)
+    say('re-identifying the instrument parameters')
+    re = reidentify(inputs, _training_rows(data, data.frames), model.params, model_of,           # 0.
+                    force_scale=_robust_force_scale(data), rng=rng, jaw_side_cable_length=jaw_side)
+    raw_gap = rms(data.y[data.test] - data.nominal[data.test])
+    frames = _reidentified_frames(inputs, re.params, model_of, jaw_side, len(train_logs),
+                                  friction_column='pulley_friction_coefficient' in re.values)
+    data = _pooled(frames, fold_tests, re.params)
     data.force_scale = _robust_force_scale(data)
-    base, gain, calibration = _calibrate(data, rng, measured, jaw_side_cable_length)      # 1.
+    if data.force_base_width > 1:
+        # the base's friction at the optimum of the same objective every effect's refit reaches
+        # (the re-identification's fit weighs and scales a little differently)
+        polished = _joint_refit(None, None, _friction_step(data), data, inputs, re.params, model_of, jaw_side,
+                                len(train_logs), fold_tests, re.yaml, 'cable_modulus' in re.values)
+        if polished is not None:
+            re.polish(pulley_friction_coefficient=polished.friction,
+                      torque_constant=polished.torque_constant, cable_modulus=polished.cable_modulus)
+            data = polished
+    base, gain, calibration = _calibrate(data, rng, measured, jaw_side, re, raw_gap)         # 1.
     force_floor_ms = (FORCE_FLOOR * rms(data.y[data.test])) ** 2
+
+    def joint(name, value, step):
+        return _joint_refit(name, value, step, data, inputs, re.params, model_of, jaw_side, len(train_logs),
+                            fold_tests, re.yaml, 'cable_modulus' in re.values)
+
     ranking, fits = _rank_effects(data, base, gain, rng, force_floor_ms, param_penalty,     # 3.
-                                  min_improvement, unit, say)
-    winner = ranking[0]['effect']
+                                  min_improvement, unit, say, joint)
+    winner = ranking[_first_named(ranking)]['effect']
     second = None if winner == NONE else _second_effect(                                    # 4.
         data, winner, fits, rng, force_floor_ms, param_penalty, min_improvement, unit, say)
     verdict, final = _verdict(base, fits, ranking, second, unit, measured, param_penalty,

@@ -14,9 +14,11 @@ import math
 
 import numpy as np
 
+from grip_force_ros.identify.calibration import block_bootstrap_std
+
 __all__ = ['MAX_FIT_ROWS', 'HUBER_K', 'ANGLE_FLOOR_MS', 'FORCE_FLOOR', 'PooledData', 'lstsq',
            'block_bootstrap_std', 'rms', 'huber_lstsq', 'huber_ms', 'channel_fit', 'fold_fit',
-           'evaluate', 'full_fit', 'combine_designs', 'held_out_score']
+           'neighbours', 'evaluate', 'full_fit', 'combine_designs', 'held_out_score']
 
 #: Training rows used per fit at most (an even subsample beyond; 10 min at 200 Hz).
 MAX_FIT_ROWS = 120_000
@@ -43,24 +45,6 @@ def lstsq(X: np.ndarray, y: np.ndarray, weights: np.ndarray | None = None) -> np
         sw = np.ones(len(y)) if weights is None else np.sqrt(weights)
         coef, *_ = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)
         return coef
-
-
-def block_bootstrap_std(X, y, rng, blocks: int = 20, draws: int = 200) -> np.ndarray:
-    """Std of least-squares coefficients over a moving-block bootstrap (keeps autocorrelation)."""
-    n, k = X.shape
-    if n < 2 * blocks:
-        return np.full(k, np.nan)
-    edges = np.linspace(0, n, blocks + 1).astype(int)
-    xtx = np.stack([X[a:b].T @ X[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    xty = np.stack([X[a:b].T @ y[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    picks = rng.integers(0, blocks, size=(draws, blocks))
-    coefs = []
-    for p in picks:
-        try:
-            coefs.append(np.linalg.solve(xtx[p].sum(0), xty[p].sum(0)))
-        except np.linalg.LinAlgError:
-            continue
-    return np.std(coefs, axis=0) if len(coefs) > 2 else np.full(k, np.nan)
 
 
 def rms(x) -> float:
@@ -99,12 +83,21 @@ class PooledData:
         for key in ('y', 'nominal', 'jaw', 'jaw_model', 'contact', 'current', 'current_rate', 'wrist',
                     'jaw_velocity', 'load_time', 'object', 't'):
             setattr(self, key, _concat(frames, key))
-        # angle calibration: zero, scale, the cable's elastic stretch under both tensions and
-        # the lag of the jaw behind the drum in motion
-        # (the scale r0/r_n is geometry: kept, so the target is jaw - jaw_model)
+        #: the force channel's base columns: the nominal and, when the frames have them, its
+        #: derivatives by the re-identified parameters (a local refit of them with every effect)
+        self.base = (np.concatenate([f['base'] for f in frames]) if all('base' in f for f in frames)
+                     else self.nominal[:, None])
+        self.force_base_width = self.base.shape[1]
+        # angle calibration: the encoder zero, the cable's elastic stretch on the drum side and on
+        # the jaw side (their coefficients: the re-identified stiffness refitted, and the split
+        # of the cable left free as before issue 10), the lag of the jaw behind the drum in motion
+        # and the wrist (the re-identified coupling refitted); the scale r0/r_n is geometry:
+        # kept, so the target is jaw - jaw_model
         self.angle_target = self.jaw - self.jaw_model
-        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'drum_tension'),
-                                           _concat(frames, 'jaw_tension'), self.jaw_velocity])
+        self.angle_base = np.column_stack([np.ones_like(self.jaw), _concat(frames, 'stretch_drum'),
+                                           _concat(frames, 'stretch_jaw'), self.jaw_velocity, self.wrist])
+        #: columns of the angle channel's base (an effect's angle columns follow them)
+        self.angle_base_width = self.angle_base.shape[1]
         self.log_index = np.concatenate([np.full(len(f['t']), i) for i, f in enumerate(frames)])
 
     def shift(self, X, delay: float):
@@ -157,7 +150,7 @@ def channel_fit(data: PooledData, X, fold: int, force: bool):
     A design that is just the channel's baseline (no column of the effect) is fitted
     once and cached.
     """
-    base_width = 1 if force else data.angle_base.shape[1]
+    base_width = data.force_base_width if force else data.angle_base.shape[1]
     key = (fold, force)
     is_base = X.shape[1] == base_width and (not force or np.array_equal(X[:, 0], data.nominal))
     if is_base and key in data.base_cache:
@@ -187,22 +180,65 @@ def fold_fit(data: PooledData, Xf, Xa, fold: int):
     return objective, rf, ra
 
 
-def evaluate(data: PooledData, designs, grid):
+def neighbours(grid, value) -> list:
+    """Values between ``value`` and its neighbours on the grid: geometric midpoints of the numeric width.
+
+    A grid value is a number (a time constant, a delay, a width) or a tuple whose second
+    element is one (``(source, width[, ...])``: neighbours share the other elements). A
+    non-numeric value (None, a name) has no neighbours.
+    """
+    def width(v):
+        w = v[1] if isinstance(v, tuple) else v
+        return float(w) if isinstance(w, (int, float)) and not isinstance(w, bool) and w > 0 else None
+
+    def same_kind(v):
+        return isinstance(v, tuple) == isinstance(value, tuple) and (
+            not isinstance(v, tuple) or (len(v) == len(value) and v[:1] + v[2:] == value[:1] + value[2:]))
+
+    w0 = width(value)
+    if w0 is None:
+        return []
+    widths = sorted({width(v) for v in grid if same_kind(v) and width(v) is not None})
+    i = widths.index(w0) if w0 in widths else None
+    if i is None:
+        return []
+    out = []
+    for j in (i - 1, i + 1):
+        if 0 <= j < len(widths):
+            mid = math.sqrt(w0 * widths[j])
+            out.append(value[:1] + (mid,) + value[2:] if isinstance(value, tuple) else mid)
+    return out
+
+
+def evaluate(data: PooledData, designs, grid, refine: bool = True):
     """Fit every grid value on each fold's training part; keep each fold's best.
 
     Each fold's best is chosen by its own training objective; held-out residuals come
-    from the fold that did not see them.
+    from the fold that did not see them. With ``refine``, each fold then tries the geometric
+    midpoints between its best value and the grid neighbours (:func:`neighbours`), so a time
+    constant or a width between the grid points is not stuck at one of them.
 
     Returns held-out residual arrays (force, angle; zero outside the held-out part), the
     pooled held-out MSEs, and the grid value chosen by most folds.
     """
     best = [None] * len(data.folds)
-    for value in grid:
+
+    def consider(value, folds):
         Xf, Xa = designs(value)
-        for k in range(len(data.folds)):
+        for k in folds:
             objective, rf, ra = fold_fit(data, Xf, Xa, k)
             if best[k] is None or objective < best[k][0]:
                 best[k] = (objective, value, rf, ra)
+
+    for value in grid:
+        consider(value, range(len(data.folds)))
+    if refine:
+        candidates: dict = {}
+        for k, b in enumerate(best):
+            for v in neighbours(grid, b[1]):
+                candidates.setdefault(v, []).append(k)
+        for value, folds in candidates.items():
+            consider(value, folds)
     resid_f = np.zeros(data.y.size)
     resid_a = np.zeros(data.y.size)
     for (_, te), (_, _, rf, ra) in zip(data.folds, best):
@@ -240,13 +276,14 @@ def combine_designs(data, first, other, first_name, other_name, fits, other_valu
     the whole force late).
     """
     (f1, a1), (f2, a2) = first, other
+    nb = data.force_base_width
     if other_name == 'sensor_delay':
         Xf = data.shift(f1, float(other_value))
     elif first_name == 'sensor_delay':
-        Xf = np.column_stack([f1, data.shift(f2[:, 1:], float(fits[first_name]['value']))])
+        Xf = np.column_stack([f1, data.shift(f2[:, nb:], float(fits[first_name]['value']))])
     else:
-        Xf = np.column_stack([f1, f2[:, 1:]])
-    Xa = np.column_stack([a1, a2[:, 4:]])
+        Xf = np.column_stack([f1, f2[:, nb:]])
+    Xa = np.column_stack([a1, a2[:, data.angle_base_width:]])
     return Xf, Xa
 
 

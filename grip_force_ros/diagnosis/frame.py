@@ -19,9 +19,6 @@ from grip_force_ros.objects import OBJECTS
 
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
 SETTLE_TIME = 0.2
-#: Jaw-side free length of the cable (m) for the stick phase of the pulley friction: an
-#: assumption (about 2 cm from the last guide pulley to the jaw of an 8 mm instrument).
-JAW_SIDE_CABLE_LENGTH = 0.02
 #: Current steps (A/s of the 20 ms smoothed current) whose mechanical response (cable and
 #: contact dynamics, ~10 ms) the quasi-static model does not describe; left out for STEP_HOLD s.
 STEP_RATE = 4.0
@@ -59,20 +56,20 @@ def _factor_for(t: np.ndarray, analysis_rate: float) -> int:
 
 
 def load_decimated(source, analysis_rate: float = 200.0, *, chunk_rows: int = 200_000,
-                   progress=None) -> dict[str, np.ndarray]:
+                   progress=None, measured: bool = True) -> dict[str, np.ndarray]:
     """Read a log (path or dict) and block-average it to about ``analysis_rate`` (Hz).
 
     A path is streamed in chunks (CSV) so the full-rate log is never held whole.
-    ``progress(rows)`` is called per chunk.
+    ``progress(rows)`` is called per chunk. ``measured=False`` accepts a log of inputs only.
     """
     if isinstance(source, Mapping):
-        log = normalise_log(source)
+        log = normalise_log(source, measured=measured)
         return decimate(log, _factor_for(log['t'], analysis_rate))
     parts: dict[str, list[np.ndarray]] = {}
     factor = None
     carry: dict[str, np.ndarray] | None = None
     rows = 0
-    for chunk in iter_log(source, chunk_rows=chunk_rows):
+    for chunk in iter_log(source, chunk_rows=chunk_rows, measured=measured):
         if carry:
             chunk = {k: np.concatenate([carry[k], v]) for k, v in chunk.items()}
         if factor is None:
@@ -136,11 +133,11 @@ def play_sliding(x: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hold_where_stuck(values: np.ndarray, sliding: np.ndarray) -> np.ndarray:
-    """Hold ``values`` where not ``sliding``: the last value seen while sliding.
+    """Hold ``values`` (rows) where not ``sliding``: the last value seen while sliding.
 
     Where ``sliding``, ``values`` itself; before any sliding, the first value.
     """
-    idx = np.maximum.accumulate(np.where(sliding, np.arange(values.size), 0))
+    idx = np.maximum.accumulate(np.where(sliding, np.arange(len(values)), 0))
     return values[idx]
 
 
@@ -206,27 +203,170 @@ def capstan_tension(drum_tension: np.ndarray, efficiency: np.ndarray,
     return out, uncertain
 
 
-def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = None,
-                default_object: str = 'needle', direction_aware: bool = True,
-                jaw_side_cable_length: float = JAW_SIDE_CABLE_LENGTH) -> dict[str, np.ndarray]:
-    """Analysis frame of one (decimated) log: signals, nominal prediction and features.
+def frame_inputs(log: Mapping[str, np.ndarray], *, measured: str | None = None,
+                 default_object: str = 'needle', require_measured: bool = True) -> dict:
+    """Return the parameter-free part of a frame: signals, smoothed velocities, objects, current steps.
 
     Parameters
     ----------
     log : mapping
         Contract columns (see :mod:`grip_force_ros.logs`), usually block-averaged.
-    model : GripForceModel
-        The nominal model of the instrument.
     measured : {'grip_force', 'jaw_torque'}, optional
         Which column to explain; found from the log when omitted.
     default_object : str
         Object assumed when the log has no ``object`` column.
+    require_measured : bool
+        False: a log with inputs only (``y`` is then NaN).
+
+    Returns
+    -------
+    dict
+        ``t`` (s), ``dt`` (s), ``measured`` (name), ``y`` (measured column), ``finite``
+        (bool), ``current`` (A), ``wrist``, ``jaw``, ``motor`` (rad), ``jaw_velocity``,
+        ``motor_velocity`` (rad/s, 20 ms smoothed), ``objects`` (str), ``codes`` (object
+        codes), ``current_rate`` (A/s), ``stepping`` (bool: within STEP_HOLD of a current step).
+    """
+    if measured is None:
+        try:
+            measured = measured_column(log)
+        except LogError:
+            if require_measured:
+                raise
+            measured = 'grip_force'
+    if measured not in log and require_measured:
+        raise DiagnosisError(f'log has no {measured!r} column')
+    t = np.asarray(log['t'], float)
+    if t.size < 20:
+        raise DiagnosisError(f'log too short for a diagnosis ({t.size} samples after averaging)')
+    dt = float(np.median(np.diff(t)))
+    raw = {k: np.asarray(log[k], float) for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle')}
+    y = np.asarray(log[measured], float) if measured in log else np.full(t.size, np.nan)
+    # samples with a missing (non-finite) value are carried as 0 and left out of every fit
+    finite = np.logical_and.reduce([np.isfinite(v) for v in raw.values()]
+                                   + ([np.isfinite(y)] if measured in log else []))
+    if finite.sum() < 20:
+        raise DiagnosisError(f'log has only {int(finite.sum())} samples with every value finite')
+    raw = {k: np.where(finite, v, 0.0) for k, v in raw.items()}
+    current, wrist, jaw, motor = (raw['current'], raw['wrist_angle'], raw['jaw_angle'], raw['motor_angle'])
+    objects = np.asarray(log.get(OBJECT_COLUMN, np.full(t.size, default_object)), dtype=str)
+    codes = np.zeros(t.size)
+    for name in np.unique(objects):
+        codes[objects == name] = OBJECTS.index(str(name))
+    current_rate = np.gradient(lowpass(current, dt, 0.02), t)
+    stepping = np.abs(current_rate) > STEP_RATE
+    if stepping.any():
+        hold = max(1, int(round(STEP_HOLD / dt)))
+        stepping = np.convolve(stepping.astype(float), np.ones(hold + 1), mode='full')[:t.size] > 0
+    return {'t': t, 'dt': dt, 'measured': measured, 'y': np.where(finite, y, 0.0) if measured in log else y,
+            'finite': finite, 'current': current, 'wrist': wrist, 'jaw': jaw, 'motor': motor,
+            'jaw_velocity': np.gradient(lowpass(jaw, dt, 0.02), t),
+            'motor_velocity': np.gradient(lowpass(motor, dt, 0.02), t),
+            'objects': objects, 'codes': codes, 'current_rate': current_rate, 'stepping': stepping}
+
+
+def cable_lengths(params, jaw_side_cable_length: float | None = None) -> tuple[float, float]:
+    """Free cable length (m) on the drum side and on the jaw side of the guide pulleys.
+
+    From the schema's ``cable_length`` and ``cable_jaw_side_fraction`` (the cable of the
+    simulated plant, our stated assumption for any instrument); ``jaw_side_cable_length``
+    (m) replaces the jaw side when given.
+    """
+    total = float(params.cable_length)
+    share = float(params.cable_jaw_side_fraction)
+    jaw_side = share * total if jaw_side_cable_length is None else float(jaw_side_cable_length)
+    return (1.0 - share) * total, jaw_side
+
+
+def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
+            jaw_side_cable_length: float | None = None) -> dict[str, np.ndarray]:
+    """Return the model's part of a frame: the nominal prediction, tensions, model jaw angle, stretch.
+
+    Parameters
+    ----------
+    inputs : mapping
+        :func:`frame_inputs` of a log.
+    model : GripForceModel
+        The nominal model of the instrument (its parameters: ``model.params``).
     direction_aware : bool
         Apply the model's pulley friction in the direction of cable slip
-        (:func:`capstan_tension`) instead of the loading direction only.
-    jaw_side_cable_length : float
-        Free cable length (m) between the pulleys and the jaw: sets how fast the wrist
-        moves a stuck cable across the friction band (stiffness E A / length).
+        (:func:`capstan_tension`); False: the loading branch (``GripForceModel.forward``).
+    jaw_side_cable_length : float, optional
+        Free cable length (m) between the pulleys and the jaw (:func:`cable_lengths`):
+        sets how fast the wrist moves a stuck cable across the friction band (stiffness
+        E A / length) and the jaw side's share of the stretch.
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``nominal`` (prediction of the measured column: grip force N, or drive torque
+        N*m for ``jaw_torque``), ``torque`` (N*m, drive torque M), ``drum_tension`` /
+        ``jaw_tension`` (N), ``efficiency`` (-), ``gain`` (1/m, grip force per drive
+        torque), ``uncertain`` (bool: the stuck tension is not yet determined),
+        ``jaw_model`` (rad, model jaw angle from the drum angle) and ``stretch`` (rad: the
+        jaw angle the cable's elastic stretch adds, ``(L_d T0 + L_j Tn) / (E A r_n)``; its two
+        parts ``stretch_drum`` and ``stretch_jaw``).
+    """
+    current, wrist, jaw = inputs['current'], inputs['wrist'], inputs['jaw']
+    objects = inputs['objects']
+    n = current.size
+    p = model.params
+    torque = np.zeros(n)            # model drive torque M (N*m), loading branch
+    drum_tension = np.zeros(n)      # F0 (N)
+    efficiency = np.ones(n)         # lambda_n (-)
+    gain = np.zeros(n)              # contact gain G (1/m): grip force per drive torque
+    for name in np.unique(objects):
+        sel = objects == name
+        r = model.forward(current[sel], wrist[sel], jaw[sel], obj=str(name),
+                          motor_velocity=inputs['motor_velocity'][sel],
+                          jaw_velocity=inputs['jaw_velocity'][sel])
+        torque[sel] = r.jaw_torque
+        drum_tension[sel] = r.drum_tension
+        efficiency[sel] = r.efficiency
+        gain[sel] = contact_gain(str(name), jaw[sel], p.jaw_moment_arm_tip, p.jaw_moment_arm_inner)
+    rn = p.drive_pulley_radius
+    section = p.cable_modulus * np.pi * p.cable_radius ** 2                               # E A (N)
+    drum_side, jaw_side = cable_lengths(p, jaw_side_cable_length)
+    if direction_aware:
+        f = p.drive_resistance_fraction
+        dt = inputs['dt']
+        # loading branch: M = r_n F0 (lambda - f) = r_n (1 - f/lambda) Tn with Tn = lambda F0, so
+        # M = forward torque + r_n (1 - f/lambda) (Tn - lambda F0) with the slip-direction Tn
+        with np.errstate(divide='ignore', invalid='ignore'):
+            arm = rn * np.maximum(1.0 - f / efficiency, 0.0)                # m
+        # cable pulled in at the jaw a = r_n (c wrist - jaw): a stuck cable's jaw side tension
+        # falls by k da (k: jaw-side cable stiffness E A / L_j)
+        k = section / jaw_side                                                            # N/m
+        pulled = rn * (p.wrist_finger_coupling * lowpass(wrist, dt, 0.02) - lowpass(jaw, dt, 0.02))
+        change = -k * np.diff(pulled, prepend=pulled[0])
+        tn, uncertain = capstan_tension(drum_tension, efficiency, change)
+        torque = torque + arm * (tn - efficiency * drum_tension)
+    else:
+        tn, uncertain = efficiency * drum_tension, np.zeros(n, dtype=bool)
+    predicted = torque if inputs['measured'] == 'jaw_torque' else np.maximum(torque, 0.0) * gain
+    return {'nominal': np.asarray(predicted, float), 'torque': torque, 'drum_tension': drum_tension,
+            'jaw_tension': tn, 'efficiency': efficiency, 'gain': gain, 'uncertain': uncertain,
+            'jaw_model': np.asarray(model.jaw_angle(inputs['motor'], wrist, current), float),
+            'stretch_drum': drum_side * drum_tension / (section * rn),
+            'stretch_jaw': jaw_side * tn / (section * rn),
+            'stretch': (drum_side * drum_tension + jaw_side * tn) / (section * rn)}
+
+
+def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = None,
+                default_object: str = 'needle', direction_aware: bool = True,
+                jaw_side_cable_length: float | None = None) -> dict[str, np.ndarray]:
+    """Analysis frame of one (decimated) log: signals, nominal prediction and features.
+
+    :func:`frame_inputs` and :func:`nominal` (see them for ``measured``,
+    ``default_object``, ``direction_aware`` and ``jaw_side_cable_length``), joined by
+    :func:`assemble_frame`.
+    """
+    return assemble_frame(frame_inputs(log, measured=measured, default_object=default_object), model,
+                          direction_aware=direction_aware, jaw_side_cable_length=jaw_side_cable_length)
+
+
+def assemble_frame(inputs: Mapping, model, *, direction_aware: bool = True,
+                   jaw_side_cable_length: float | None = None) -> dict[str, np.ndarray]:
+    """Analysis frame from a log's :func:`frame_inputs` and the model ``model``.
 
     Returns
     -------
@@ -235,70 +375,23 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
         ``nominal`` (model prediction of ``y``), ``torque`` (N*m, drive torque M),
         ``gain`` (1/m, grip force per drive torque; 1 for jaw torque logs),
         ``drum_tension`` / ``jaw_tension`` (N, cable tension at the drum / jaw side),
-        ``contact`` (0/1), ``current`` (A),
-        ``current_rate`` (A/s), ``jaw``/``wrist``/``motor`` angles (rad),
+        ``stretch`` (rad, jaw angle added by the cable's stretch), ``contact`` (0/1),
+        ``current`` (A), ``current_rate`` (A/s), ``jaw``/``wrist``/``motor`` angles (rad),
         ``jaw_velocity``/``motor_velocity`` (rad/s), ``jaw_model`` (rad, model jaw
-        angle from the drum angle), ``load_time`` (s under load), ``object`` (code).
+        angle from the drum angle), ``load_time`` (s under load), ``object`` (code),
+        ``steady`` (1 where fits and scores may use the sample).
     """
-    measured = measured or measured_column(log)
-    if measured not in log:
-        raise DiagnosisError(f'log has no {measured!r} column')
-    t = np.asarray(log['t'], float)
-    if t.size < 20:
-        raise DiagnosisError(f'log too short for a diagnosis ({t.size} samples after averaging)')
-    dt = float(np.median(np.diff(t)))
-    raw = {k: np.asarray(log[k], float)
-           for k in ('current', 'wrist_angle', 'jaw_angle', 'motor_angle', measured)}
-    # samples with a missing (non-finite) value are carried as 0 and left out of every fit
-    finite = np.logical_and.reduce([np.isfinite(v) for v in raw.values()])
-    if finite.sum() < 20:
-        raise DiagnosisError(f'log has only {int(finite.sum())} samples with every value finite')
-    raw = {k: np.where(finite, v, 0.0) for k, v in raw.items()}
-    current, wrist, jaw, motor = (raw['current'], raw['wrist_angle'], raw['jaw_angle'], raw['motor_angle'])
-    jaw_vel = np.gradient(lowpass(jaw, dt, 0.02), t)
-    motor_vel = np.gradient(lowpass(motor, dt, 0.02), t)
-    objects = np.asarray(log.get(OBJECT_COLUMN, np.full(t.size, default_object)), dtype=str)
-    codes = np.zeros(t.size)
-    torque = np.zeros(t.size)            # model drive torque M (N*m), loading branch
-    drum_tension = np.zeros(t.size)      # F0 (N)
-    efficiency = np.ones(t.size)         # lambda_n (-)
-    gain = np.zeros(t.size)              # contact gain G (1/m): grip force per drive torque
-    for name in np.unique(objects):
-        sel = objects == name
-        codes[sel] = OBJECTS.index(str(name))
-        r = model.forward(current[sel], wrist[sel], jaw[sel], obj=str(name),
-                          motor_velocity=motor_vel[sel], jaw_velocity=jaw_vel[sel])
-        torque[sel] = r.jaw_torque
-        drum_tension[sel] = r.drum_tension
-        efficiency[sel] = r.efficiency
-        gain[sel] = contact_gain(str(name), jaw[sel], model.params.jaw_moment_arm_tip,
-                                 model.params.jaw_moment_arm_inner)
-    if direction_aware:
-        rn = model.params.drive_pulley_radius
-        f = model.params.drive_resistance_fraction
-        # loading branch: M = r_n F0 (lambda - f) = r_n (1 - f/lambda) Tn with Tn = lambda F0, so
-        # M = forward torque + r_n (1 - f/lambda) (Tn - lambda F0) with the slip-direction Tn
-        with np.errstate(divide='ignore', invalid='ignore'):
-            arm = rn * np.maximum(1.0 - f / efficiency, 0.0)                # m
-        # cable pulled in at the jaw a = r_n (c wrist - jaw): a stuck cable's jaw side tension
-        # falls by k da (k: jaw-side cable stiffness E A / L, L = JAW_SIDE_CABLE_LENGTH assumed)
-        p = model.params
-        k = p.cable_modulus * np.pi * p.cable_radius ** 2 / jaw_side_cable_length      # N/m
-        pulled = rn * (p.wrist_finger_coupling * lowpass(wrist, dt, 0.02) - lowpass(jaw, dt, 0.02))
-        change = -k * np.diff(pulled, prepend=pulled[0])
-        tn, uncertain = capstan_tension(drum_tension, efficiency, change)
-        torque = torque + arm * (tn - efficiency * drum_tension)
-    else:
-        tn, uncertain = efficiency * drum_tension, np.zeros(t.size, dtype=bool)
-    nominal = torque if measured == 'jaw_torque' else np.maximum(torque, 0.0) * gain
-    if measured == 'jaw_torque':
+    t = inputs['t']
+    nom = nominal(inputs, model, direction_aware=direction_aware, jaw_side_cable_length=jaw_side_cable_length)
+    codes = inputs['codes']
+    if inputs['measured'] == 'jaw_torque':
         # a jaw torque rig holds the jaw against its load through the whole stroke: loaded
         # wherever the log names an object (the current's sign says which way the drive
         # slides, not whether the jaw is loaded: with friction larger than the load it flips
         # at every stroke under a constant load)
         contact = (codes > 0).astype(float)
     else:
-        contact = ((nominal > 0) & (codes > 0)).astype(float)
+        contact = ((nom['nominal'] > 0) & (codes > 0)).astype(float)
     # time under load (s): resets whenever the prediction says no load
     loaded = contact > 0
     load_time = np.zeros(t.size)
@@ -314,22 +407,18 @@ def build_frame(log: Mapping[str, np.ndarray], model, *, measured: str | None = 
         after = np.searchsorted(t[changes], t, side='right') - 1
         valid = after >= 0
         near[valid] = (t[valid] - t[changes[after[valid]]]) < SETTLE_TIME
-    jaw_model = model.jaw_angle(motor, wrist, current)
-    current_smooth = lowpass(current, dt, 0.02)
-    current_rate = np.gradient(current_smooth, t)
-    stepping = np.abs(current_rate) > STEP_RATE
-    if stepping.any():
-        hold = max(1, int(round(STEP_HOLD / dt)))
-        stepping = np.convolve(stepping.astype(float), np.ones(hold + 1), mode='full')[:t.size] > 0
-    return {'t': t - t[0], 'dt': np.array(dt), 'y': raw[measured],
+    return {'t': t - t[0], 'dt': np.array(inputs['dt']), 'y': inputs['y'],
             'max_current': np.array(float(model.params.max_current)),
-            'steady': (~near & ~uncertain & ~stepping & finite).astype(float),
-            'torque': torque, 'gain': np.ones(t.size) if measured == 'jaw_torque' else gain,
-            'drum_tension': drum_tension, 'jaw_tension': tn,
-            'nominal': np.asarray(nominal, float), 'contact': contact, 'current': current,
-            'current_rate': current_rate, 'jaw': jaw, 'wrist': wrist,
-            'motor': motor, 'jaw_velocity': jaw_vel, 'motor_velocity': motor_vel,
-            'jaw_model': np.asarray(jaw_model, float), 'load_time': load_time, 'object': codes}
+            'steady': (~near & ~nom['uncertain'] & ~inputs['stepping'] & inputs['finite']).astype(float),
+            'torque': nom['torque'],
+            'gain': np.ones(t.size) if inputs['measured'] == 'jaw_torque' else nom['gain'],
+            'drum_tension': nom['drum_tension'], 'jaw_tension': nom['jaw_tension'], 'stretch': nom['stretch'],
+            'stretch_drum': nom['stretch_drum'], 'stretch_jaw': nom['stretch_jaw'],
+            'nominal': nom['nominal'], 'contact': contact, 'current': inputs['current'],
+            'current_rate': inputs['current_rate'], 'jaw': inputs['jaw'], 'wrist': inputs['wrist'],
+            'motor': inputs['motor'], 'jaw_velocity': inputs['jaw_velocity'],
+            'motor_velocity': inputs['motor_velocity'], 'jaw_model': nom['jaw_model'], 'load_time': load_time,
+            'object': codes}
 
 
 def measured_of(logs: Iterable[Mapping[str, np.ndarray]]) -> str:

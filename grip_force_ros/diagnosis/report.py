@@ -147,13 +147,23 @@ def write_report(d: Diagnosis, out_dir, *, title: str = 'Sim-to-real gap diagnos
               f"{r['samples']['train']} training and {r['samples']['test']} held-out samples at "
               f"{_fmt(r['split']['analysis_rate_hz'])} Hz.", '',
               '## 1. Nominal model and calibration', '',
-              'Calibrated on the training part as a lab would (not unmodelled effects):', '',
+              'The instrument\'s own parameters, re-identified on the training part before any effect '
+              '(not unmodelled effects):', '',
+              '| parameter | YAML | fitted | std | unit | off |', '|---|---|---|---|---|---|']
+    calibration = r['calibration']
+    for name, c in calibration.get('parameters', {}).items():
+        off = 'yes' if c.get('off') else c.get('note', 'no')
+        lines.append(f"| {name} | {_fmt(c['yaml'])} | {_fmt(c['fitted'])} | {_fmt(c['std'], 2)} | "
+                     f"{c['unit']} | {off} |")
+    lines += ['', 'Then calibrated as a lab would:', '',
               '| quantity | value | std | unit | meaning |', '|---|---|---|---|---|']
-    for name, c in r['calibration'].items():
-        if isinstance(c, dict):
+    for name, c in calibration.items():
+        if isinstance(c, dict) and 'value' in c:
             lines.append(f"| {name} | {_fmt(c['value'])} | {_fmt(c['std'], 2)} | {c['unit']} | "
                          f"{c['meaning']} |")
-    lines += ['', f"Uncalibrated held-out RMS gap: {_fmt(r['calibration']['gap_uncalibrated'])} {unit}.", '',
+    lines += ['', 'Held-out RMS gap of the YAML model, uncalibrated: '
+              f"{_fmt(calibration['gap_uncalibrated'])} {unit}; re-identified: "
+              f"{_fmt(calibration.get('gap_reidentified'))} {unit}.", '',
               '## 2. Where', '', f"![regions]({figs['regions'].name})", '',
               '| region | share of gap | share of samples | rms | mean |', '|---|---|---|---|---|']
     for g in r['regions'][:12]:

@@ -27,7 +27,8 @@ Outcomes (:data:`OUTCOMES`):
 ``refuse_set``
     A runtime parameter set is refused with the reason; the old value stays.
 ``bounded``
-    A runtime parameter set is accepted, but the hardware limits still bound the output.
+    A runtime parameter set is accepted, or an input is plausible but wrong (a load cell
+    stuck at 0 N), and the hardware limits still bound the output.
 ``refuse_start``
     A node given this parameter file exits non-zero, naming the problem on stderr.
 """
@@ -53,7 +54,8 @@ OUTCOMES = {
     'stale_safe': 'watchdog: safe state within two control periods of the timeout, reason on '
                   '/diagnostics, resumes without a current jump',
     'refuse_set': 'runtime parameter set refused with the reason, old value kept',
-    'bounded': 'runtime parameter set accepted, hardware limits still bound the output',
+    'bounded': 'runtime parameter set accepted, or a plausible but wrong input used; hardware '
+               'limits still bound the output',
     'refuse_start': 'node exits non-zero with the offending key on stderr',
     # the dVRK interface and the drive, on real node processes (faults/dvrk.py)
     'drive_cut': "the controller process dies mid-grasp: the sim's drive cuts the current to 0 A "
@@ -122,7 +124,7 @@ class FaultCase:
         """'message', 'restart', 'param_set' or 'param_file'."""
         if self.outcome == 'refuse_start':
             return 'param_file'
-        if self.outcome in ('refuse_set', 'bounded'):
+        if self.outcome == 'refuse_set' or (self.outcome == 'bounded' and self.source is None):
             return 'param_set'
         if self.category == 'sim restart':
             return 'restart'
@@ -192,12 +194,17 @@ def duplicate_each(copies: int = 2) -> Mutator:
 
 
 def frozen_stamp() -> Mutator:
-    """Fresh values under the stamp of the window's first sample (a stuck driver)."""
+    """Fresh values under the stamp of the window's first sample (a stuck driver).
+
+    A new window (its tick index ``k`` falls back) starts from its own first sample, also
+    when that sample does not come at tick 0 (samples relayed from another process).
+    """
     first: dict = {}
 
     def mutate(sample: dict, k: int) -> list:
-        if k == 0 or 'stamp' not in first:
+        if 'stamp' not in first or k < first['k']:
             first['stamp'] = sample['stamp']
+        first['k'] = k
         return [dict(sample, stamp=first['stamp'])]
     return mutate
 
@@ -339,6 +346,11 @@ def _message_cases() -> list[FaultCase]:
           set_field('force', 0, NAN), reason=r'nan|not finite|non-finite', sensor=True),
         C('force_sensor_out_of_range', 'range', 'load-cell grip force 1e4 N', 'reject_safe',
           'force', set_field('force', 0, 1e4), reason=r'grip force.*beyond', sensor=True),
+        # plausible and wrong: nothing can reject it; the force loop winds up to the limit
+        C('force_sensor_stuck_at_zero', 'range',
+          'load cell stuck at 0 N (a dead sensor) while gripping: the force loop drives the current '
+          'up, the current and slew limits must hold', 'bounded', 'force', set_field('force', 0, 0.0),
+          ticks=150, sensor=True),
     ]
     # --- the simulated instrument restarts
     cases += [
@@ -408,6 +420,10 @@ def _param_file_cases() -> list[FaultCase]:
           reason=r'jaw_angle_m'),
         C('file_nan_value', 'parameter file', 'max_current_slew: .nan', 'refuse_start',
           params={'max_current_slew': NAN}, reason=r'max_current_slew'),
+        C('file_cable_overstressed', 'parameter file',
+          'cable_radius 0.15 mm: the drum tension at max_current stresses it beyond its yield '
+          'strength (an instrument that could not be built)', 'refuse_start',
+          params={'cable_radius': 0.00015}, reason=r'could not be built.*cable stress'),
     ]
 
 

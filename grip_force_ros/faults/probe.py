@@ -1,12 +1,15 @@
 """The fault probe: a plant and a fault injector on real DDS topics (rclpy).
 
-:class:`FaultProbe` is an rclpy node that stands in for the master and the instrument:
-at ``rate`` it steps an :class:`~grip_force_ros.sim.InstrumentSim` with the latest current
-command it received, publishes the master angle, the joint and actuator states (and the
-load cell when asked) over DDS, and passes each sample through the active fault mutator
-of its source (:mod:`grip_force_ros.faults.catalogue`). It records everything the
-controller publishes (command, target and estimated force, /diagnostics) and checks every
-command against the hardware limits as it arrives.
+:class:`FaultProbe` is an rclpy node that stands in for the master and, by default, the
+instrument: at ``rate`` it steps an :class:`~grip_force_ros.sim.InstrumentSim` with the
+latest current command it received, publishes the master angle, the joint and actuator
+states (and the load cell when asked) over DDS, and passes each sample through the active
+fault mutator of its source (:mod:`grip_force_ros.faults.catalogue`). With ``relay`` the
+instrument is the shipped ``sim_instrument`` process instead: it publishes its states on
+topics under the ``relay`` prefix, and the probe passes each of its messages through the
+mutator onto the controller's topics (the commands go from the controller to that process
+directly). It records everything the controller publishes (command, target and estimated
+force, /diagnostics) and checks every command against the hardware limits as it arrives.
 """
 from __future__ import annotations
 
@@ -19,12 +22,22 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.control.inputs import SOURCES
-from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS
+from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, SOURCES
+from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, STATE_SUB_QOS
 from grip_force_ros.sim import InstrumentSim
 
 _TOPICS = {'master': topics.MASTER_JS, 'instrument': topics.INSTRUMENT_JS,
            'actuator': topics.ACTUATOR_JS, 'force': topics.MEASURED_FORCE}
+
+
+def relay_remaps(prefix: str) -> dict:
+    """Topic remaps of a ``sim_instrument`` process whose states the probe relays.
+
+    Its joint, actuator and load-cell topics (and its /diagnostics) go under ``prefix``;
+    it still subscribes to the controller's current commands.
+    """
+    return {**{_TOPICS[s]: f'{prefix}/{_TOPICS[s]}' for s in INSTRUMENT_SOURCES},
+            topics.DIAGNOSTICS: f'{prefix}/diagnostics'}
 
 
 def to_time_msg(seconds: float):
@@ -125,22 +138,28 @@ class FaultProbe(Node):
     master_angle : float
         Master gripper angle held by default (rad); below ``master_contact_angle`` the
         controller grips.
+    relay : str, optional
+        Topic prefix of a ``sim_instrument`` process (:func:`relay_remaps`): relay its
+        states through the fault mutators instead of simulating the instrument here.
     """
 
     def __init__(self, params, rate: float = 1000.0, sensor: bool = False,
-                 master_angle: float = 0.1, **kwargs):
+                 master_angle: float = 0.1, relay: str | None = None, **kwargs):
         super().__init__('fault_probe', **kwargs)
         self.params = params
         self.period = 1.0 / rate
         self.sensor = sensor
         self.master_angle = master_angle
+        self.relay = relay
         self.plant = InstrumentSim(params, obj=params.object_kind, seed=0)
         self.command = 0.0
         self.lock = threading.RLock()
         # the active fault: source -> mutator, its tick counter and its end event
         self.fault: dict = {}
-        self.fault_ticks_left = 0
+        self.fault_ticks_left = self.fault_window = 0
         self.fault_k = 0
+        self.fault_started = None
+        self.fault_applied = 0
         self.fault_done = threading.Event()
         self.restart_pending = False
         self.stamp_offset = {s: 0.0 for s in _TOPICS}   # s, permanent offset (sim clock reset)
@@ -164,6 +183,13 @@ class FaultProbe(Node):
         self.steps: list[tuple] = []
         self.estimates: list[tuple] = []
         self.diagnostics: list[tuple] = []   # (receive time, text, values dict)
+        self.relayed = 0                     # instrument messages relayed (relay mode)
+        if relay is not None:
+            for source in INSTRUMENT_SOURCES:
+                msg_type = WrenchStamped if source == 'force' else JointState
+                self.create_subscription(msg_type, f'{relay}/{_TOPICS[source]}',
+                                         lambda msg, s=source: self._on_relayed(s, msg),
+                                         STATE_SUB_QOS if source == 'actuator' else RECORD_QOS)
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.TARGET_FORCE, self._on_target, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
@@ -181,8 +207,10 @@ class FaultProbe(Node):
         """Apply ``mutator`` to the samples of ``sources`` for ``ticks`` ticks."""
         with self.lock:
             self.fault = {s: mutator for s in sources}
-            self.fault_ticks_left = ticks
+            self.fault_ticks_left = self.fault_window = ticks
             self.fault_k = 0
+            self.fault_started = None        # probe clock of the window's first tick (s)
+            self.fault_applied = 0           # samples that went through the mutator
             self.fault_done = threading.Event()
             return self.fault_done
 
@@ -218,42 +246,84 @@ class FaultProbe(Node):
 
     def _tick(self) -> None:
         self.ticks += 1
-        self.plant.step(self.command, self.period)
+        if self.relay is None:
+            self.plant.step(self.command, self.period)
         now = self.now()
         samples = self.samples(now)
         with self.lock:
             fault = self.fault
             k = self.fault_k
             if fault:
-                self.fault_k += 1
-                self.fault_ticks_left -= 1
-                if self.fault_ticks_left <= 0:
+                if self.relay is not None:
+                    # the sim process runs in real time: the window is wall time, not ticks
+                    # (the probe's timer runs late on a loaded machine)
+                    if self.fault_started is None:
+                        self.fault_started = now
+                    k = int((now - self.fault_started) / self.period + 1e-6)
+                    self.fault_k = k + 1
+                    # and a one-sample fault must have met a sample of the process
+                    met = self.fault_applied > 0 or self.restart_pending
+                    ended = k + 1 >= self.fault_window and met
+                else:
+                    self.fault_k += 1
+                    self.fault_ticks_left -= 1
+                    ended = self.fault_ticks_left <= 0
+                if ended:
                     self.fault = {}
                     if self.restart_pending:
                         self._finish_restart()
                     self.fault_done.set()
             elif self.restart_pending:   # pragma: no cover - restart without a window
                 self._finish_restart()
-        if fault and self.restart_pending and k == 0:
+        if fault and self.restart_pending and k == 0 and self.relay is None:
             for source in ('instrument', 'actuator'):
                 self.destroy_publisher(self._pubs.pop(source))
         for source, sample in samples.items():
             if source == 'force' and not self.sensor:
                 continue
-            if source not in self._pubs:
+            if source not in self._pubs or (self.relay is not None and source in INSTRUMENT_SOURCES):
                 continue
-            sample['stamp'] += self.stamp_offset[source]
-            mutate = fault.get(source) or fault.get('all')
-            out = [sample] if mutate is None else mutate(sample, k)
-            if mutate is None:
-                self.last_good_publish[source] = now
-            pub = self._pubs[source]
-            for s in out:
-                pub.publish(self._message(source, s))
+            self._pass(source, sample, fault, k, now)
+
+    def _pass(self, source: str, sample: dict, fault: dict, k: int, now: float) -> None:
+        """Publish one good sample of ``source`` through the active fault's mutator."""
+        sample['stamp'] += self.stamp_offset[source]
+        mutate = fault.get(source) or fault.get('all')
+        out = [sample] if mutate is None else mutate(sample, k)
+        if mutate is None:
+            self.last_good_publish[source] = now
+        else:
+            self.fault_applied += 1
+        pub = self._pubs[source]
+        for s in out:
+            pub.publish(self._message(source, s))
+
+    def _on_relayed(self, source: str, msg) -> None:
+        """Pass a state of the ``sim_instrument`` process on to the controller, through the fault."""
+        if source == 'force' and not self.sensor:
+            return
+        with self.lock:
+            fault, k = self.fault, self.fault_k
+        self.relayed += 1
+        if not (fault.get(source) or fault.get('all')) and not self.stamp_offset[source]:
+            self.last_good_publish[source] = self.now()   # untouched: the message itself
+            self._pubs[source].publish(msg)
+            return
+        self._pass(source, self._sample(source, msg), fault, k, self.now())
+
+    @staticmethod
+    def _sample(source: str, msg) -> dict:
+        """Turn a received message into the plain sample dict of the mutators."""
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        if source == 'force':
+            return {'stamp': stamp, 'force': msg.wrench.force.z}
+        return {'stamp': stamp, 'name': list(msg.name), 'position': list(msg.position),
+                'velocity': list(msg.velocity), 'effort': list(msg.effort)}
 
     def _finish_restart(self) -> None:
         self.restart_pending = False
-        self.plant = InstrumentSim(self.params, obj=self.params.object_kind, seed=1)
+        if self.relay is None:
+            self.plant = InstrumentSim(self.params, obj=self.params.object_kind, seed=1)
         self.command = 0.0
         for source in ('instrument', 'actuator'):
             self.stamp_offset[source] += self.restart_offset

@@ -3,12 +3,18 @@
 * Message, silence and sim-restart faults: the controller node runs in this process
   (``parameter_overrides`` from the instrument YAML), a :class:`FaultProbe` closes the loop
   with a simulated instrument and injects each fault over DDS; one executor thread spins both.
+  Every case that involves the instrument runs a second time against the shipped
+  ``sim_instrument`` process (plant ``sim_instrument``): its states reach the controller
+  through the probe, which applies the fault on the way; "sim restart" kills that process
+  and starts a new one.
 * Runtime parameter faults: the probe calls the controller's parameter services.
 * Parameter-file faults: the ``controller`` executable is started with the bad
   ``--params-file`` and must exit non-zero naming the problem (no traceback).
+* Negative control (:mod:`.defects`): each deliberately broken controller build runs the
+  cases that must catch it; every defect must make at least one of them fail.
 
 :func:`run_faultcheck` returns the report ``{"cases", "passed", "crashes",
-"limit_violations", "failures", "details"}``.
+"limit_violations", "failures", "details", "negative_control"}``.
 """
 from __future__ import annotations
 
@@ -25,16 +31,19 @@ from pathlib import Path
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
+from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
 from grip_force_ros.faults.catalogue import SOURCES, FaultCase, bad_params_text, catalogue
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
 #: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
 GRIP_MASTER_ANGLE = 0.1
-#: How long a case may take to recover after its fault window (s).
-RECOVERY_TIMEOUT = 2.0
-#: Longest wait for the controller to grip before a case starts (s).
-READY_TIMEOUT = 5.0
+#: How long a case may take to recover after its fault window (s): ~0.1 s on a quiet machine;
+#: a loaded one (load 11 on 2 cores) took more than 2 s once. Never resuming is the fault.
+RECOVERY_TIMEOUT = 10.0
+#: Longest wait for the controller to grip before a case starts (s): ~0.1 s on a quiet
+#: machine; more than 5 s once at load 8 (never gripping is the fault).
+READY_TIMEOUT = 15.0
 #: Bumpless resume: the first command after the safe state may differ from the last safe
 #: command by at most this share of one slew step.
 RESUME_JUMP_SHARE = 0.5
@@ -42,6 +51,25 @@ RESUME_JUMP_SHARE = 0.5
 ISOLATION_NS = '/faultcheck_param_file'
 #: Extra allowance on the watchdog latency for DDS delivery and timer jitter (s).
 WATCHDOG_SLACK = 0.002
+#: The plants a case can run against: the probe's own InstrumentSim, or the shipped
+#: ``sim_instrument`` process (relayed through the probe).
+PLANTS = ('probe', 'sim_instrument')
+#: Topic prefix of the ``sim_instrument`` process's states (the probe relays them).
+RELAY_PREFIX = '/faultcheck_sim'
+#: Longest wait for a ``sim_instrument`` process to start and the loop to grip (s).
+PROCESS_READY_TIMEOUT = 30.0
+#: A fault window this short is one bad sample among good ones; it is sent again (at most
+#: SINGLE_SAMPLE_ATTEMPTS times in all) until the controller has taken one.
+SINGLE_SAMPLE_TICKS = 2
+SINGLE_SAMPLE_ATTEMPTS = 5
+#: Trials of a case that a loaded machine spoils (see run_case_redoing_spoiled).
+CASE_ATTEMPTS = 3
+
+
+def involves_instrument(case: FaultCase) -> bool:
+    """Tell whether a case faults the instrument's side (so it runs on the sim process too)."""
+    return case.kind in ('message', 'restart') and (
+        case.source in INSTRUMENT_SOURCES or case.source in ('all', 'restart'))
 
 
 # ---------------------------------------------------------------------------- session
@@ -54,9 +82,14 @@ class Session:
         Instrument YAML (its values become the controller's ``parameter_overrides``).
     sensor : bool
         Controller with ``force_sensor_enabled`` and a probe publishing the load cell.
+    plant : str
+        One of :data:`PLANTS`: the probe's InstrumentSim, or a ``sim_instrument`` process.
+    defect : str, optional
+        A deliberately broken controller (:mod:`.defects`, negative control only).
     """
 
-    def __init__(self, config: Path, sensor: bool = False):
+    def __init__(self, config: Path, sensor: bool = False, plant: str = 'probe',
+                 defect: str | None = None):
         import rclpy
         from rclpy.context import Context
         from rclpy.parameter import Parameter
@@ -73,8 +106,19 @@ class Session:
         overrides = [Parameter(k, value=list(v) if isinstance(v, (list, tuple)) else v)
                      for k, v in values.items()]
         self.controller = ControllerNode(parameter_overrides=overrides, context=self.context)
+        if defect is not None:
+            from grip_force_ros.faults.defects import break_controller
+            break_controller(self.controller, defect)
+        if plant not in PLANTS:
+            raise ValueError(f'unknown plant {plant!r}; one of {PLANTS}')
+        self.plant, self.config, self.sim = plant, Path(config), None
+        self.ready_timeout = READY_TIMEOUT if plant == 'probe' else PROCESS_READY_TIMEOUT
+        self.recovery_timeout = RECOVERY_TIMEOUT
         self.probe = FaultProbe(self.params, rate=self.params.control_rate, sensor=sensor,
-                                master_angle=GRIP_MASTER_ANGLE, context=self.context)
+                                master_angle=GRIP_MASTER_ANGLE, context=self.context,
+                                relay=RELAY_PREFIX if plant == 'sim_instrument' else None)
+        if plant == 'sim_instrument':
+            self.sim = self._start_sim()
         self.executor = self._executor()
         self.executor.add_node(self.controller)
         self.executor.add_node(self.probe)
@@ -104,9 +148,46 @@ class Session:
     def alive(self) -> bool:
         return self.crash is None and self._thread.is_alive()
 
+    # ------------------------------------------------------------------ the sim process
+    def _start_sim(self):
+        """Start the shipped ``sim_instrument`` on the instrument file, its states relayed."""
+        from grip_force_ros.faults.probe import relay_remaps
+        from grip_force_ros.nodes.processes import NodeProcess, node_command
+        log = Path(tempfile.gettempdir()) / f'grip_force_faultcheck_sim_{os.getpid()}.log'
+        return NodeProcess('sim_instrument', command=node_command(
+            'sim_instrument', self.config, remaps=relay_remaps(RELAY_PREFIX)), log_path=log)
+
+    def restart_plant(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
+        """Restart the instrument: the probe's plant, or kill and start the sim process.
+
+        Returns the event of the fault window (``ticks`` probe ticks of silence; stamps
+        shifted by ``stamp_offset`` s from its end on).
+        """
+        done = self.probe.restart_sim(ticks, stamp_offset)
+        if self.sim is None:
+            return done
+        self.killed = {'pid': self.sim.pid}
+        self.sim.popen.kill()               # a crash, not a clean shutdown
+        self.killed['exit_code'] = self.sim.popen.wait()
+        self.recovery_timeout = PROCESS_READY_TIMEOUT   # a new process has to start
+
+        def start_again():
+            done.wait(ticks * self.probe.period * 20 + 2.0)
+            if not self._stop:          # a closed session starts no process
+                self.sim = self._start_sim()
+        self._restarting = threading.Thread(target=start_again, name='faultcheck-sim-restart',
+                                            daemon=True)
+        self._restarting.start()
+        return done
+
     def close(self) -> None:
         import rclpy
         self._stop = True
+        restarting = getattr(self, '_restarting', None)
+        if restarting is not None:      # let a pending restart finish (or see _stop) first
+            restarting.join(timeout=5.0)
+        if self.sim is not None:
+            self.sim.stop(grace=2.0)
         self._thread.join(timeout=2.0)
         try:
             self.executor.shutdown(timeout_sec=1.0)
@@ -125,10 +206,10 @@ class Session:
         targets = self.probe.targets[-samples:]
         return len(targets) == samples and targets[0][0] >= since and all(t[2] > 0 for t in targets)
 
-    def wait_gripping(self, timeout: float = READY_TIMEOUT) -> bool:
+    def wait_gripping(self, timeout: float | None = None) -> bool:
         from grip_force_ros.nodes.harness import wait_until
         start = self.probe.now()
-        return wait_until(lambda: self.gripping(start), timeout)
+        return wait_until(lambda: self.gripping(start), timeout or self.ready_timeout)
 
     # ------------------------------------------------------------------ parameters
     def set_parameters(self, values: dict, atomic: bool = False, timeout: float = 5.0):
@@ -201,8 +282,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     from grip_force_ros.nodes.harness import wait_until
     probe, params = session.probe, session.params
     detail: dict = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
-                    'description': case.description}
+                    'description': case.description, 'plant': session.plant}
     probe.master_angle = GRIP_MASTER_ANGLE if case.master_angle is None else case.master_angle
+    session.recovery_timeout = RECOVERY_TIMEOUT
     if not session.wait_gripping():
         detail.update(passed=False, why='controller not gripping before the fault')
         return detail
@@ -214,7 +296,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         offset = 0.0
         if case.mutate is not None:   # the clock-reset variant carries its stamp shift
             offset = case.mutate({'stamp': 0.0}, 0)[0]['stamp']
-        done = probe.restart_sim(case.ticks, offset)
+        done = session.restart_plant(case.ticks, offset)
     else:
         sources = SOURCES if case.source == 'all' else (case.source,)
         done = probe.inject(sources, case.mutate, case.ticks)
@@ -224,8 +306,22 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     last_received = session.receive_times()
     held = session.held_inputs()     # what the controller holds while the fault lasts
     done.wait(case.ticks * probe.period * 20 + 2.0)
+    attempts = 1
+    if case.kind == 'message' and case.ticks <= SINGLE_SAMPLE_TICKS:
+        # The controller keeps only the newest sample of a topic (KEEP_LAST 1): a single bad
+        # sample that the next good one overtakes before the controller takes it was never
+        # delivered. Send it again (the same fault) until the controller has seen one.
+        while attempts < SINGLE_SAMPLE_ATTEMPTS and not wait_until(
+                lambda: session.rejected_count() > rejected_before, 0.2):
+            attempts += 1
+            done = probe.inject(sources, case.mutate, case.ticks)
+            done.wait(case.ticks * probe.period * 20 + 2.0)
+        detail['attempts'] = attempts
     t1 = probe.now()
-    recovered = wait_until(lambda: session.gripping(t1), RECOVERY_TIMEOUT)
+    recovered = wait_until(lambda: session.gripping(t1), session.recovery_timeout)
+    if case.kind == 'restart' and session.sim is not None:   # the real process, killed and new
+        detail['sim_process'] = {'killed_pid': session.killed['pid'],
+                                 'exit_code': session.killed['exit_code'], 'new_pid': session.sim.pid}
     pattern = re.compile(case.reason, re.I) if case.reason else None
     if pattern is not None:   # /diagnostics may come at a lower rate: give it time
         wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
@@ -244,7 +340,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     )
     problems = []
     if not recovered:
-        problems.append('control did not resume within %.1f s' % RECOVERY_TIMEOUT)
+        problems.append('control did not resume within %.1f s' % session.recovery_timeout)
     if jumps and max(jumps) > RESUME_JUMP_SHARE * step + 1e-9:
         problems.append(f'current jump {max(jumps):.4f} A at resume (> {RESUME_JUMP_SHARE} slew step)')
     if case.outcome in ('reject_safe', 'reject_once', 'stale_safe', 'clamp') and reason_text is None:
@@ -252,18 +348,26 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     if case.outcome in ('reject_safe', 'stale_safe') and not safe_rows:
         problems.append('output never went to the safe state')
     if case.outcome == 'stale_safe':
+        timeout = _case_timeout(case, params)
+        detail['watchdog_timeout_ms'] = round(timeout * 1e3, 3)
         latency = _watchdog_latency(case, probe, last_good, rows, session)
         detail['safe_after_last_input_ms'] = None if latency is None else round(latency * 1e3, 3)
-        limit = params.watchdog_timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
+        limit = timeout + 2.0 / params.control_rate + WATCHDOG_SLACK
         detail['safe_latency_limit_ms'] = round(limit * 1e3, 3)
         received = _watchdog_latency(case, probe, last_received, rows, session)
         detail['safe_after_last_receive_ms'] = None if received is None else round(received * 1e3, 3)
-        steps = _steps_to_safe(case, probe, last_received, rows, params.watchdog_timeout)
+        steps = _steps_to_safe(case, probe, last_received, rows, timeout)
         detail['controller_steps_after_timeout'] = steps
         if latency is None or steps is None:
             problems.append('no safe output after the last input')
         elif steps > 2:
             problems.append(f'safe only at the {steps}th control period after the timeout')
+        elif steps == 0:   # safe before this input's timeout: another input was lost first?
+            silenced = _case_sources(case)
+            others = [d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005 and any(
+                f'stale {s} input' in d[1] for s in SOURCES if s not in silenced)]
+            if others:     # the machine starved another input: this trial measured nothing
+                detail['spoiled'] = others[0][:300]
     if case.outcome in ('clamp', 'ignore'):
         modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
         modes = [m for m in modes if m is not None]
@@ -278,8 +382,15 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
                   if d[0] <= t1 + 0.005 and _diag_mode(d[2]) is Mode.SAFE and 'stale' not in d[1]]
         if unsafe:
             problems.append(f'went to the safe state: {unsafe[0][:200]}')
-        if grip_share < 0.5:
+        if grip_share < 0.5 and unsafe:
             problems.append(f'left grip in {1 - grip_share:.0%} of the fault window')
+        elif grip_share < 0.5:   # only for stale inputs: the machine starved the loop
+            detail['spoiled'] = (f'left grip in {1 - grip_share:.0%} of the fault window for '
+                                 'stale inputs only (a starved process)')
+    if case.outcome == 'bounded':   # a wrong but plausible input: only the limits stand
+        commands = [abs(r[2]) for r in window]
+        detail['peak_command'] = max(commands) if commands else math.nan
+        detail['max_current'] = params.max_current
     detail['rejected_samples'] = rejected
     if case.outcome == 'ignore' and rejected:
         problems.append(f'{rejected} samples rejected: {session.last_rejection()}')
@@ -293,6 +404,27 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     detail['passed'] = not problems
     if problems:
         detail['why'] = '; '.join(problems)
+    return detail
+
+
+def run_case_redoing_spoiled(session: Session, case: FaultCase) -> dict:
+    """Run a message case; a trial spoiled by the machine is redone, at most twice.
+
+    Spoiled: a watchdog case whose output went safe before its own input's timeout because
+    another input was lost first, or a case that must not leave grip whose output did for
+    stale inputs only (a starved process on a loaded machine: found with 10 kHz bursts
+    relayed from the sim process at load 11). The third spoiled trial fails with its cause.
+    """
+    spoiled = []
+    for _ in range(CASE_ATTEMPTS):
+        detail = run_message_case(session, case)
+        if not detail.get('spoiled'):
+            break
+        spoiled.append(detail['spoiled'])
+    else:
+        detail['passed'] = False
+        detail['why'] = f'spoiled {CASE_ATTEMPTS} times by another lost input: ' + ' | '.join(spoiled)
+    detail['spoiled_trials'] = spoiled
     return detail
 
 
@@ -320,14 +452,26 @@ def _diag_mode(values: dict) -> Mode | None:
     return None
 
 
+def _case_sources(case) -> tuple:
+    """Input sources a message or restart case silences or faults."""
+    if case.kind == 'restart':
+        return ('instrument', 'actuator')
+    return SOURCES if case.source == 'all' else (case.source,)
+
+
+def _case_timeout(case, params) -> float:
+    """Watchdog timeout (s) that applies to the case: the shortest of its sources'."""
+    timeouts = source_timeouts(params)
+    return min(timeouts[s] for s in _case_sources(case))
+
+
 def _watchdog_latency(case, probe, last_good, rows, session):
     """Time from the last good input of the silenced source to the first safe output (s)."""
-    if case.kind == 'restart':
-        sources = ('instrument', 'actuator')
-    else:
-        sources = (case.source,)
+    sources = _case_sources(case)
     # the last good sample went out just before the fault window began
-    last = max(last_good[s] for s in sources if s in last_good)
+    # several silenced sources (a restart): the first of them to go stale trips the watchdog
+    last = min((last_good[s] for s in sources if last_good.get(s) == last_good.get(s)),
+               default=math.nan)
     if last != last:
         return None
     safe = [r for r in rows if r[3] == 0.0 and r[1] >= last]
@@ -345,8 +489,10 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
     DDS delivery and of scheduling stalls of a loaded machine, which the wall-clock
     latencies include.
     """
-    sources = ('instrument', 'actuator') if case.kind == 'restart' else (case.source,)
-    last = max(last_good[s] for s in sources if s in last_good)
+    sources = _case_sources(case)
+    # several silenced sources (a restart): the first of them to go stale trips the watchdog
+    last = min((last_good[s] for s in sources if last_good.get(s) == last_good.get(s)),
+               default=math.nan)
     if last != last:
         return None
     steps = 0
@@ -460,8 +606,83 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
 
 
 # ---------------------------------------------------------------------------- all of it
+def _run_group(group: list[FaultCase], config: Path, sensor: bool, plant: str, progress=None,
+               defect: str | None = None) -> tuple[list[dict], int, int]:
+    """Run message, restart and runtime-parameter cases on sessions of one kind.
+
+    A fresh session (controller, probe, plant) after any failure or crash.
+
+    Returns
+    -------
+    tuple
+        (details, crashes, limit violations seen by the sessions).
+    """
+    details: list[dict] = []
+    crashes = violations = 0
+    session = None
+    for case in group:
+        try:
+            if session is None:
+                session = Session(config, sensor=sensor, plant=plant, defect=defect)
+            if case.kind == 'param_set':
+                detail = run_param_set_case(session, case)
+            else:
+                detail = run_case_redoing_spoiled(session, case)
+        except Exception:  # noqa: BLE001 - a harness error fails the case, not the run
+            detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
+                      'passed': False, 'why': 'harness error: ' + traceback.format_exc(limit=3)}
+        if plant != 'probe':
+            detail['name'] = f'{case.name}@{plant}'
+        if session is not None and not session.alive:
+            crashes += 1
+            detail['passed'] = False
+            detail['crash'] = (session.crash or 'executor thread ended')[-800:]
+            detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
+        details.append(detail)
+        if progress:
+            progress(detail)
+        if session is not None and (not session.alive or not detail.get('passed')):
+            violations += session.violation_count()   # also those between cases
+            session.close()   # a fresh controller for the next case
+            session = None
+    if session is not None:
+        violations += session.violation_count()
+        session.close()
+    return details, crashes, violations
+
+
+def run_negative_control(config: str | os.PathLike | None = None, progress=None) -> dict:
+    """Run each defect's matching cases on a controller with that defect (:mod:`.defects`).
+
+    Returns
+    -------
+    dict
+        ``cases`` (defects injected), ``caught`` (defects that made at least one case
+        fail), ``defects``: per defect its cases, ``caught_by`` (the failing ones, with why).
+    """
+    from grip_force_ros.faults.defects import DEFECTS, negative_control_session
+    config = instrument_path(config)
+    by_name = {c.name: c for c in catalogue()}
+    results = []
+    with negative_control_session():
+        for defect in DEFECTS.values():
+            cases = [by_name[n] for n in defect.cases]
+            details = []
+            for sensor in (False, True):
+                group = [c for c in cases if c.sensor == sensor]
+                if group:
+                    details += _run_group(group, config, sensor, 'probe', defect=defect.name)[0]
+            caught_by = {d['name']: d.get('why', '') for d in details if not d.get('passed')}
+            result = {'defect': defect.name, 'description': defect.description,
+                      'cases': list(defect.cases), 'caught': bool(caught_by), 'caught_by': caught_by}
+            results.append(result)
+            if progress:
+                progress(result)
+    return {'cases': len(results), 'caught': sum(r['caught'] for r in results), 'defects': results}
+
+
 def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLike | None = None,
-                   progress=None) -> dict:
+                   progress=None, plants=PLANTS, negative_control: bool = True) -> dict:
     """Run ``cases`` (default: the whole catalogue) and return the report.
 
     Parameters
@@ -472,15 +693,36 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         Instrument YAML (path or shipped name) of the controller under test; default
         :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
     progress : callable, optional
-        ``progress(detail)`` after each case.
+        ``progress(detail)`` after each case (and each defect of the negative control).
+    plants : sequence of str
+        :data:`PLANTS` to run against: every case on the probe's plant, the cases that
+        involve the instrument (:func:`involves_instrument`) on the ``sim_instrument``
+        process too (named ``<case>@sim_instrument``).
+    negative_control : bool
+        Also run :func:`run_negative_control`.
 
     Returns
     -------
     dict
         ``cases``, ``passed``, ``crashes``, ``limit_violations``, ``failures`` (names and
-        why), ``details`` (one dict per case) and ``seconds``.
+        why), ``details`` (one dict per case run), ``negative_control`` (``{cases, caught,
+        defects}``; ``{cases: 0, caught: 0}`` when not run) and ``seconds``.
     """
+    from grip_force_ros.nodes.processes import reserve_domains
     start = time.monotonic()
+    held = None
+    if not os.environ.get('ROS_DOMAIN_ID'):   # a domain of its own, held for the run
+        held = reserve_domains(1)
+        os.environ['ROS_DOMAIN_ID'] = str(held.domain_id)
+    try:
+        return _run_faultcheck(cases, config, progress, plants, negative_control, start)
+    finally:
+        if held is not None:
+            del os.environ['ROS_DOMAIN_ID']
+            held.release()
+
+
+def _run_faultcheck(cases, config, progress, plants, negative_control, start) -> dict:
     config = instrument_path(config)
     cases = catalogue() if cases is None else list(cases)
     file_cases = [c for c in cases if c.kind == 'param_file']
@@ -492,39 +734,16 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
             daemon=True)
         file_thread.start()
     details: list[dict] = []
-    crashes = 0
-    violations = 0
-    for sensor in (False, True):
-        group = [c for c in cases if c.kind not in ('param_file', 'process') and c.sensor == sensor]
-        if not group:
-            continue
-        session = None
-        for case in group:
-            if session is None:
-                session = Session(config, sensor=sensor)
-            try:
-                if case.kind == 'param_set':
-                    detail = run_param_set_case(session, case)
-                else:
-                    detail = run_message_case(session, case)
-            except Exception:  # noqa: BLE001 - a harness error fails the case, not the run
-                detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
-                          'passed': False, 'why': 'harness error: ' + traceback.format_exc(limit=3)}
-            if not session.alive:
-                crashes += 1
-                detail['passed'] = False
-                detail['crash'] = (session.crash or 'executor thread ended')[-800:]
-                detail['why'] = (detail.get('why', '') + '; controller crashed').lstrip('; ')
-            details.append(detail)
-            if progress:
-                progress(detail)
-            if not session.alive or not detail.get('passed'):
-                violations += session.violation_count()   # also those between cases
-                session.close()   # a fresh controller for the next case
-                session = None
-        if session is not None:
-            violations += session.violation_count()
-            session.close()
+    crashes = violations = 0
+    for plant in plants:
+        for sensor in (False, True):
+            group = [c for c in cases if c.kind not in ('param_file', 'process') and c.sensor == sensor
+                     and (plant == 'probe' or involves_instrument(c))]
+            if group:
+                d, c, v = _run_group(group, config, sensor, plant, progress)
+                details += d
+                crashes += c
+                violations += v
     process_cases = [c for c in cases if c.kind == 'process']
     if process_cases:   # the dVRK interface and the drive, each on its own processes
         from grip_force_ros.faults.dvrk import run_process_cases
@@ -537,6 +756,8 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
             details.append(detail)
             if progress:
                 progress(detail)
+    negative = (run_negative_control(config, progress) if negative_control
+                else {'cases': 0, 'caught': 0, 'defects': []})
     failures = [{'name': d['name'], 'why': d.get('why', '')} for d in details if not d.get('passed')]
     return {
         'cases': len(details),
@@ -544,6 +765,7 @@ def run_faultcheck(cases: list[FaultCase] | None = None, config: str | os.PathLi
         'crashes': crashes,
         'limit_violations': violations,
         'failures': failures,
+        'negative_control': negative,
         'seconds': round(time.monotonic() - start, 1),
         'details': details,
     }

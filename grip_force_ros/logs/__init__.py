@@ -31,7 +31,7 @@ __all__ = ['CORE_COLUMNS', 'MEASURED_COLUMNS', 'OBJECT_COLUMN', 'LogError', 'mea
            'read_bag', 'write_bag', 'is_bag']
 
 
-def read_log(path, *, chunk_rows: int = 200_000, progress=None) -> dict:
+def read_log(path, *, chunk_rows: int = 200_000, progress=None, measured: bool = True) -> dict:
     """Read a log (CSV, or a rosbag2 directory / ``.mcap`` / ``.db3`` file).
 
     Parameters
@@ -43,6 +43,8 @@ def read_log(path, *, chunk_rows: int = 200_000, progress=None) -> dict:
         Rows parsed at a time from a CSV (bounds the temporary memory).
     progress : callable, optional
         ``progress(rows_read)`` called after every chunk (e.g. to print on stderr).
+    measured : bool
+        False: accept a log of inputs only (no measured column), as a prediction needs.
 
     Returns
     -------
@@ -55,20 +57,21 @@ def read_log(path, *, chunk_rows: int = 200_000, progress=None) -> dict:
         Missing file or columns, non-rising time, unreadable bag.
     """
     if is_bag(path):
-        return read_bag(path, progress=progress)
-    return read_csv(path, chunk_rows=chunk_rows, progress=progress)
+        return read_bag(path, progress=progress, measured=measured)
+    return read_csv(path, chunk_rows=chunk_rows, progress=progress, measured=measured)
 
 
-def iter_log(path, *, chunk_rows: int = 200_000):
+def iter_log(path, *, chunk_rows: int = 200_000, measured: bool = True):
     """Yield a log in chunks of at most ``chunk_rows`` rows (dicts of arrays).
 
     CSV logs are streamed from disk, so memory stays bounded by the chunk size;
     bags are aligned first (their topics arrive interleaved) and then yielded in chunks.
+    ``measured=False`` accepts a log of inputs only.
     """
     if is_bag(path):
-        log = read_bag(path)
+        log = read_bag(path, measured=measured)
         n = len(log['t'])
         for start in range(0, n, chunk_rows):
             yield {k: v[start:start + chunk_rows] for k, v in log.items()}
         return
-    yield from iter_csv(path, chunk_rows=chunk_rows)
+    yield from iter_csv(path, chunk_rows=chunk_rows, measured=measured)

@@ -273,8 +273,10 @@ class _TopicBuffer:
         return _sorted_unique({k: np.concatenate([p[k] for p in self.parts]) for k in keys})
 
 
-def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
+def read_bag(path, *, progress=None, measured: bool = True) -> dict[str, np.ndarray]:
     """Read a rosbag2 (MCAP or sqlite3) of the product's topics into contract columns.
+
+    ``measured=False``: the force topic is optional (a bag of inputs only).
 
     Returns
     -------
@@ -326,19 +328,21 @@ def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
     except Exception as exc:  # rosbags raises its own types; keep one domain error
         raise LogError(f'{path}: cannot read bag: {exc}') from exc
 
-    for topic in (topics.ACTUATOR_JS, topics.INSTRUMENT_JS, topics.MEASURED_FORCE):
+    needed = (topics.ACTUATOR_JS, topics.INSTRUMENT_JS) + ((topics.MEASURED_FORCE,) if measured else ())
+    for topic in needed:
         if not buffers[topic].count:
             raise LogError(f'{path}: no messages on {topic}')
     try:
         act = buffers.pop(topics.ACTUATOR_JS).finish()
         ins = buffers.pop(topics.INSTRUMENT_JS).finish()
-        wr = buffers.pop(topics.MEASURED_FORCE).finish()
+        force = buffers.pop(topics.MEASURED_FORCE)
+        wr = force.finish() if force.count else None
     except LogError as exc:
         raise LogError(f'{path}: {exc}') from None
 
     t_ns = act['stamp']
-    lo = max(ins['stamp'][0], wr['stamp'][0])
-    hi = min(ins['stamp'][-1], wr['stamp'][-1])
+    lo = max(ins['stamp'][0], wr['stamp'][0] if wr is not None else ins['stamp'][0])
+    hi = min(ins['stamp'][-1], wr['stamp'][-1] if wr is not None else ins['stamp'][-1])
     keep = (t_ns >= lo) & (t_ns <= hi)
     if keep.sum() < 2:
         raise LogError(f'{path}: topics do not overlap in time')
@@ -357,9 +361,9 @@ def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
            'jaw_angle': on_time(ins, f'position/{topics.JAW_JOINT}'),
            'wrist_velocity': on_time(ins, f'velocity/{topics.WRIST_JOINT}'),
            'jaw_velocity': on_time(ins, f'velocity/{topics.JAW_JOINT}')}
-    if np.any(np.isfinite(wr['fz'])):
+    if wr is not None and np.any(np.isfinite(wr['fz'])):
         log['grip_force'] = on_time(wr, 'fz')
-    if np.any(wr['tz'] != 0):
+    if wr is not None and np.any(wr['tz'] != 0):
         log['jaw_torque'] = on_time(wr, 'tz')
     if objects:
         objects.sort()
@@ -367,7 +371,7 @@ def read_bag(path, *, progress=None) -> dict[str, np.ndarray]:
         names = np.array([v for _, v in objects])
         idx = np.clip(np.searchsorted(o_ns, t_ns, side='right') - 1, 0, None)
         log[OBJECT_COLUMN] = names[idx]
-    return normalise_log(log, where=str(path))
+    return normalise_log(log, where=str(path), measured=measured)
 
 
 def _stamps(stamp_ns: np.ndarray, bag_ns: np.ndarray) -> np.ndarray:

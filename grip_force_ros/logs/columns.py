@@ -34,11 +34,14 @@ def measured_column(log: Mapping[str, np.ndarray]) -> str:
                    f'columns: {", ".join(log)}')
 
 
-def normalise_log(log: Mapping[str, object], *, where: str = 'log') -> dict[str, np.ndarray]:
+def normalise_log(log: Mapping[str, object], *, where: str = 'log',
+                  measured: bool = True) -> dict[str, np.ndarray]:
     """Check a log against the contract and return it as float64/str arrays.
 
     Numeric columns become contiguous float64 arrays, ``object`` a str array of
-    lower-case names. Time must be finite and strictly rising.
+    lower-case names. Time must be finite and strictly rising. ``measured=False``
+    accepts a log of inputs only (no ``grip_force`` or ``jaw_torque``: what a model
+    prediction needs).
 
     Raises
     ------
@@ -49,7 +52,8 @@ def normalise_log(log: Mapping[str, object], *, where: str = 'log') -> dict[str,
     if missing:
         raise LogError(f'{where}: missing column(s) {", ".join(missing)} '
                        f'(contract: {", ".join(CORE_COLUMNS)}, grip_force or jaw_torque[, object])')
-    measured_column(log)
+    if measured:
+        measured_column(log)
     out: dict[str, np.ndarray] = {}
     n = None
     for name, values in log.items():

@@ -47,10 +47,11 @@ def _parse_chunk(lines: list[str], names: list[str], path: Path, first_row: int)
     return chunk
 
 
-def iter_csv(path, *, chunk_rows: int = 200_000) -> Iterator[dict[str, np.ndarray]]:
+def iter_csv(path, *, chunk_rows: int = 200_000, measured: bool = True) -> Iterator[dict[str, np.ndarray]]:
     """Yield a CSV log as chunks (dicts of arrays) of at most ``chunk_rows`` rows.
 
     Each chunk is checked against the contract; time must rise across chunks too.
+    ``measured=False``: the measured column is optional (a log of inputs only).
 
     Raises
     ------
@@ -71,7 +72,8 @@ def iter_csv(path, *, chunk_rows: int = 200_000) -> Iterator[dict[str, np.ndarra
                 raise LogError(f'{path}: time must rise strictly (row {row + 1}: t={chunk["t"][0]!r} '
                                f'after {last_t!r})')
             if chunk['t'].size >= 2:
-                chunk = normalise_log(chunk, where=f'{path} (rows {row + 1}..{row + len(lines)})')
+                chunk = normalise_log(chunk, where=f'{path} (rows {row + 1}..{row + len(lines)})',
+                                      measured=measured)
             else:
                 chunk = {k: (v if k == OBJECT_COLUMN else v.astype(np.float64)) for k, v in chunk.items()}
             last_t = chunk['t'][-1]
@@ -79,11 +81,12 @@ def iter_csv(path, *, chunk_rows: int = 200_000) -> Iterator[dict[str, np.ndarra
             yield chunk
 
 
-def read_csv(path, *, chunk_rows: int = 200_000, progress=None) -> dict[str, np.ndarray]:
+def read_csv(path, *, chunk_rows: int = 200_000, progress=None,
+             measured: bool = True) -> dict[str, np.ndarray]:
     """Read a whole CSV log into arrays (see :func:`grip_force_ros.logs.read_log`)."""
     parts: dict[str, list[np.ndarray]] = {}
     rows = 0
-    for chunk in iter_csv(path, chunk_rows=chunk_rows):
+    for chunk in iter_csv(path, chunk_rows=chunk_rows, measured=measured):
         for k, v in chunk.items():
             parts.setdefault(k, []).append(v)
         rows += len(chunk['t'])
@@ -94,7 +97,7 @@ def read_csv(path, *, chunk_rows: int = 200_000, progress=None) -> dict[str, np.
     log = {}
     for k in list(parts):
         log[k] = np.concatenate(parts.pop(k))
-    return normalise_log(log, where=str(path))
+    return normalise_log(log, where=str(path), measured=measured)
 
 
 def _format_column(values: np.ndarray, name: str) -> np.ndarray:
@@ -103,7 +106,8 @@ def _format_column(values: np.ndarray, name: str) -> np.ndarray:
     return np.char.mod('%.10g', np.asarray(values, dtype=np.float64))
 
 
-def write_csv(path, log: Mapping[str, np.ndarray], *, chunk_rows: int = 200_000) -> Path:
+def write_csv(path, log: Mapping[str, np.ndarray], *, chunk_rows: int = 200_000,
+              measured: bool = True) -> Path:
     """Write a log as CSV (header row, then ``%.10g`` values), in chunks.
 
     Parameters
@@ -114,6 +118,8 @@ def write_csv(path, log: Mapping[str, np.ndarray], *, chunk_rows: int = 200_000)
         Columns of the contract (see :mod:`grip_force_ros.logs`); checked first.
     chunk_rows : int
         Rows formatted per chunk (bounds the memory of a long log).
+    measured : bool
+        False: the log may have no measured column (inputs and model columns only).
 
     Returns
     -------
@@ -121,7 +127,7 @@ def write_csv(path, log: Mapping[str, np.ndarray], *, chunk_rows: int = 200_000)
         The file written.
     """
     path = Path(path)
-    log = normalise_log(log, where=str(path))
+    log = normalise_log(log, where=str(path), measured=measured)
     names = list(log)
     path.parent.mkdir(parents=True, exist_ok=True)
     n = len(log['t'])

@@ -108,6 +108,9 @@ MIN_STEP_SPACING_PERIODS = 0.5
 FALLBACK_AFTER_PERIODS = 1.5
 #: After ``shutdown`` the process ends this long later (s): the transition's reply goes out first.
 EXIT_DELAY = 0.2
+#: A timer tick this many timer periods after the previous one follows a stall of this process:
+#: it does not step (once), so that the states that came in meanwhile are taken first.
+STALL_PERIODS = 5.0
 
 #: The plausibility ranges of ControlInputs (copied on a runtime parameter change).
 _INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance',
@@ -168,7 +171,7 @@ class ControllerNode(LifecycleNode):
         self._exit_timer = None
         self._configure_error = None
         self._quiet_failure = False    # autostart: the exception reports a failed configure
-        self.steps = {'on_state': 0, 'on_timer': 0}   # control steps by trigger
+        self.steps = {'on_state': 0, 'on_timer': 0, 'deferred_after_stall': 0}   # by trigger
         if self._param.params.autostart:
             self._quiet_failure = True
             configured = self.trigger_configure() == _SUCCESS
@@ -285,6 +288,9 @@ class ControllerNode(LifecycleNode):
         self._min_spacing = MIN_STEP_SPACING_PERIODS * self._period
         self._fallback_after = FALLBACK_AFTER_PERIODS * self._period
         self._last_step = -math.inf        # when the last control step started
+        self._last_timer = -math.inf       # when the timer last fired
+        self._timer_period = 1.0 / params.control_rate   # s, between timer ticks
+        self._late_reported = 0            # late inputs counted at the last /diagnostics
         self._last_state_step = -math.inf  # when the last step on an instrument state started
         if self.io is not None:
             self.io.forces_pending = False
@@ -406,11 +412,20 @@ class ControllerNode(LifecycleNode):
         Steps when no instrument state came for :data:`FALLBACK_AFTER_PERIODS` state
         periods (a lost state; when they stop, every half state period at most, so the
         watchdog acts on the stale inputs), never within :data:`MIN_STEP_SPACING_PERIODS`
-        state periods of the previous step.
+        state periods of the previous step. A tick more than :data:`STALL_PERIODS` timer
+        periods after the previous one (this process was not scheduled) does not step: the
+        states that came in meanwhile run first, so a stall of this process is not taken for a
+        lost input (the next tick steps if none came).
         """
         if self.controller is None:        # a queued event after cleanup or shutdown
             return
         started = time.perf_counter()
+        previous, self._last_timer = self._last_timer, started
+        if previous != -math.inf and started - previous > STALL_PERIODS * self._timer_period:
+            # this process did not run for a while: the inputs' age says nothing about them
+            # until the callbacks queued meanwhile have run (a scheduling stall, not a fault)
+            self.steps['deferred_after_stall'] += 1
+            return
         if (started - self._last_state_step >= self._fallback_after
                 and started - self._last_step >= self._min_spacing):
             self.steps['on_timer'] += 1
@@ -463,6 +478,7 @@ class ControllerNode(LifecycleNode):
     def diagnostic_status(self, out) -> DiagnosticStatus:
         """Build the controller's DiagnosticStatus for the last output ``out``."""
         params = self._param.params
+        late = sum(self.controller.late_counts.values())
         procedure = self.procedure
         if not self.active and procedure is None:   # deactivated: the ramp is over
             level, mode, reasons = DiagnosticStatus.OK, 'inactive', 'current 0 A, loop stopped'
@@ -471,8 +487,8 @@ class ControllerNode(LifecycleNode):
         else:
             if out is None or out.mode is Mode.SAFE:
                 level = DiagnosticStatus.ERROR
-            elif out.limits_hit or out.reasons or self._limits_seen:
-                level = DiagnosticStatus.WARN
+            elif out.limits_hit or out.reasons or self._limits_seen or late > self._late_reported:
+                level = DiagnosticStatus.WARN   # late inputs since the last report: a warning
             else:
                 level = DiagnosticStatus.OK
             mode = out.mode if out is not None else 'starting'
@@ -486,6 +502,8 @@ class ControllerNode(LifecycleNode):
             'stale' in r or 'input yet' in r for r in out.reasons)
         values['watchdog'] = 'tripped' if tripped else 'ok'
         values['watchdog_timeout_s'] = f'{params.watchdog_timeout:g}'
+        values.update((f'watchdog_timeout_{source}_s', f'{timeout:g}')
+                      for source, timeout in self.controller.timeouts.items())
         faults = [getattr(self.inputs, f'{s}_fault') for s in SOURCES]
         values['input_faults'] = '; '.join(f for f in faults if f) or 'none'
         values['new_rejections'] = '; '.join(self._new_rejections) or 'none'
@@ -499,6 +517,7 @@ class ControllerNode(LifecycleNode):
         values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an instrument state
         values['steps_on_timer'] = str(self.steps['on_timer'])   # fallback: no fresh state
         values.update(self.io.status())
+        values['steps_deferred_after_stall'] = str(self.steps['deferred_after_stall'])
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'
@@ -514,6 +533,7 @@ class ControllerNode(LifecycleNode):
         self._diag_pub.publish(array)
         self._limits_seen = set()
         self._new_rejections = []
+        self._late_reported = sum(self.controller.late_counts.values())
 
 
 def main(args=None) -> int:

@@ -12,7 +12,8 @@ The one owner of
 * the process (:class:`NodeProcess`): started with its output in a log file,
   paused, stopped with escalation (SIGINT, SIGTERM, SIGKILL) whatever happens;
   :class:`ProcessGroup` starts several and stops them together, in reverse order;
-* a free ROS domain on this machine (:func:`pick_domain_ids`).
+* a free ROS domain on this machine (:func:`pick_domain_ids`), held for a run
+  (:func:`reserve_domains`: no DDS port bound, and a lock file no other run holds).
 
 The demo, the benchmarks, the fault check, the soak and the tests start nodes
 through this module. Nodes inside this process (a test reaching into a node):
@@ -20,11 +21,13 @@ through this module. Nodes inside this process (a test reaching into a node):
 """
 from __future__ import annotations
 
+import fcntl
 import os
 import shlex
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -232,6 +235,20 @@ def node_command(name: str, params_file: str | os.PathLike | None = None,
 
 
 # ---------------------------------------------------------------- processes
+def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
+    """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
+
+    A parent started as a background job (``&``, nohup, a CI runner) has SIGINT ignored, and
+    its children would inherit that: they could not be stopped with SIGINT, the first step of
+    :meth:`NodeProcess.stop` (found by the suite run as a background job).
+    """
+    def setup() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        if preexec_fn is not None:
+            preexec_fn()
+    return setup
+
+
 class NodeProcess:
     """One node (or any command) in its own process, stopped for sure.
 
@@ -286,7 +303,7 @@ class NodeProcess:
             self.popen = subprocess.Popen(self.command, env=child_env,
                                           stdout=stdout, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, start_new_session=own_session,
-                                          preexec_fn=preexec_fn, **text)
+                                          preexec_fn=_child_setup(preexec_fn), **text)
         except OSError as exc:
             raise ProcessError(f'cannot start {name}: {exc}') from exc
         finally:
@@ -433,13 +450,57 @@ def domain_in_use(domain_id: int, ports: set[int] | None = None) -> bool:
     return any(low <= p < low + _DOMAIN_GAIN for p in ports)
 
 
+#: Domains the reservations of this process hold (see :func:`held_domains`).
+_HELD_HERE: set[int] = set()
+
+
+def held_domains() -> frozenset[int]:
+    """Domains this process holds through :func:`reserve_domains` (e.g. a test suite's own)."""
+    return frozenset(_HELD_HERE)
+
+
+def domain_lock_path(domain_id: int) -> Path:
+    """Lock file that marks ``domain_id`` as taken by a run on this machine."""
+    return Path(tempfile.gettempdir()) / f'grip_force_ros_domain_{int(domain_id)}.lock'
+
+
+def _try_lock(domain_id: int):
+    """Open file holding an exclusive ``flock`` on the domain's lock file, or None if taken."""
+    f = open(domain_lock_path(domain_id), 'a')  # noqa: SIM115 - held until the reservation ends
+    try:
+        fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        f.close()
+        return None
+    return f
+
+
+def domain_locked(domain_id: int) -> bool:
+    """Tell whether another run holds the lock of ``domain_id`` (see :func:`reserve_domains`)."""
+    f = _try_lock(domain_id)
+    if f is None:
+        return True
+    f.close()          # closing drops our flock again
+    return False
+
+
+def _candidates(start: int | None, candidates: Iterable[int] | None) -> list[int]:
+    if candidates is not None:
+        return list(candidates)
+    first = (os.getpid() % MAX_DOMAIN_ID) + 1 if start is None else start
+    return [((first - 1 + k) % MAX_DOMAIN_ID) + 1 for k in range(MAX_DOMAIN_ID)]
+
+
 def pick_domain_ids(count: int = 1, *, start: int | None = None,
                     candidates: Iterable[int] | None = None,
                     exclude: Iterable[int] = ()) -> list[int]:
     """``count`` ROS domain ids that no process on this machine is using.
 
-    The search starts at a pid-derived id (two runs started together rarely
-    pick the same one) and wraps around ``1..MAX_DOMAIN_ID``.
+    A domain is in use when a process has bound one of its DDS ports, or when a run
+    holds its lock (:func:`reserve_domains`). The search starts at a pid-derived id
+    (two runs started together rarely pick the same one) and wraps around
+    ``1..MAX_DOMAIN_ID``. The ids are not held: a caller that runs nodes for a while
+    should hold them with :func:`reserve_domains`.
 
     Raises
     ------
@@ -447,15 +508,101 @@ def pick_domain_ids(count: int = 1, *, start: int | None = None,
         If not enough free domains exist.
     """
     ports = _udp_ports_in_use()
-    if candidates is None:
-        first = (os.getpid() % MAX_DOMAIN_ID) + 1 if start is None else start
-        candidates = [((first - 1 + k) % MAX_DOMAIN_ID) + 1 for k in range(MAX_DOMAIN_ID)]
     excluded = set(exclude)
     chosen: list[int] = []
-    for d in candidates:
-        if d in excluded or d in chosen or domain_in_use(d, ports):
+    for d in _candidates(start, candidates):
+        if d in excluded or d in chosen or domain_in_use(d, ports) or domain_locked(d):
             continue
         chosen.append(d)
         if len(chosen) == count:
             return chosen
+    raise ProcessError(f'no {count} free ROS domain id(s) found')
+
+
+class DomainReservation:
+    """ROS domain ids held by this process: a ``flock`` on each one's lock file.
+
+    Made by :func:`reserve_domains`. Other runs on the machine (test suites, demos,
+    benchmarks, each through this module) skip a held domain, so two of them never
+    share one; the lock goes with the process (``release``, the end of a ``with``
+    block, or the process's exit, whatever way it ends).
+
+    Attributes
+    ----------
+    ids : list of int
+        The domains held, in the order asked.
+    """
+
+    def __init__(self, ids: Sequence[int], files: Sequence):
+        self.ids = list(ids)
+        self._files = list(files)
+        _HELD_HERE.update(self.ids)
+
+    @property
+    def domain_id(self) -> int:
+        """The first (often the only) domain held."""
+        return self.ids[0]
+
+    def release(self) -> None:
+        """Drop the locks (idempotent)."""
+        for f in self._files:
+            try:
+                fcntl.flock(f, fcntl.LOCK_UN)
+            finally:
+                f.close()
+        if self._files:
+            _HELD_HERE.difference_update(self.ids)
+        self._files = []
+
+    def __enter__(self) -> 'DomainReservation':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+def reserve_domains(count: int = 1, *, start: int | None = None,
+                    candidates: Iterable[int] | None = None,
+                    exclude: Iterable[int] = (), retries: int = 3) -> DomainReservation:
+    """Find ``count`` free ROS domains and hold them (the one robust way to get a domain).
+
+    Free: no process has bound one of the domain's DDS ports (a port scan, as
+    :func:`pick_domain_ids`) and no other run holds its lock file. The lock is taken
+    with ``flock(LOCK_EX | LOCK_NB)``, so two runs that scan at the same moment cannot
+    both win the same domain; a domain lost that way is skipped and the scan goes on.
+
+    Parameters
+    ----------
+    count : int
+        Number of domains.
+    start, candidates, exclude
+        As :func:`pick_domain_ids`.
+    retries : int
+        Scans before giving up (a scan can lose every candidate to concurrent runs).
+
+    Returns
+    -------
+    DomainReservation
+
+    Raises
+    ------
+    ProcessError
+        If not enough free domains exist.
+    """
+    excluded = set(exclude)
+    held_ids: list[int] = []
+    files: list = []
+    for _ in range(max(1, retries)):
+        ports = _udp_ports_in_use()
+        for d in _candidates(start, candidates):
+            if d in excluded or d in held_ids or domain_in_use(d, ports):
+                continue
+            f = _try_lock(d)
+            if f is None:
+                continue
+            held_ids.append(d)
+            files.append(f)
+            if len(held_ids) == count:
+                return DomainReservation(held_ids, files)
+    DomainReservation(held_ids, files).release()
     raise ProcessError(f'no {count} free ROS domain id(s) found')

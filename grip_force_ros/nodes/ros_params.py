@@ -11,8 +11,11 @@ What rclpy does not check is checked here, in the schema's own words:
 * at start-up, every value of the parameter file (``--params-file``) is
   validated against the whole schema before anything is declared: unknown keys
   (typos), wrong types, out-of-range values, elements of double arrays, string
-  choices, and the schema's cross-parameter rules (``params.check_consistency``). A bad
-  file raises :class:`~grip_force_ros.params.ParameterError` naming the key,
+  choices, and the schema's cross-parameter rules (``params.check_consistency``); an
+  instrument file (it names ``instrument_name``) must also describe an instrument that
+  could be built (``model.physical.check_physical``: cable stress at ``max_current``
+  below ``cable_yield_strength``, chain efficiency in (0, 1], a jaw torque that closes).
+  A bad file raises :class:`~grip_force_ros.params.ParameterError` naming the key,
   the value and the range; the node's ``main`` turns that into a non-zero exit.
 * at runtime, ``add_on_set_parameters_callback`` validates the candidate set
   (no side effects there); ``add_post_set_parameters_callback`` rebuilds the
@@ -29,6 +32,8 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from grip_force_ros.model.contact import ModelError
+from grip_force_ros.model.physical import check_physical
 from grip_force_ros.params import SCHEMA, SPECS, ParameterError, ParamSet, ParamSpec, make_params
 from grip_force_ros.params.interface import with_profile_defaults
 
@@ -152,6 +157,11 @@ class NodeParameters:
         # invalid instrument file even where the bad key belongs to another node.
         schema_values = {n: v for n, v in overrides.items() if n in SPECS}
         checked = dict(make_params(schema_values))
+        if 'instrument_name' in overrides:   # an instrument file: could it be built at all?
+            try:
+                check_physical(checked)
+            except ModelError as exc:
+                raise ParameterError(str(exc)) from None
         for name in self._extra_names:
             spec = self._specs[name]
             checked[name] = spec.check(overrides.get(name, spec.default))

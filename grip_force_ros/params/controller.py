@@ -17,6 +17,10 @@ STATE_RATE_MIN = 100.0
 STATE_RATE_MAX = 1500.0
 #: The watchdog timeout must cover this many state periods (a state may come late by one).
 WATCHDOG_STATE_PERIODS = 2.0
+#: The watchdog timeouts of the inputs the loop closes on (instrument joints, actuator, load
+#: cell) and of the set point (master); control/inputs.py maps each input source to its own.
+FEEDBACK_TIMEOUTS = ('watchdog_timeout', 'actuator_watchdog_timeout', 'force_watchdog_timeout')
+MASTER_TIMEOUT = 'master_watchdog_timeout'
 
 CONTROLLER = [
     # --- loop timing and watchdog -------------------------------------------------------
@@ -32,10 +36,30 @@ CONTROLLER = [
        f'{STATE_RATE_MIN:g} to {STATE_RATE_MAX:g} Hz (docs/control.md), and the node refuses '
        'to start outside that range. A step interval longer than watchdog_timeout is a fault.',
        min=STATE_RATE_MIN, max=STATE_RATE_MAX, read_only=True, group=_G),
+    # One watchdog per input (docs/control.md, "Late and lost inputs"): an input older than its
+    # timeout (by receive time) is lost and puts the output in the safe state (the current
+    # ramps to 0 at the slew limit); younger, control goes on with its last value, and an
+    # input older than three of its own sample intervals is counted late (/diagnostics).
+    # The feedback watchdogs must cover two state periods (expected_state_rate).
     _P('watchdog_timeout', 'double', 0.03, 's',
-       'An input older than this (by its receive time) is stale and puts the output in the safe '
-       'state (current ramps to 0 at the slew limit). 30 ms as the dVRK uses. Must cover two '
-       'state periods (expected_state_rate).',
+       'Watchdog of the instrument joint states (instrument/measured_js): older than this by '
+       'its receive time, the input is lost and the output goes to the safe state. 30 ms, the '
+       "dVRK's watchdog on its drive link. Must cover two state periods (expected_state_rate).",
+       min=0.002, max=1.0, group=_G),
+    _P('actuator_watchdog_timeout', 'double', 0.03, 's',
+       'Watchdog of the actuator state (instrument/actuator/measured_js: measured current, drum '
+       "angle), the loop's feedback on the drive link. 30 ms, as the dVRK's drive link.",
+       min=0.002, max=1.0, group=_G),
+    _P('force_watchdog_timeout', 'double', 0.03, 's',
+       'Watchdog of the load cell (grip/measured_force) when force_sensor_enabled: the force '
+       'loop closes on it, so a stale force is a stale feedback, as the drive link: 30 ms.',
+       min=0.002, max=1.0, group=_G),
+    _P('master_watchdog_timeout', 'double', 0.1, 's',
+       "Watchdog of the master console stream (master/gripper/measured_js), the set point. Up to "
+       'this age the hold goes on with the last master angle (a console at 100 Hz-1 kHz with '
+       "jitter, or a stalled process, is late, not lost); 0.1 s is below a surgeon's visual "
+       'reaction time (~0.2 s), and the grip force stays closed-loop on fresh instrument data '
+       'meanwhile. Never below the feedback watchdogs.',
        min=0.002, max=1.0, group=_G),
     _P('stamp_future_tolerance', 'double', 0.1, 's',
        'A message stamped more than this ahead of the controller clock is rejected as invalid.',
@@ -150,14 +174,25 @@ def check_controller(values) -> None:
     lo, hi = values['master_angle_min'], values['master_angle_max']
     if lo >= hi:
         raise ParameterError(f"'master_angle_min' {lo} rad must be below 'master_angle_max' {hi} rad")
-    periods = values['watchdog_timeout'] * values['control_rate']
-    if periods < 2.0:
-        raise ParameterError(
-            f"'watchdog_timeout' {values['watchdog_timeout']} s is less than two control periods "
-            f"at 'control_rate' {values['control_rate']} Hz: every input would be stale")
+    for name in (MASTER_TIMEOUT,) + FEEDBACK_TIMEOUTS:
+        periods = values[name] * values['control_rate']
+        if periods < 2.0:
+            raise ParameterError(
+                f"'{name}' {values[name]} s is less than two control periods at 'control_rate' "
+                f"{values['control_rate']} Hz: every input would be stale")
     rate = values['expected_state_rate']
-    if values['watchdog_timeout'] * rate < WATCHDOG_STATE_PERIODS:
-        raise ParameterError(
-            f"'watchdog_timeout' {values['watchdog_timeout']} s is less than "
-            f"{WATCHDOG_STATE_PERIODS:g} state periods at 'expected_state_rate' {rate:g} Hz "
-            f'({WATCHDOG_STATE_PERIODS / rate * 1e3:g} ms): every state would arrive stale')
+    for name in FEEDBACK_TIMEOUTS:
+        if values[name] * rate < WATCHDOG_STATE_PERIODS:
+            raise ParameterError(
+                f"'{name}' {values[name]} s is less than {WATCHDOG_STATE_PERIODS:g} state periods "
+                f"at 'expected_state_rate' {rate:g} Hz ({WATCHDOG_STATE_PERIODS / rate * 1e3:g} ms): "
+                'every state would arrive stale')
+    # A lost feedback leaves the force loop acting on an old measurement (the integrator winds
+    # on an old error); a lost set point only holds the grasp. The first must never be
+    # tolerated longer than the second.
+    for name in FEEDBACK_TIMEOUTS:
+        if values[name] > values[MASTER_TIMEOUT]:
+            raise ParameterError(
+                f"'{name}' {values[name]} s is longer than '{MASTER_TIMEOUT}' "
+                f'{values[MASTER_TIMEOUT]} s: a stale feedback would be tolerated longer than a '
+                'stale set point')

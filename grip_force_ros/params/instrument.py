@@ -59,6 +59,15 @@ INSTRUMENT = [
        'Cable radius r. NOT in the paper: assumed 0.2 mm (a 0.4 mm steel cable, usual in 8 mm '
        'instruments). Sets the friction exponents via rho = (R - r)/r and the section A = pi r^2.',
        min=1e-5, max=0.005, read_only=True),
+    _P('cable_yield_strength', 'double', 1.08e9, 'Pa',
+       'Largest tension per nominal cable section (tension / (pi r^2)) the cable takes; the '
+       'drum tension at max_current must stay below it (grip-force params --check and node '
+       'start refuse the instrument otherwise). Default: stainless steel (CRES) 7x19 wire rope, '
+       'MIL-W-83420 Comp B, 1/16 in: 480 lbf minimum breaking strength (FAA AC 43.13-1B, '
+       'Table 7-3) = 2135 N on pi (0.794 mm)^2 = 1.08 GPa (3/32 in: 0.92, 1/8 in: 0.99 GPa). '
+       'Rope tables give breaking, not yield, strength; a rope yields below it, so an '
+       'instrument above this value cannot be built, one below it may still need a margin.',
+       min=1e7, max=1e10, read_only=True),
     _P('pulley_friction_coefficient', 'double', 0.15, '',
        'Cable-pulley friction coefficient mu (Table 1: 0.15).', min=0.0, max=1.0, read_only=True),
     _P('tension_friction_gain', 'double', 0.0, '1/N',

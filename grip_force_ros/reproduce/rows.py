@@ -3,7 +3,10 @@
 Every model number is computed here by running the model code on the instrument's
 parameters; nothing is fitted to the paper. A row is ``reproduced`` when
 ``|model - paper| / |paper| <= 5%`` and ``inconsistent`` otherwise; its note shows the
-computation that decides it.
+computation that decides it. A row that only feeds one of the paper's own inputs back
+(a ratio of two Table 1 numbers, a formula evaluated with the paper's own lambda_3) is
+``consistency`` instead of ``reproduced``: it checks that we read the paper the way it
+computed, it predicts nothing. So "reproduced" means predicted.
 """
 from __future__ import annotations
 
@@ -16,11 +19,15 @@ from grip_force_ros.model import GripForceModel
 from grip_force_ros.model import transmission as tx
 from grip_force_ros.model.contact import PULL_OUT_PER_MU
 
-__all__ = ['Row', 'TOLERANCE', 'PAPER', 'compute_rows', 'resistance_readings',
+__all__ = ['Row', 'TOLERANCE', 'PAPER', 'STATUSES', 'compute_rows', 'resistance_readings',
            'cable_radius_for_efficiency', 'status_of']
 
 #: |rel_err| up to which a paper number counts as reproduced.
 TOLERANCE = 0.05
+
+#: Row statuses: predicted within TOLERANCE, an input of the paper fed back and matching
+#: within TOLERANCE (not a prediction), or off by more than TOLERANCE.
+STATUSES = ('reproduced', 'consistency', 'inconsistent')
 
 #: The paper's reported numbers (SI).
 PAPER = {
@@ -53,14 +60,24 @@ class Row:
         return asdict(self)
 
 
-def status_of(rel_err: float) -> str:
-    """'reproduced' if ``|rel_err| <= TOLERANCE`` else 'inconsistent'."""
-    return 'reproduced' if abs(rel_err) <= TOLERANCE else 'inconsistent'
+def status_of(rel_err: float, fed_back: bool = False) -> str:
+    """Status of a row (:data:`STATUSES`) from its relative error.
+
+    'reproduced' (or 'consistency' when ``fed_back``: the model number only returns an
+    input of the paper) if ``|rel_err| <= TOLERANCE``, else 'inconsistent'.
+    """
+    if abs(rel_err) > TOLERANCE:
+        return 'inconsistent'
+    return 'consistency' if fed_back else 'reproduced'
 
 
-def _row(quantity: str, paper: float, model: float, note: str) -> Row:
+def _row(quantity: str, paper: float, model: float, note: str, fed_back: str | None = None) -> Row:
+    """One row; ``fed_back`` names the paper input the model number only returns (its note says so)."""
     rel = (model - paper) / abs(paper)
-    return Row(quantity, float(paper), float(model), float(rel), status_of(rel), note)
+    if fed_back:
+        note = (f'Consistency check, not a prediction: the model number returns {fed_back}, an input '
+                f'taken from the paper. {note}')
+    return Row(quantity, float(paper), float(model), float(rel), status_of(rel, bool(fed_back)), note)
 
 
 def cable_radius_for_efficiency(params, target: float) -> float:
@@ -133,7 +150,8 @@ def compute_rows(params) -> list[Row]:
                      PAPER['torque_slope'], readings_paper[2][2],
                      f'{p.drive_pulley_radius:g} * {per_amp:.1f} * (0.765 - 0.5) = '
                      f'{readings_paper[2][2]:.4f}: '
-                     "the only reading of M' under which the paper's lambda_3 and slope agree."))
+                     "the only reading of M' under which the paper's lambda_3 and slope agree.",
+                     fed_back="the paper's own lambda_3 = 0.765 (our model computes 0.647)"))
     rows.append(_row("torque slope, paper's lambda_3 = 0.765, M' as printed [N*m/A]",
                      PAPER['torque_slope'], readings_paper[0][2],
                      f"M' static part r_n M0/r0 = r_n F0: {p.drive_pulley_radius:g} * {per_amp:.1f} * "
@@ -155,9 +173,11 @@ def compute_rows(params) -> list[Row]:
     wrist_c = theta4(0.0, 1.0, 0.0) - theta4(0.0, 0.0, 0.0)
     current_c = theta4(0.0, 0.0, 1.0) - theta4(0.0, 0.0, 0.0)
     rows.append(_row('finger angle: drum coefficient [rad/rad]', PAPER['drum_coefficient'], drum_c,
-                     f'r0/r_n = {p.drum_radius * 1e3:g}/{p.drive_pulley_radius * 1e3:g} = {drum_c:.4f}'))
+                     f'r0/r_n = {p.drum_radius * 1e3:g}/{p.drive_pulley_radius * 1e3:g} = {drum_c:.4f}',
+                     fed_back='the ratio of two Table 1 radii'))
     rows.append(_row('finger angle: wrist coefficient [rad/rad]', PAPER['wrist_coefficient'], wrist_c,
-                     f'-coupling = -{p.wrist_finger_coupling:g} (paper: 3/5)'))
+                     f'-coupling = -{p.wrist_finger_coupling:g} (paper: 3/5)',
+                     fed_back="the paper's coupling 3/5 (wrist_finger_coupling in the YAML)"))
     finger, wrist = model.creep_angles(1.0)
     ea = model.stiffness
     needed_ea = ea * current_c / PAPER['current_coefficient']

@@ -1,0 +1,183 @@
+"""Run the ROS test files K times under a CPU load and tabulate what failed.
+
+``grip-force loadcheck --runs 20`` (``./dev loadcheck --runs 20``): each run is a fresh
+``python -m pytest -m ros test/`` (every test marked ``ros``: real nodes over DDS) in
+its own process, its own ROS domain (test/conftest.py), while a
+:class:`~grip_force_ros.bench.load.LoadGenerator` keeps every core busy (one busy
+process per core by default, started before and stopped after each run). The junit XML
+of each run says which tests failed, erred or skipped and why; the report groups them by
+test over the runs. A test that fails in some runs only is a race: its message and the
+runs it failed in are what to start from.
+
+No rclpy here: the tests run in child processes.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from collections import defaultdict
+from pathlib import Path
+
+from grip_force_ros.bench.load import LoadGenerator
+
+#: pytest selection of the ROS tests (the marker of every test that starts real nodes).
+ROS_MARKER = 'ros'
+#: Longest one run may take before it counts as hung (s).
+RUN_TIMEOUT = 1800.0
+
+
+def test_dir() -> Path:
+    """The suite's folder of a source checkout (the tests are not installed).
+
+    Raises
+    ------
+    FileNotFoundError
+        When this package is not run from a source checkout.
+    """
+    path = Path(__file__).resolve().parents[2] / 'test'
+    if not (path / 'conftest.py').is_file():
+        raise FileNotFoundError(f'no test suite at {path} (loadcheck needs a source checkout)')
+    return path
+
+
+def parse_junit(path: Path) -> dict:
+    """Read the tests, failures (with errors) and skips of one junit XML file.
+
+    Returns
+    -------
+    dict
+        ``tests`` (int), ``failed`` and ``skipped``: lists of {'test', 'message'}
+        (``test`` = ``file::name`` as pytest prints it, ``message`` the first line).
+    """
+    root = ET.parse(path).getroot()
+    out = {'tests': 0, 'failed': [], 'skipped': []}
+    for case in root.iter('testcase'):
+        out['tests'] += 1
+        name = case.get('classname', '').replace('.', '/') + '.py::' + case.get('name', '')
+        for tag, key in (('failure', 'failed'), ('error', 'failed'), ('skipped', 'skipped')):
+            node = case.find(tag)
+            if node is not None:
+                text = (node.get('message') or node.text or '').strip()
+                out[key].append({'test': name, 'kind': tag,
+                                 'message': text.splitlines()[0][:300] if text else ''})
+                break
+    return out
+
+
+def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float = 1.0,
+             select: str = ROS_MARKER, files: list[str] | None = None,
+             pytest_args: list[str] | None = None, timeout: float = RUN_TIMEOUT) -> dict:
+    """One pytest run of the selected tests under load; its outcome as a dict.
+
+    Parameters
+    ----------
+    index : int
+        Run number (names the junit and log files).
+    out_dir : Path
+        Where ``run<index>.xml`` and ``run<index>.log`` go.
+    workers, duty
+        Of the :class:`LoadGenerator` (default: one busy process per core, full duty);
+        ``workers=0`` runs without load (a quiet reference).
+    select : str
+        pytest ``-m`` expression.
+    files : list of str, optional
+        Test files or node ids (default: the whole test folder).
+    pytest_args : list of str, optional
+        Further pytest arguments.
+    timeout : float
+        Longest run (s); a run that takes longer is killed and counted as failed.
+    """
+    tests = test_dir()
+    junit = out_dir / f'run{index}.xml'
+    log = out_dir / f'run{index}.log'
+    cmd = [sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider', '-m', select,
+           f'--junitxml={junit}', *(files or [str(tests)]), *(pytest_args or [])]
+    env = dict(os.environ)
+    env.pop('ROS_DOMAIN_ID', None)     # each run reserves its own (test/conftest.py)
+    load = LoadGenerator(workers, seconds=timeout + 60.0, duty=duty) if workers != 0 else None
+    start = time.monotonic()
+    if load is not None:
+        load.start()
+    loads = []
+    try:
+        with open(log, 'w') as out:
+            # SIGINT at its default, as in a terminal: a runner started in the background
+            # (`&`, nohup) would hand the suite SIGINT ignored
+            proc = subprocess.Popen(cmd, cwd=tests.parent, env=env, stdout=out,
+                                    stderr=subprocess.STDOUT, start_new_session=True,
+                                    preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+            while proc.poll() is None and time.monotonic() - start < timeout:
+                loads.append(os.getloadavg()[0])
+                time.sleep(2.0)
+            if proc.poll() is None:
+                os.killpg(proc.pid, 9)
+            code = proc.wait()
+    finally:
+        load_summary = load.stop() if load is not None else {'workers': 0}
+    seconds = time.monotonic() - start
+    result = {'run': index, 'exit_code': code, 'seconds': round(seconds, 1),
+              'timed_out': seconds >= timeout, 'load': load_summary,
+              'load_average_mean': round(sum(loads) / len(loads), 2) if loads else None,
+              'load_average_max': round(max(loads), 2) if loads else None,
+              'junit': str(junit), 'log': str(log)}
+    if junit.is_file():
+        result.update(parse_junit(junit))
+    else:
+        result.update(tests=0, failed=[{'test': '(session)', 'kind': 'error',
+                                        'message': f'no junit report; exit code {code}'}],
+                      skipped=[])
+    return result
+
+
+def tabulate(runs: list[dict]) -> dict:
+    """Group the failures of ``runs`` by test: in how many runs, which, the first message."""
+    by_test: dict = defaultdict(lambda: {'runs': [], 'messages': []})
+    for r in runs:
+        for f in r['failed']:
+            entry = by_test[f['test']]
+            entry['runs'].append(r['run'])
+            entry['messages'].append(f['message'])
+    table = {test: {'failed_runs': len(e['runs']), 'runs': e['runs'], 'first_message': e['messages'][0]}
+             for test, e in sorted(by_test.items(), key=lambda kv: -len(kv[1]['runs']))}
+    skipped: dict = defaultdict(int)
+    for r in runs:
+        for s in r['skipped']:
+            skipped[f"{s['test']}: {s['message']}"] += 1
+    return {'runs': len(runs), 'failed_runs': sum(1 for r in runs if r['failed'] or r['exit_code']),
+            'failures_by_test': table, 'skips': dict(skipped),
+            'seconds': [r['seconds'] for r in runs],
+            'load_average_mean': [r['load_average_mean'] for r in runs],
+            'tests_per_run': [r['tests'] for r in runs]}
+
+
+def loadcheck(runs: int, out_dir: Path, progress=None, **run_options) -> dict:
+    """Run :func:`run_once` ``runs`` times; the table of :func:`tabulate` plus every run."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    results = []
+    for k in range(1, runs + 1):
+        r = run_once(k, out_dir, **run_options)
+        results.append(r)
+        if progress is not None:
+            progress(r)
+    report = tabulate(results)
+    report['details'] = results
+    report['out_dir'] = str(out_dir)
+    return report
+
+
+def render(report: dict) -> str:
+    """Return the text table of a :func:`loadcheck` report."""
+    lines = [f"{report['runs']} run(s), {report['failed_runs']} with a failure; "
+             f"load average per run {report['load_average_mean']}; "
+             f"seconds {report['seconds']}; tests per run {report['tests_per_run']}"]
+    for test, e in report['failures_by_test'].items():
+        lines.append(f"  {e['failed_runs']}/{report['runs']}  {test}  (runs {e['runs']}): "
+                     f"{e['first_message']}")
+    for text, n in report['skips'].items():
+        lines.append(f'  skipped {n}x  {text}')
+    lines.append(f"logs and junit files: {report['out_dir']}")
+    return '\n'.join(lines)

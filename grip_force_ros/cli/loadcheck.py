@@ -1,0 +1,46 @@
+"""`grip-force loadcheck`: the ROS test files K times under a CPU load, failures tabulated."""
+from __future__ import annotations
+
+HELP = 'run the ROS tests K times under a bounded CPU load and tabulate the failures'
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument('--runs', type=int, default=3, help='pytest runs (default 3; the bar is 20)')
+    parser.add_argument('--workers', type=int, default=None,
+                        help='busy processes during each run (default: one per core; 0 = no load)')
+    parser.add_argument('--duty', type=float, default=1.0, help='busy share of each worker (default 1)')
+    parser.add_argument('--select', default='ros',
+                        help="pytest -m expression of the tests (default 'ros': every test with real nodes)")
+    parser.add_argument('--files', nargs='*', metavar='FILE',
+                        help='test files or node ids (default: the whole test folder)')
+    parser.add_argument('--out', default=None,
+                        help='folder of the junit files and logs (default out/loadcheck/<time>)')
+    parser.add_argument('--timeout', type=float, default=1800.0, help='longest run (s, default 1800)')
+    parser.add_argument('--json', action='store_true', help='print the report as JSON')
+
+
+def run(args) -> int:
+    import json
+    import sys
+    import time
+    from pathlib import Path
+
+    from grip_force_ros.bench.loadcheck import loadcheck, render
+
+    if args.runs < 1:
+        print('error: --runs must be >= 1', file=sys.stderr)
+        return 2
+    out = Path(args.out or f"out/loadcheck/{time.strftime('%Y%m%d-%H%M%S')}")
+
+    def progress(r):
+        failed = ', '.join(f['test'] for f in r['failed']) or 'none'
+        print(f"run {r['run']}: {r['tests']} tests, {r['seconds']:.0f} s, load average "
+              f"{r['load_average_mean']}, failed: {failed}", file=sys.stderr, flush=True)
+
+    report = loadcheck(args.runs, out, progress=progress, workers=args.workers, duty=args.duty,
+                       select=args.select, files=args.files, timeout=args.timeout)
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(render(report))
+    return 0 if report['failed_runs'] == 0 else 1

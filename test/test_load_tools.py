@@ -1,0 +1,131 @@
+"""The suite's own tooling for loaded runs: domain reservation, the load generator, loadcheck.
+
+No rclpy: the domain locks, the busy processes and the junit tables are plain processes
+and files.
+"""
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import psutil
+import pytest
+
+from grip_force_ros.bench.load import LoadError, LoadGenerator
+from grip_force_ros.bench.loadcheck import parse_junit, tabulate
+from grip_force_ros.nodes.processes import (ProcessError, domain_locked, held_domains,
+                                            pick_domain_ids, reserve_domains)
+
+
+# ---------------------------------------------------------------- domains
+def test_the_suite_holds_its_own_domain():
+    own = int(os.environ['ROS_DOMAIN_ID'])
+    assert own in held_domains()              # test/conftest.py reserved it
+    assert domain_locked(own)                 # seen as taken by any other run
+    assert own not in pick_domain_ids(3, start=own)
+
+
+def test_two_reservations_never_share_a_domain():
+    with reserve_domains(2) as a, reserve_domains(2) as b:
+        assert len(set(a.ids) | set(b.ids)) == 4
+        assert all(domain_locked(d) for d in a.ids + b.ids)
+    assert not any(d in held_domains() for d in a.ids + b.ids)
+    assert not any(domain_locked(d) for d in a.ids + b.ids)
+
+
+def test_another_process_cannot_take_a_held_domain():
+    with reserve_domains(1) as mine:
+        code = textwrap.dedent(f"""
+            from grip_force_ros.nodes.processes import ProcessError, reserve_domains
+            try:
+                reserve_domains(1, candidates=[{mine.domain_id}])
+            except ProcessError:
+                print('refused')
+            else:
+                print('taken')
+        """)
+        out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                             timeout=60)
+        assert out.stdout.strip() == 'refused', out.stderr
+    with pytest.raises(ProcessError):
+        reserve_domains(1, candidates=[])
+
+
+# ---------------------------------------------------------------- load generator
+def test_load_generator_refuses_values_beyond_its_bounds():
+    for kwargs in ({'workers': 0}, {'workers': 10_000}, {'seconds': 0.0}, {'seconds': 1e9},
+                   {'duty': 0.0}, {'duty': 1.5}):
+        with pytest.raises(LoadError):
+            LoadGenerator(**{'workers': 1, **kwargs})
+
+
+def test_load_workers_stop_at_their_deadline():
+    load = LoadGenerator(1, seconds=0.5).start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while load.running() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert load.running() == 0, 'a worker outlived its deadline'
+    finally:
+        summary = load.stop()
+    assert summary['workers'] == 1 and summary['worker_cpu_s'] > 0
+
+
+def test_load_workers_never_outlive_their_parent():
+    """The parent is SIGKILLed (no clean-up runs): its workers end too."""
+    code = textwrap.dedent("""
+        import os, sys, time
+        from grip_force_ros.bench.load import LoadGenerator
+        load = LoadGenerator(2, seconds=120).start()
+        print(' '.join(str(p.pid) for p in load.procs), flush=True)
+        time.sleep(120)
+    """)
+    parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
+    pids = [int(p) for p in parent.stdout.readline().split()]
+    assert len(pids) == 2
+    workers = [psutil.Process(p) for p in pids]
+    time.sleep(0.5)
+    assert all(w.is_running() for w in workers)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    gone, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive, [p.pid for p in alive]
+
+
+# ---------------------------------------------------------------- loadcheck tables
+JUNIT = """<?xml version="1.0" encoding="utf-8"?>
+<testsuites><testsuite name="pytest" tests="3">
+<testcase classname="test.test_ros_nodes" name="test_a" time="1.0"/>
+<testcase classname="test.test_ros_nodes" name="test_b" time="1.0">
+  <failure message="AssertionError: no instrument state from the sim process">trace</failure></testcase>
+<testcase classname="test.test_demo_e2e" name="test_c" time="1.0">
+  <skipped message="not built">skip</skipped></testcase>
+</testsuite></testsuites>
+"""
+
+
+def test_loadcheck_groups_failures_by_test(tmp_path):
+    path = tmp_path / 'run1.xml'
+    path.write_text(JUNIT)
+    parsed = parse_junit(path)
+    assert parsed['tests'] == 3
+    assert parsed['failed'] == [{'test': 'test/test_ros_nodes.py::test_b', 'kind': 'failure',
+                                 'message': 'AssertionError: no instrument state from the sim process'}]
+    runs = [dict(parsed, run=1, exit_code=1, seconds=10.0, load_average_mean=4.0),
+            dict(parse_junit(path), run=2, exit_code=1, seconds=11.0, load_average_mean=4.2),
+            {'run': 3, 'exit_code': 0, 'seconds': 9.0, 'load_average_mean': 3.9, 'tests': 3,
+             'failed': [], 'skipped': []}]
+    table = tabulate(runs)
+    assert table['runs'] == 3 and table['failed_runs'] == 2
+    entry = table['failures_by_test']['test/test_ros_nodes.py::test_b']
+    assert entry['failed_runs'] == 2 and entry['runs'] == [1, 2]
+    assert table['skips'] == {'test/test_demo_e2e.py::test_c: not built': 2}
+
+
+def test_load_command_refuses_values_beyond_its_bounds(capsys):
+    from grip_force_ros.cli import main
+    assert main(['load', '--seconds', '0']) == 2
+    assert 'seconds' in capsys.readouterr().err
+    assert main(['loadcheck', '--runs', '0']) == 2
