@@ -177,13 +177,20 @@ def wait_gripping(probe, timeout=60.0):
 
 
 def slew_violations(commands):
-    """Every pair of commands against the slew limit (the fault probe's judge)."""
+    """Every pair of commands against the slew limit (the fault probe's judge), each with the
+    commands around it ((receipt s, stamp s, A), times from the first of them)."""
     period = 1.0 / PARAMS.expected_state_rate
     monitor = LimitMonitor(PARAMS.max_current, PARAMS.max_current_slew * period, period,
                            PARAMS.watchdog_timeout)
-    for receipt, stamp, value in commands:
+    found = []
+    for k, (receipt, stamp, value) in enumerate(commands):
         monitor.check(value, receipt, stamp)
-    return monitor.violations
+        if len(monitor.violations) > len(found):
+            around = commands[max(k - 3, 0):k + 2]
+            t0 = around[0][0]
+            found.append((monitor.violations[-1],
+                          [(round(r - t0, 4), round(s - t0, 4), round(a, 4)) for r, s, a in around]))
+    return found
 
 
 def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
@@ -238,6 +245,17 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
     assert abs(first) <= PARAMS.max_current_slew / PARAMS.expected_state_rate + 1e-12, first
     assert slew_violations(probe.commands) == [], slew_violations(probe.commands)[:5]
     assert ctl.poll() is None, rig.log('controller')
+
+    # cleanup releases the topics: back to unconfigured, no publisher on the drive's topic
+    for transition in ('deactivate', 'cleanup'):
+        got = lifecycle(env, 'set', '/controller', transition)
+        assert 'Transitioning successful' in got.stdout, (got, rig.log('controller'))
+    assert lifecycle(env, 'get', '/controller').stdout.split() == ['unconfigured', '[1]']
+    servo = f'/{topics.SERVO_CURRENT}'
+    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+                 lambda r: 'Publisher count: 0' in r.stdout, timeout=30)
+    assert 'Publisher count: 0' in info.stdout, info
+    assert ctl.poll() is None and 'Traceback' not in rig.log('controller'), rig.log('controller')
 
 
 def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
