@@ -38,14 +38,23 @@ def test_schema_declares_each_simulated_effect_from_the_registry():
 
 def test_sim_diagnosis_and_blind_check_read_the_registry():
     from grip_force_ros.diagnosis import effects as diagnosis_effects
-    from grip_force_ros.diagnosis.blind import BLIND_EFFECTS, cases
+    from grip_force_ros.diagnosis.blind import BLIND_EFFECTS, STRENGTH_SPREAD, cases
     from grip_force_ros.sim import EFFECT_NAMES as SIM_NAMES
     assert SIM_NAMES == effects.SIMULATED
     assert diagnosis_effects.EFFECT_NAMES == effects.DIAGNOSED
     assert set(diagnosis_effects.EFFECTS) == set(effects.DIAGNOSED)
-    strengths = {(name, s) for name in BLIND_EFFECTS for s in effects.REGISTRY[name].strengths}
-    singles = {c.effects[0] for c in cases() if len(c.effects) == 1}
-    assert singles == strengths
+    # the blind set draws each single effect around one registry level (STRENGTH_SPREAD, so
+    # that no strength sits on the diagnosis' grid), in level order, clipped to the range
+    singles = [c.effects[0] for c in cases() if len(c.effects) == 1]
+    assert {name for name, _ in singles} == set(BLIND_EFFECTS)
+    low, high = STRENGTH_SPREAD
+    for name in BLIND_EFFECTS:
+        spec = effects.REGISTRY[name]
+        drawn = [s for n, s in singles if n == name]
+        assert len(drawn) == len(spec.strengths)
+        for level, s in zip(spec.strengths, drawn):
+            assert spec.min <= s <= spec.max
+            assert s in (spec.min, spec.max) or low <= s / level <= high, (name, level, s)
 
 
 def test_strengths_at_a_level():

@@ -184,12 +184,12 @@ def test_faultcheck_cli_json():
 def test_a_defect_cannot_be_injected_outside_the_negative_control():
     """The test-only switch: no broken build outside the fault check's own session."""
     from grip_force_ros.faults.defects import DEFECTS, break_controller, negative_control_session
-    from grip_force_ros.nodes.controller import read_joints
+    from grip_force_ros.nodes.controller_io import read_joints
     with pytest.raises(RuntimeError, match='negative control'):
         break_controller(object(), 'watchdog_off')
     with negative_control_session(), pytest.raises(ValueError, match='unknown defect'):
         break_controller(object(), 'brakes_off')
     for defect in DEFECTS.values():           # each names cases of the catalogue
         assert defect.cases and set(defect.cases) <= {c.name for c in catalogue()}
-    from grip_force_ros.nodes import controller as node_module
+    from grip_force_ros.nodes import controller_io as node_module
     assert node_module.read_joints is read_joints     # nothing left patched

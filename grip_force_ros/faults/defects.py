@@ -106,7 +106,7 @@ def _broken_controller_class(defect: str) -> type:
     return Broken
 
 
-def _lenient_read_joints(msg, joints, fields):
+def _lenient_read_joints(msg, joints, fields, others=False):
     """``read_joints`` without its finite check (the node-side half of ``nan_passed_through``)."""
     from grip_force_ros.nodes.common import InputRejected
     names = list(msg.name)
@@ -132,7 +132,7 @@ def break_controller(node, defect: str) -> None:
     if defect not in DEFECTS:
         raise ValueError(f'unknown defect {defect!r}; one of {sorted(DEFECTS)}')
     if defect == 'nan_passed_through':
-        from grip_force_ros.nodes import controller as node_module
+        from grip_force_ros.nodes import controller_io as node_module   # the profiles read joints there
         node.inputs.__class__ = _NanThroughInputs
         _PATCHED.append((node_module, 'read_joints', node_module.read_joints))
         node_module.read_joints = _lenient_read_joints
