@@ -30,6 +30,11 @@ TARGET_FORCE = 'grip/target_force'
 MEASURED_FORCE = 'grip/measured_force'
 DIAGNOSTICS = '/diagnostics'
 
+#: The controller's services (private names: /controller/set_object, ...; nodes/controller_services.py).
+SET_OBJECT_SRV = '~/set_object'     # rcl_interfaces/srv/SetParameters: object_kind
+TARE_SRV = '~/tare'                 # std_srvs/srv/Trigger
+CALIBRATE_SRV = '~/calibrate'       # std_srvs/srv/Trigger
+
 MASTER_JOINT = 'gripper'
 WRIST_JOINT = 'wrist_pitch'
 JAW_JOINT = 'jaw'

@@ -3,25 +3,25 @@
     ros2 launch grip_force_ros controller.launch.py [instrument:=NAME|PATH] [namespace:=NS]
                                                     [interface:=crtk|dvrk] [arm:=PSM1]
                                                     [master:=MTML] [request_enable:=false]
+                                                    [autostart:=true]
 
 crtk: the instrument must publish instrument/measured_js and instrument/actuator/measured_js
 (and grip/measured_force if it has a load cell) and follow instrument/actuator/servo_jf;
 a master publishes master/gripper/measured_js (docs/ros_interface.md). dvrk: beside a dVRK
 console, the controller drives ``arm``'s jaw (/PSM1/jaw/servo_jf, N*m) from ``master``'s
 gripper while the arm is ENABLED and homed (docs/dvrk.md); request_enable:=true lets it ask
-the arm to enable and home (default false: the console's operator does). Arguments as in
-grasp.launch.py.
+the arm to enable and home (default false: the console's operator does). autostart:=false:
+the controller waits unconfigured for `ros2 lifecycle set` (a launch_ros LifecycleNode whose
+transitions launch logs). Arguments as in grasp.launch.py.
 """
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
 
+from grip_force_ros.nodes.launch_actions import PACKAGE, controller_actions
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
-
-PACKAGE = 'grip_force_ros'
 
 
 def _controller(context):
@@ -31,8 +31,7 @@ def _controller(context):
     params = str(instrument_path(arg('instrument'), config).resolve())
     own = {'interface': arg('interface'), 'arm': arg('arm'), 'master': arg('master'),
            'request_enable': arg('request_enable').lower() == 'true'}
-    return [Node(package=PACKAGE, executable='controller', name='controller',
-                 namespace=arg('namespace'), parameters=[params, own], output='screen')]
+    return controller_actions(arg('namespace'), [params, own], arg('autostart').lower() == 'true')
 
 
 def generate_launch_description():
@@ -52,5 +51,8 @@ def generate_launch_description():
                               description='dvrk: the master whose gripper drives the jaw'),
         DeclareLaunchArgument('request_enable', default_value='false', choices=['true', 'false'],
                               description='dvrk: ask the arm to enable and home'),
+        DeclareLaunchArgument('autostart', default_value='true', choices=['true', 'false'],
+                              description='false: the controller waits unconfigured for '
+                                          '`ros2 lifecycle set /controller configure`'),
         OpaqueFunction(function=_controller),
     ])

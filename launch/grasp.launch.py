@@ -2,7 +2,7 @@
 
     ros2 launch grip_force_ros grasp.launch.py [instrument:=NAME|PATH] [namespace:=NS]
                                                [interface:=crtk|dvrk] [arm:=PSM1] [master:=MTML]
-                                               [request_enable:=true]
+                                               [request_enable:=true] [autostart:=true]
 
 instrument:=      an instrument file of the package (config/, e.g. long_jaw_grasper, with or
                   without .yaml) or a path to a parameter YAML; every node reads all of it.
@@ -17,6 +17,10 @@ arm:=, master:=   the dVRK arm and master names of the dvrk profile (PSM1, MTML;
                   run beside them).
 request_enable:=  dvrk: the controller asks the simulated arm to enable and home (default
                   true here: nobody else does; beside a real dVRK the console does).
+autostart:=       true: the controller (a lifecycle node) configures and activates itself;
+                  false: it is launched as a launch_ros LifecycleNode and waits unconfigured,
+                  sending no command, for `ros2 lifecycle set /controller configure` and
+                  `activate`; launch logs its transitions.
 
 The master plays the needle grasp (approach, close, hold, pull test, release) once and
 holds its last angle; Ctrl-C stops all three. docs/ros_interface.md has the details.
@@ -27,11 +31,9 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from grip_force_ros.nodes.launch_actions import PACKAGE, controller_actions
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
-
-PACKAGE = 'grip_force_ros'
-EXECUTABLES = ('sim_instrument', 'controller', 'master')
 
 
 def _nodes(context):
@@ -40,10 +42,15 @@ def _nodes(context):
     config = f'{get_package_share_directory(PACKAGE)}/config'
     params = str(instrument_path(arg('instrument'), config).resolve())
     profile = {'interface': arg('interface'), 'arm': arg('arm'), 'master': arg('master')}
-    own = {'controller': {'request_enable': arg('request_enable').lower() == 'true'}}
-    return [Node(package=PACKAGE, executable=exe, name=exe, namespace=arg('namespace'),
-                 parameters=[params, {**profile, **own.get(exe, {})}], output='screen')
-            for exe in EXECUTABLES]
+    controller = {**profile, 'request_enable': arg('request_enable').lower() == 'true'}
+
+    def node(exe):
+        return Node(package=PACKAGE, executable=exe, name=exe, namespace=arg('namespace'),
+                    parameters=[params, profile], output='screen')
+    return [node('sim_instrument'),
+            *controller_actions(arg('namespace'), [params, controller],
+                                arg('autostart').lower() == 'true'),
+            node('master')]
 
 
 def generate_launch_description():
@@ -63,5 +70,8 @@ def generate_launch_description():
                               description='dvrk: the master whose gripper drives the jaw'),
         DeclareLaunchArgument('request_enable', default_value='true', choices=['true', 'false'],
                               description='dvrk: the controller asks the arm to enable and home'),
+        DeclareLaunchArgument('autostart', default_value='true', choices=['true', 'false'],
+                              description='false: the controller waits unconfigured for '
+                                          '`ros2 lifecycle set /controller configure`'),
         OpaqueFunction(function=_nodes),
     ])

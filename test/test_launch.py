@@ -204,3 +204,45 @@ def test_controller_launch_alone(tmp_path):
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
     assert launch_exit_codes(text) == {'controller': 0}, text
+
+
+def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
+    """autostart:=false (issue 14.3): the controller is a launch_ros LifecycleNode that waits
+    unconfigured, the drive gets no command; ``ros2 lifecycle set`` configures and activates
+    it, launch logs each transition, and the loop closes (the command echoed)."""
+    require_ros_tools()
+    env = ros_env()
+    log = tmp_path / 'launch.log'
+    proc = start('ros2', 'launch', 'grip_force_ros', 'grasp.launch.py', 'autostart:=false',
+                 log=log, env=env)
+
+    def lifecycle(*args):
+        return retry(lambda: run('ros2', 'lifecycle', *args, '--no-daemon', '--spin-time', '2',
+                                 env=env, timeout=60),
+                     lambda r: r.returncode == 0 and 'Node not found' not in r.stdout + r.stderr,
+                     timeout=90)
+
+    servo = '/instrument/actuator/servo_jf'
+    try:
+        got = lifecycle('get', '/controller')
+        assert got.stdout.split() == ['unconfigured', '[1]'], (got, log.read_text())
+        info = retry(lambda: run('ros2', 'topic', 'info', servo, '--no-daemon', '--spin-time', '2',
+                                 env=env, timeout=60),
+                     lambda r: 'Subscription count: 1' in r.stdout, timeout=60)   # the sim's
+        assert 'Publisher count: 0' in info.stdout, info
+        for transition, state in (('configure', 'inactive'), ('activate', 'active')):
+            got = lifecycle('set', '/controller', transition)
+            assert 'Transitioning successful' in got.stdout, (got, log.read_text())
+            assert lifecycle('get', '/controller').stdout.split()[0] == state
+        echo = run('ros2', 'topic', 'echo', '--once', '--no-daemon', servo,
+                   'sensor_msgs/msg/JointState', timeout=120, env=env)
+        assert echo.returncode == 0 and '- jaw_drum' in echo.stdout, (echo.stdout, echo.stderr)
+        assert proc.poll() is None, log.read_text()
+    finally:
+        code, text = _stop_launch(proc, log, env)
+    assert code == 0, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    # the launch_ros LifecycleNode's transition events, as launch logs them
+    for seen in ('controller: unconfigured -> configuring', 'controller: inactive -> activating'):
+        assert seen in text, text
+    assert 'Traceback' not in text, text

@@ -22,8 +22,10 @@ MAY_IMPORT = {
     'rig': {'plotting'},
     'diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'plotting'},
     'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
-    'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting'},
-    'nodes': {'objects', 'effects', 'control', 'model', 'sim', 'trajectories', 'params', 'topics'},
+    'figures': {'objects', 'effects', 'model', 'control', 'sim', 'trajectories', 'params', 'plotting',
+                'topics'},
+    'nodes': {'objects', 'effects', 'control', 'identify', 'model', 'sim', 'trajectories', 'params',
+              'topics'},
     'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
              'params', 'topics', 'plotting'},
     'faults': {'objects', 'effects', 'nodes', 'control', 'model', 'sim', 'params', 'topics'},
@@ -34,7 +36,7 @@ MAY_IMPORT = {
 #: The only parts that import rclpy or ROS message packages.
 ROS_PARTS = {'nodes', 'demo', 'faults', 'bench'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
-               'geometry_msgs', 'diagnostic_msgs', 'crtk_msgs'}
+               'geometry_msgs', 'diagnostic_msgs', 'crtk_msgs', 'std_srvs', 'lifecycle_msgs'}
 
 
 def part_of(path: Path) -> str:

@@ -19,6 +19,7 @@ ROSDEP_KEYS = {
     'sensor_msgs': 'sensor_msgs',
     'geometry_msgs': 'geometry_msgs',
     'diagnostic_msgs': 'diagnostic_msgs',
+    'std_srvs': 'std_srvs',
     'ament_index_python': 'ament_index_python',
     'numpy': 'python3-numpy',
     'scipy': 'python3-scipy',

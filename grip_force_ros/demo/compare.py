@@ -29,13 +29,13 @@ import numpy as np
 
 from grip_force_ros.demo import comparison_configs
 from grip_force_ros.demo.analysis import spread
+from grip_force_ros.identify.procedures import (CALIBRATION_FIRST_RAMP, CALIBRATION_HOLD,
+                                                CALIBRATION_RAMP, CALIBRATION_SHARES,
+                                                calibration_current)
 
 CONDITIONS = ('controlled', 'uncalibrated', 'sensor', 'naive')
 #: Master trajectory length of the comparison runs (s): the needle grasp at time_scale 1.2.
 TASK_DURATION = 6.0
-#: Calibration staircase: shares of the master travel past contact, each held this long (s).
-CALIBRATION_SHARES = (0.25, 0.5, 0.75, 1.0)
-CALIBRATION_HOLD = 0.6
 
 
 def plant_scales(index: int, plant_error: float) -> dict[str, float]:
@@ -55,36 +55,28 @@ def calibration_csv(params, path: Path) -> Path:
     """Write the calibration grasp (t, master_angle) for an instrument's force map.
 
     Open, close to the first level past contact, then a staircase up through
-    :data:`CALIBRATION_SHARES` of the travel from the contact angle to fully
-    closed (slow ramps: the pulley friction is then in its loading direction,
-    as the model describes it), then open again.
+    :data:`~grip_force_ros.identify.procedures.CALIBRATION_SHARES` of the travel from the
+    contact angle to fully closed (slow ramps: the pulley friction is then in its loading
+    direction, as the model describes it), then open again. Through the naive map (current
+    proportional to the master closing) this is the current staircase the controller's
+    ``~/calibrate`` runs (:class:`~grip_force_ros.identify.procedures.CurrentStaircase`).
     """
     open_angle = min(0.8, params.master_angle_max)
     contact, closed = params.master_contact_angle, params.master_angle_min
     rows = [(0.0, open_angle), (0.4, open_angle)]
     t = 0.4
     for k, share in enumerate(CALIBRATION_SHARES):
-        t += 0.5 if k == 0 else 0.3
+        t += CALIBRATION_FIRST_RAMP if k == 0 else CALIBRATION_RAMP
         angle = contact - share * (contact - closed)
         rows.append((t, angle))
         t += CALIBRATION_HOLD
         rows.append((t, angle))
-    t += 0.3
+    t += CALIBRATION_RAMP
     rows.append((t, open_angle))
     rows.append((t + 0.2, open_angle))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text('t,master_angle\n' + ''.join(f'{a:.4f},{b:.6f}\n' for a, b in rows))
     return path
-
-
-def calibration_current(params) -> float:
-    """Return the current (A) of the top calibration level.
-
-    That is grip_force_max per the shipped model, at most max_current.
-    """
-    from grip_force_ros.model import GripForceModel
-    current = float(GripForceModel(params).inverse(params.grip_force_max, 0.0, 0.0, 'needle'))
-    return min(current, params.max_current)
 
 
 def naive_gain(reference_config: Path) -> float:

@@ -48,20 +48,54 @@ A malformed message (unknown or missing joint names, wrong array lengths, NaN)
 is rejected with its reason; the last good input is kept. All the control
 logic, the plausibility checks and the watchdog live in
 :mod:`grip_force_ros.control`.
+
+Lifecycle (``rclpy.lifecycle``; ``ros2 lifecycle get|set /controller``):
+
+``unconfigured``
+    Parameters declared and the parameter file validated (a bad file refuses the node at
+    construction, exit 2, as a plain node). Nothing is published: the drive gets no
+    command (the sim, like a drive with a command timeout, holds 0 A).
+``configure`` -> ``inactive``
+    The controller core built from the parameters, the profile's topics created
+    (:mod:`~grip_force_ros.nodes.controller_io`: subscriptions fill the inputs, so they
+    are fresh at activation); no step runs, nothing is published (zero current). A
+    failure (e.g. the dvrk profile without crtk_msgs) leaves the node unconfigured and logs
+    why.
+``activate`` -> ``active``
+    A fresh controller state (0 A, as after a start): the loop closes, bumplessly from 0 A
+    (the force target ramps up from the estimate, the current at most at the slew limit).
+``deactivate`` -> ``inactive``
+    The loop stops at once; inside the transition the current ramps to 0 A at
+    ``max_current_slew`` (safe steps, one per state period), and the transition completes
+    when the command is 0 A: so ``inactive`` always means 0 A, and no command follows the
+    0 A one. The ramp takes at most ``max_current / max_current_slew`` (5 ms for the
+    shipped instruments).
+``cleanup`` -> ``unconfigured``: the topics are destroyed. ``shutdown`` from any state:
+    the same ramp if active, then the release; the process then ends (exit 0).
+
+``autostart`` (default true) configures and activates the node at start, so ``ros2 run``,
+the launch files, the demo, the bench and the fault check run as a plain node did.
+
+Services (:mod:`~grip_force_ros.nodes.controller_services`): ``~/set_object``, ``~/tare``,
+``~/calibrate``.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
+import traceback
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.node import Node
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.task import Future
 
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
 from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, InputRejected, run_node
 from grip_force_ros.nodes.controller_io import controller_io
+from grip_force_ros.nodes.controller_services import ControllerServices
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 
 GROUPS = ('instrument', 'limits', 'controller', 'interface')
@@ -72,6 +106,8 @@ DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
 MIN_STEP_SPACING_PERIODS = 0.5
 #: The timer steps only when no instrument state came for this many state periods:
 FALLBACK_AFTER_PERIODS = 1.5
+#: After ``shutdown`` the process ends this long later (s): the transition's reply goes out first.
+EXIT_DELAY = 0.2
 #: A timer tick this many timer periods after the previous one follows a stall of this process:
 #: it does not step (once), so that the states that came in meanwhile are taken first.
 STALL_PERIODS = 5.0
@@ -81,21 +117,165 @@ _INPUT_RANGES = ('master_angle_min', 'master_angle_max', 'master_angle_tolerance
                  'jaw_angle_min', 'jaw_angle_max', 'wrist_angle_limit', 'current_limit',
                  'force_limit', 'stamp_future_tolerance')
 
+_SUCCESS = TransitionCallbackReturn.SUCCESS
+_FAILURE = TransitionCallbackReturn.FAILURE
 
-class ControllerNode(Node):
+
+def _transition(method):
+    """Log a transition callback's exception (rclpy turns it into ERROR without a word)."""
+    @functools.wraps(method)
+    def logged(self, state):
+        try:
+            return method(self, state)
+        except Exception:
+            self.get_logger().error(f'{method.__name__} failed:\n{traceback.format_exc()}')
+            raise
+    return logged
+
+
+class _ZeroRamp:
+    """The loop's step while the node leaves the active state: safe, with ``reason``."""
+
+    drives_current = False
+    finished = False
+    name = 'ramp to 0 A'
+
+    def __init__(self, node, reason: str):
+        self.node = node
+        self.reason = reason
+
+    def step(self, now, inputs, interlock):
+        return self.node.controller.step(now, inputs, self.reason)
+
+    def status(self) -> str:
+        return f'{self.reason}: ramping the current to 0 A'
+
+
+class ControllerNode(LifecycleNode):
     """Runs :class:`GripController` once per actuator state, the timer as watchdog fallback."""
 
     def __init__(self, **kwargs):
         super().__init__('controller', **kwargs)
         self.finished = Future()
-        self._param = declare_node_parameters(self, GROUPS, on_update=self._on_params)
-        params = self._param.params
-        self.controller = GripController(params)
-        self.inputs: ControlInputs = self.controller.new_inputs()
-        self.last_output = None
         self._now_ns = self.get_clock().now
-        self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
-                                               DIAGNOSTICS_QOS)
+        self._param = declare_node_parameters(self, GROUPS, on_update=self._on_params)
+        self.user_services = ControllerServices(self)
+        self.add_on_set_parameters_callback(self._refuse_unsafe_set)
+        self.controller: GripController | None = None
+        self.inputs: ControlInputs | None = None
+        self.io = None
+        self.procedure = None          # a service's procedure or the deactivation ramp, or None
+        self.last_output = None
+        self._timer = None             # the control_rate timer: exists while configured
+        self._diag_pub = None
+        self._exit_timer = None
+        self._configure_error = None
+        self._quiet_failure = False    # autostart: the exception reports a failed configure
+        self.steps = {'on_state': 0, 'on_timer': 0, 'deferred_after_stall': 0}   # by trigger
+        if self._param.params.autostart:
+            self._quiet_failure = True
+            configured = self.trigger_configure() == _SUCCESS
+            self._quiet_failure = False
+            if not configured or self.trigger_activate() != _SUCCESS:
+                why = self._configure_error or 'the autostart transitions failed (see the log)'
+                self.destroy_node()        # refuse to start: leave nothing in the ROS graph
+                raise ValueError(why)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def params(self):
+        """The node's current :class:`~grip_force_ros.params.ParamSet`."""
+        return self._param.params
+
+    @property
+    def lifecycle_state(self) -> str:
+        """Return the label of the lifecycle state ('unconfigured', 'inactive', 'active', ...)."""
+        return self._state_machine.current_state[1]
+
+    @property
+    def active(self) -> bool:
+        """Whether the loop runs (the lifecycle state is active, the timer not cancelled)."""
+        return self._timer is not None and not self._timer.is_canceled()
+
+    # ------------------------------------------------------------------ lifecycle
+    @_transition
+    def on_configure(self, state) -> TransitionCallbackReturn:
+        """Build the controller core and the profile's topics; nothing steps or publishes yet."""
+        params = self.params
+        self._configure_error = None
+        try:
+            self.controller = GripController(params)
+            self.inputs = self.controller.new_inputs()
+            self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
+                                                   DIAGNOSTICS_QOS)
+            self._timer = self.create_timer(1.0 / params.control_rate, self._tick, autostart=False)
+            self.io = controller_io(self, params)     # the profile's topics (dvrk: crtk_msgs)
+        except ValueError as exc:
+            self._release()
+            self._configure_error = str(exc)
+            if not self._quiet_failure:
+                self.get_logger().error(f'configure failed: {exc}')
+            return _FAILURE
+        self._reset_loop_state()
+        where = (f'arm {params.arm}, master {params.master}' if params.interface == 'dvrk'
+                 else 'crtk topics')
+        self.get_logger().info(
+            f'{params.instrument_name}: {params.interface} interface ({where}), stepping on '
+            f'instrument states (expected {params.expected_state_rate:g} Hz), watchdog timer '
+            f'{params.control_rate:.0f} Hz, feedback '
+            f"{'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
+            f'object {params.object_kind}')
+        self.get_logger().info(self.controller.gains.describe())   # the schedule at this rate
+        return _SUCCESS
+
+    @_transition
+    def on_activate(self, state) -> TransitionCallbackReturn:
+        """Close the loop from a fresh controller state (0 A, as after a start)."""
+        if self.controller.steps:
+            self.controller = GripController(self.params)
+        self._reset_loop_state()
+        self._timer.reset()
+        self.get_logger().info('active: closing the loop')
+        return _SUCCESS
+
+    @_transition
+    def on_deactivate(self, state) -> TransitionCallbackReturn:
+        """Stop the loop; ramp the current to 0 A at the slew limit before completing."""
+        self._stop_loop('deactivated')
+        self.get_logger().info('inactive: current 0 A, loop stopped')
+        return _SUCCESS
+
+    @_transition
+    def on_cleanup(self, state) -> TransitionCallbackReturn:
+        """Destroy the profile's topics and the controller core."""
+        self._release()
+        return _SUCCESS
+
+    @_transition
+    def on_shutdown(self, state) -> TransitionCallbackReturn:
+        """From any state: ramp to 0 A if active, release, then end the process."""
+        self._stop_loop('shutting down')
+        self._release()
+        self._exit_timer = self.create_timer(EXIT_DELAY, self._exit)
+        self.get_logger().info('finalized: the process ends')
+        return _SUCCESS
+
+    @_transition
+    def on_error(self, state) -> TransitionCallbackReturn:
+        """Make safe after a transition raised (ramp to 0 A, release); back to unconfigured."""
+        self._stop_loop('error in a transition')
+        self._release()
+        return _SUCCESS
+
+    def _exit(self) -> None:
+        self._exit_timer.cancel()
+        if not self.finished.done():
+            self.finished.set_result(True)
+
+    def _reset_loop_state(self) -> None:
+        """Forget the previous activation's timing and /diagnostics (not the inputs)."""
+        params = self.params
+        self.last_output = None
         self._diag_key = None          # (mode, limits_hit, reasons, rejected count) last published
         self._diag_time = -math.inf    # s, when /diagnostics was last published
         self._limits_seen: set = set()  # limits hit since the last /diagnostics
@@ -113,22 +293,63 @@ class ControllerNode(Node):
         self._timer_period = 1.0 / params.control_rate   # s, between timer ticks
         self._late_reported = 0            # late inputs counted at the last /diagnostics
         self._last_state_step = -math.inf  # when the last step on an instrument state started
-        self.steps = {'on_state': 0, 'on_timer': 0, 'deferred_after_stall': 0}   # by trigger
-        self._timer = self.create_timer(1.0 / params.control_rate, self._tick)
-        try:                               # the profile's topics (dvrk: needs crtk_msgs)
-            self.io = controller_io(self, params)
-        except ValueError:
-            self.destroy_node()            # refuse to start: leave nothing in the ROS graph
-            raise
-        where = (f'arm {params.arm}, master {params.master}' if params.interface == 'dvrk'
-                 else 'crtk topics')
-        self.get_logger().info(
-            f'{params.instrument_name}: {params.interface} interface ({where}), stepping on '
-            f'instrument states (expected {params.expected_state_rate:g} Hz), watchdog timer '
-            f'{params.control_rate:.0f} Hz, feedback '
-            f"{'force sensor' if params.force_sensor_enabled else 'model estimate'}, "
-            f'object {params.object_kind}')
-        self.get_logger().info(self.controller.gains.describe())
+        if self.io is not None:
+            self.io.forces_pending = False
+
+    def _stop_loop(self, reason: str) -> None:
+        """Stop the loop (if it runs): a running procedure is stopped, the current ramps to 0 A.
+
+        The ramp is a safe step of the controller every state period, paced here (the
+        executor is held: the inputs age, which is safe), until the command is 0 A; then the
+        forces and /diagnostics ('inactive') go out and nothing more.
+        """
+        if not self.active:
+            return
+        self.user_services.stop(f'the controller is {reason}')
+        self._timer.cancel()
+        self.procedure = _ZeroRamp(self, reason)
+        longest = 2.0 * self.controller.current_limit / self.params.max_current_slew + 1.0  # s
+        give_up = time.monotonic() + longest
+        while True:
+            self._control()
+            if self.last_output.current_command == 0.0 or time.monotonic() > give_up:
+                break
+            time.sleep(self._period)
+        self.procedure = None
+        if self.io.forces_pending:
+            self.io.publish_forces()
+        self._publish_diagnostics(self._now_ns().to_msg(), self.last_output)
+
+    def _release(self) -> None:
+        """Destroy what configure created (safe on a half-made configuration)."""
+        if self.io is not None:
+            self.io.destroy()
+            self.io = None
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+        if self._diag_pub is not None:
+            self.destroy_publisher(self._diag_pub)
+            self._diag_pub = None
+        self.controller = None
+        self.inputs = None
+        self.last_output = None
+
+    # ------------------------------------------------------------------ procedures (services)
+    def start_procedure(self, procedure, needs_load_cell: bool) -> None:
+        """Let ``procedure`` step instead of the controller (and listen to the load cell)."""
+        self.procedure = procedure
+        if needs_load_cell:
+            self.io.want_force(True)
+
+    def end_procedure(self, procedure) -> None:
+        """Hand the loop back to the controller, which continues from the current last sent."""
+        if self.procedure is not procedure:
+            return
+        self.procedure = None
+        if procedure.drives_current:     # stopped mid-staircase: the ramp continues from there
+            self.controller.command = procedure.command
+        self.io.want_force(False)
 
     # ------------------------------------------------------------------ time
     def now(self) -> float:
@@ -159,15 +380,23 @@ class ControllerNode(Node):
         ``answered_stamp``: the state's header stamp when it was accepted fresh (the command
         carries it), else None.
         """
-        if not self._timer.is_canceled():  # cancelled: the loop is stopped
+        if not self._timer.is_canceled():  # cancelled: the loop is stopped (inactive)
             self.steps['on_state'] += 1
             started = time.perf_counter()
             self._last_state_step = started
             self._step(started, answered_stamp)
 
     # ------------------------------------------------------------------ parameters
+    def _refuse_unsafe_set(self, parameters) -> SetParametersResult:
+        """on-set callback: refuse what the schema allows but the moment does not."""
+        why = self.user_services.object_change_refusal(parameters)
+        return SetParametersResult(successful=why is None, reason=why or '')
+
     def _on_params(self, params, changed) -> None:
         """Apply an accepted runtime change: retune bumplessly, keep the latest inputs."""
+        self.get_logger().info(f'parameters changed: {sorted(changed)}')
+        if self.controller is None:        # unconfigured: configure reads them
+            return
         self.controller.update_params(params)
         fresh = self.controller.new_inputs()
         for name in _INPUT_RANGES:
@@ -176,7 +405,6 @@ class ControllerNode(Node):
         if 'request_enable' in changed and params.request_enable and hasattr(self.io,
                                                                              'request_enable'):
             self.io.request_enable()
-        self.get_logger().info(f'parameters changed: {sorted(changed)}')
 
     # ------------------------------------------------------------------ loop
     def _tick(self) -> None:
@@ -190,6 +418,8 @@ class ControllerNode(Node):
         states that came in meanwhile run first, so a stall of this process is not taken for a
         lost input (the next tick steps if none came).
         """
+        if self.controller is None:        # a queued event after cleanup or shutdown
+            return
         started = time.perf_counter()
         previous, self._last_timer = self._last_timer, started
         if previous != -math.inf and started - previous > STALL_PERIODS * self._timer_period:
@@ -228,7 +458,11 @@ class ControllerNode(Node):
     def _control(self, answered_stamp=None) -> None:
         stamp = self._now_ns()
         now = stamp.nanoseconds * 1e-9
-        out = self.controller.step(now, self.inputs, self.io.interlock())
+        procedure = self.procedure
+        if procedure is None:
+            out = self.controller.step(now, self.inputs, self.io.interlock())
+        else:                               # a service's procedure, or the ramp to 0 A
+            out = procedure.step(now, self.inputs, self.io.interlock())
         self.last_output = out
         stamp_msg = stamp.to_msg()
         self.io.publish(out, stamp_msg, answered_stamp)
@@ -246,15 +480,24 @@ class ControllerNode(Node):
         """Build the controller's DiagnosticStatus for the last output ``out``."""
         params = self._param.params
         late = sum(self.controller.late_counts.values())
-        if out is None or out.mode is Mode.SAFE:
-            level = DiagnosticStatus.ERROR
-        elif out.limits_hit or out.reasons or self._limits_seen or late > self._late_reported:
-            level = DiagnosticStatus.WARN   # late inputs since the last report: a warning
+        procedure = self.procedure
+        if not self.active and procedure is None:   # deactivated: the ramp is over
+            level, mode, reasons = DiagnosticStatus.OK, 'inactive', 'current 0 A, loop stopped'
+        elif procedure is not None and procedure.drives_current:
+            level, mode, reasons = DiagnosticStatus.WARN, 'calibrating', procedure.status()
         else:
-            level = DiagnosticStatus.OK
-        mode = out.mode if out is not None else 'starting'
-        reasons = '; '.join(out.reasons) if out is not None and out.reasons else 'ok'
+            if out is None or out.mode is Mode.SAFE:
+                level = DiagnosticStatus.ERROR
+            elif out.limits_hit or out.reasons or self._limits_seen or late > self._late_reported:
+                level = DiagnosticStatus.WARN   # late inputs since the last report: a warning
+            else:
+                level = DiagnosticStatus.OK
+            mode = out.mode if out is not None else 'starting'
+            reasons = '; '.join(out.reasons) if out is not None and out.reasons else 'ok'
         values = dict(self.controller.status(self.inputs))
+        values['mode'] = str(mode)
+        values['lifecycle_state'] = self.lifecycle_state
+        values['procedure'] = procedure.status() if procedure is not None else 'none'
         values['limits_hit'] = ', '.join(sorted(self._limits_seen)) or 'none'
         tripped = out is not None and out.mode is Mode.SAFE and any(
             'stale' in r or 'input yet' in r for r in out.reasons)

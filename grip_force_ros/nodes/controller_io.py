@@ -18,7 +18,11 @@ when a fresh instrument state arrives, and publishes the command and the force o
     step is safe otherwise, with the reason); ``<arm>/state_command`` when asked to enable
     and home (``request_enable``); the grip force topics under ``<arm>/grip/``.
 
-The node calls :meth:`ControllerIO.publish` after each step with the step's output.
+The node calls :meth:`ControllerIO.publish` after each step with the step's output. Both
+profiles subtract the tare's offsets (``current_sensor_offset``, ``load_cell_offset``) from
+the measured current and the load cell before the controller sees them. The node creates
+the I/O object when it is configured and calls :meth:`ControllerIO.destroy` when it is
+cleaned up (lifecycle, nodes/controller.py).
 """
 from __future__ import annotations
 
@@ -63,17 +67,56 @@ class ControllerIO:
     def __init__(self, node, params, names: topics.TopicSet):
         self.node = node
         self.names = names
-        node.create_subscription(JointState, names.master_js, self._on_master, STATE_SUB_QOS)
+        self._entities: list = []      # what this object created on the node (destroy())
+        self.alive = True              # False once destroy() ran: callbacks drop their event
+        self.subscribe(JointState, names.master_js, self._on_master, STATE_SUB_QOS)
         self._force_sub = None
+        self._force_wanted = False     # a service needs the load cell (want_force)
         self.update_params(params)
-        self._estimate_pub = node.create_publisher(WrenchStamped, names.estimated_force, STATE_PUB_QOS)
-        self._target_pub = node.create_publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
+        self._estimate_pub = self.publisher(WrenchStamped, names.estimated_force, STATE_PUB_QOS)
+        self._target_pub = self.publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
         # Messages reused every step: fill, do not rebuild.
         self._estimate_msg = WrenchStamped()
         self._estimate_msg.header.frame_id = topics.JAW_FRAME
         self._target_msg = WrenchStamped()
         self._target_msg.header.frame_id = topics.JAW_FRAME
         self.forces_pending = False    # estimated/target force of the last step not sent yet
+
+    # ------------------------------------------------------------------ entities
+    def subscribe(self, msg_type, topic: str, callback, qos):
+        """Create a subscription on the node, for :meth:`destroy`; see :meth:`_live`."""
+        sub = self.node.create_subscription(msg_type, topic, self._live(callback), qos)
+        self._entities.append(sub)
+        return sub
+
+    def _live(self, callback):
+        """Wrap ``callback`` to drop what comes after :meth:`destroy`.
+
+        The EventsExecutor may still run an event it queued before the entity was destroyed
+        (seen: a joint state after ``shutdown`` released the inputs).
+        """
+        def live(*args):
+            if self.alive:
+                callback(*args)
+        return live
+
+    def publisher(self, *args):
+        """Create a publisher on the node (``create_publisher`` arguments), for :meth:`destroy`."""
+        pub = self.node.create_publisher(*args)
+        self._entities.append(pub)
+        return pub
+
+    def destroy(self) -> None:
+        """Destroy every subscription, publisher, client and timer this object created."""
+        node = self.node
+        self.alive = False
+        if self._force_sub is not None:
+            node.destroy_subscription(self._force_sub)
+            self._force_sub = None
+        for entity in reversed(self._entities):
+            kind = type(entity).__name__.lower()     # subscription, publisher, client, timer
+            getattr(node, f'destroy_{kind}')(entity)
+        self._entities = []
 
     # ------------------------------------------------------------------ inputs
     def _on_master(self, msg: JointState) -> None:
@@ -87,16 +130,32 @@ class ControllerIO:
 
     def _on_force(self, msg: WrenchStamped) -> None:
         node = self.node
-        node.report(node.inputs.set_force(node.now(), msg.wrench.force.z,
+        node.report(node.inputs.set_force(node.now(), msg.wrench.force.z - self.force_offset,
                                           stamp_seconds(msg.header.stamp)))
 
     def update_params(self, params) -> None:
         """Apply accepted parameters (the load-cell subscription follows force_sensor_enabled)."""
-        enabled = params.force_sensor_enabled
-        if enabled and self._force_sub is None:
+        self._force_enabled = params.force_sensor_enabled
+        self.force_offset = params.load_cell_offset          # N
+        self.current_offset = params.current_sensor_offset   # A
+        self._follow_force()
+
+    def want_force(self, wanted: bool) -> None:
+        """Subscribe to the load cell while a service needs it, whatever force_sensor_enabled says."""
+        self._force_wanted = wanted
+        self._follow_force()
+
+    def load_cell_publishers(self) -> int:
+        """Return how many publishers the load-cell topic has (0: no load cell)."""
+        node = self.node
+        return node.count_publishers(node.resolve_topic_name(self.names.measured_force))
+
+    def _follow_force(self) -> None:
+        listen = self._force_enabled or self._force_wanted
+        if listen and self._force_sub is None:
             self._force_sub = self.node.create_subscription(
-                WrenchStamped, self.names.measured_force, self._on_force, STATE_SUB_QOS)
-        elif not enabled and self._force_sub is not None:
+                WrenchStamped, self.names.measured_force, self._live(self._on_force), STATE_SUB_QOS)
+        elif not listen and self._force_sub is not None:
             self.node.destroy_subscription(self._force_sub)
             self._force_sub = None
 
@@ -142,9 +201,9 @@ class CrtkControllerIO(ControllerIO):
 
     def __init__(self, node, params, names: topics.TopicSet):
         super().__init__(node, params, names)
-        node.create_subscription(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS)
-        node.create_subscription(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS)
-        self._servo_pub = node.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self.subscribe(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS)
+        self.subscribe(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS)
+        self._servo_pub = self.publisher(JointState, names.command, STATE_PUB_QOS)
         self._servo_msg = JointState(name=[topics.DRUM_JOINT], effort=[0.0])
 
     def _on_instrument(self, msg: JointState) -> None:
@@ -180,7 +239,7 @@ class CrtkControllerIO(ControllerIO):
         velocity = drum[2] if len(drum) > 2 else 0.0
         stamp = stamp_seconds(msg.header.stamp)
         inputs = node.inputs
-        node.report(inputs.set_actuator(now, drum[0], drum[1], velocity, stamp))
+        node.report(inputs.set_actuator(now, drum[0] - self.current_offset, drum[1], velocity, stamp))
         # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
         return inputs.actuator_time == now and stamp != 0.0
 
@@ -220,17 +279,19 @@ class DvrkControllerIO(ControllerIO):
         self.requested = False           # an enable/home request is pending (request_enable)
         self._last_request = -math.inf   # perf_counter s of the last state_command sent
         self._state_future = None
-        node.create_subscription(JointState, names.instrument_js, self._on_arm, STATE_SUB_QOS)
-        node.create_subscription(JointState, names.actuator_js, self._on_jaw, STATE_SUB_QOS)
-        node.create_subscription(self.msgs.OperatingState, names.operating_state,
-                                 self._on_operating_state, STATE_PUB_QOS)
+        self.subscribe(JointState, names.instrument_js, self._on_arm, STATE_SUB_QOS)
+        self.subscribe(JointState, names.actuator_js, self._on_jaw, STATE_SUB_QOS)
+        self.subscribe(self.msgs.OperatingState, names.operating_state, self._on_operating_state,
+                       STATE_PUB_QOS)
         self._state_client = node.create_client(self.msgs.TriggerOperatingState,
                                                 names.operating_state)
-        self._command_pub = node.create_publisher(self.msgs.StringStamped, names.state_command,
-                                                  STATE_PUB_QOS)
-        self._servo_pub = node.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self._entities.append(self._state_client)
+        self._command_pub = self.publisher(self.msgs.StringStamped, names.state_command,
+                                           STATE_PUB_QOS)
+        self._servo_pub = self.publisher(JointState, names.command, STATE_PUB_QOS)
         self._servo_msg = JointState(name=[topics.JAW_JOINT], effort=[0.0])
-        self._poll_timer = node.create_timer(ARM_POLL_PERIOD, self._poll)
+        self._poll_timer = node.create_timer(ARM_POLL_PERIOD, self._live(self._poll))
+        self._entities.append(self._poll_timer)
         if params.request_enable:
             self.request_enable()
 
@@ -273,7 +334,8 @@ class DvrkControllerIO(ControllerIO):
             why = ('no wrist yet' if age != age else f'stale wrist: {age * 1e3:.1f} ms old')
             node.reject('instrument', now, InputRejected(f'{why} ({self.names.instrument_js})'))
         # the dVRK's effort is computed from the measured motor currents: invert its conversion
-        node.report(inputs.set_actuator(now, self.conversion.current(jaw[1]), stamp=stamp))
+        node.report(inputs.set_actuator(now, self.conversion.current(jaw[1]) - self.current_offset,
+                                        stamp=stamp))
         fresh = inputs.actuator_time == now and stamp != 0.0
         node.on_state(msg.header.stamp if fresh else None)
 

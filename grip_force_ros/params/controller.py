@@ -160,6 +160,29 @@ CONTROLLER = [
        'On a switch (free <-> grip, or back from the safe state) the command continues from its '
        'last value; the difference to the new loop output decays with this time constant.',
        min=1e-3, max=1.0, group=_G),
+    # --- lifecycle and services of the node (docs/ros_interface.md) ----------------------
+    _P('autostart', 'bool', True, '',
+       'The controller node is a lifecycle node: with true it configures and activates itself '
+       'at start (ros2 run, the launch files, the demo); with false it waits unconfigured, '
+       'sending no command, for `ros2 lifecycle set /controller configure` and `activate`.',
+       read_only=True, group=_G),
+    _P('load_cell_offset', 'double', 0.0, 'N',
+       'Subtracted from the load-cell grip force (grip/measured_force) before use. ~/tare sets '
+       'it: the mean reading with the jaw open and no grip force.', min=-50.0, max=50.0, group=_G),
+    _P('current_sensor_offset', 'double', 0.0, 'A',
+       'Subtracted from the measured motor current before use. ~/tare sets it: the mean of '
+       'measured minus commanded current with the jaw open and no grip force.',
+       min=-5.0, max=5.0, group=_G),
+    _P('tare_duration', 'double', 0.2, 's',
+       'Averaging window of ~/tare (one sample per control step).', min=0.01, max=5.0, group=_G),
+    _P('tare_jaw_open_angle', 'double', 0.3, 'rad',
+       '~/tare refuses (and stops) while the measured jaw angle is below this: the jaw must be '
+       'open, touching nothing (above the sim\'s tissue contact, 0.25 rad).',
+       min=0.0, max=3.0, group=_G),
+    _P('calibration_file', 'string', '', '',
+       'Where ~/calibrate writes the calibrated parameter YAML; empty: '
+       '$ROS_HOME/grip_force_ros/<instrument_name>_calibrated.yaml ($ROS_HOME: ~/.ros).',
+       group=_G),
 ]
 
 

@@ -1,0 +1,355 @@
+"""The managed controller and its services with the real ros2 CLI (issue 14.3, 14.4).
+
+``sim_instrument`` and ``controller`` run as ``ros2 run`` processes, the master as ``ros2
+topic pub`` of a gripper angle the test sets (open, or closed on the needle: a light process
+of its own, so that it stays on time on a loaded machine, which this recording test process
+does not); this process records what the controller and the sim publish. ``ros2 lifecycle
+get|set|nodes``, ``ros2 service call`` and ``ros2 param get`` are the user's commands.
+"""
+from __future__ import annotations
+
+import re
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from _ros_tools import ROOT, require_ros_tools, retry, ros_env, run, start, stop, stop_daemon
+from grip_force_ros import topics
+from grip_force_ros.faults.probe import LimitMonitor
+from grip_force_ros.nodes.common import RECORD_QOS
+from grip_force_ros.nodes.harness import RosRunner, wait_until
+from grip_force_ros.params import load_params_file, read_params_yaml
+
+pytestmark = pytest.mark.ros
+
+CONFIG = ROOT / 'config' / 'paper_needle_driver.yaml'
+PARAMS = load_params_file(CONFIG)
+OPEN, CLOSED = 0.8, 0.0            # rad, master gripper angle
+#: The sim's current noise (current_noise_std, A): the bound of "the sim sees 0 A".
+CURRENT_NOISE = PARAMS.current_noise_std
+
+
+class Recorder(Node):
+    """Records the controller's commands, the sim's currents, the estimated force, the status."""
+
+    def __init__(self, **kwargs):
+        super().__init__('lifecycle_test_probe', **kwargs)
+        self.commands: list[tuple[float, float, float]] = []   # (receipt s, stamp s, A)
+        self.currents: list[tuple[float, float]] = []          # (receipt s, sim's measured A)
+        self.forces: list[float] = []                          # N, the controller's estimate
+        self.status: list[str] = []                            # the controller's messages
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
+        self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
+        self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE,
+                                 lambda m: self.forces.append(m.wrench.force.z), RECORD_QOS)
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, RECORD_QOS)
+
+    def now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_command(self, msg) -> None:
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.commands.append((self.now(), stamp, float(msg.effort[0])))
+
+    def _on_current(self, msg) -> None:
+        self.currents.append((self.now(), float(msg.effort[0])))
+
+    def _on_status(self, msg) -> None:
+        self.status += [s.message for s in msg.status if 'controller' in s.name]
+
+    def mode(self) -> str:
+        return self.status[-1].split(':')[0] if self.status else ''
+
+
+@pytest.fixture
+def rig(tmp_path):
+    """Start the sim (load cell 0.3 N off, friction 0.8 x the YAML's) and the test's master;
+    ``rig.controller(*ros_args)`` starts the controller. Everything stops at the end."""
+    require_ros_tools()
+    env = ros_env()
+    procs = []
+
+    class Rig:
+        probe: Recorder
+        _master = None
+
+        def ros2_run(self, name, *args):
+            proc = start('ros2', 'run', 'grip_force_ros', name, '--ros-args', '--params-file',
+                         str(CONFIG), *args, log=tmp_path / f'{name}.log', env=env)
+            procs.append(proc)
+            return proc
+
+        def controller(self, *args):
+            return self.ros2_run('controller', '-p', f'calibration_file:={tmp_path / "cal.yaml"}',
+                                 *args)
+
+        def master(self, angle):
+            """Publish the master gripper ``angle`` (rad) at 250 Hz, stamped, from now on."""
+            if self._master is not None:
+                stop(self._master, signal.SIGINT, group=True)
+            msg = (f'{{header: auto, name: [{topics.MASTER_JOINT}], position: [{angle}], '
+                   'velocity: [0.0]}')
+            self._master = start('ros2', 'topic', 'pub', '-r', '250', '-p', '0',
+                                 f'/{topics.MASTER_JS}', 'sensor_msgs/msg/JointState', msg,
+                                 log=tmp_path / 'master.log', env=env)
+            procs.append(self._master)
+
+        def log(self, name):
+            return (tmp_path / f'{name}.log').read_text()
+
+    rig = Rig()
+    rig.env, rig.tmp = env, tmp_path
+    rig.ros2_run('sim_instrument', '-p', 'force_sensor_offset:=0.3', '-p', 'friction_scale:=0.8')
+    ros = RosRunner()
+    rig.probe = ros.add(Recorder)
+    ros.start()
+    try:
+        yield rig
+    finally:
+        ros.stop()
+        for proc in procs:          # ros2 run does not pass SIGINT on: signal the group
+            stop(proc, signal.SIGINT, group=True)
+        stop_daemon(env)
+
+
+def _cli(env, *args, timeout=60.0):
+    """``ros2 ARGS``, again while the short-lived CLI node has not discovered the controller."""
+    return retry(lambda: run('ros2', *args, env=env, timeout=60),
+                 lambda r: 'Node not found' not in r.stdout + r.stderr, timeout=timeout)
+
+
+def lifecycle(env, *args):
+    return _cli(env, 'lifecycle', *args, '--no-daemon', '--spin-time', '2')
+
+
+def param(env, name):
+    got = _cli(env, 'param', 'get', '/controller', name, '--no-daemon', '--spin-time', '2')
+    assert got.returncode == 0, got
+    return got.stdout.strip().split(': ', 1)[1]
+
+
+#: A refusal or stop for a stale input or a stalled loop: the machine's load (the tests share
+#: 2 cores with other work; the test's own master, in this process, has been seen 0.9 s late).
+LOAD_STALL = re.compile(r'stale \w+ input|stalled')
+
+
+def trigger(env, service, attempts=1):
+    """``ros2 service call /controller/<service> std_srvs/srv/Trigger``: (success, message).
+
+    ``attempts`` > 1: call again (after 2 s) while the service refuses or stops because an
+    input went stale or the loop stalled (the watchdog acting on the load, not the test's
+    subject); any other answer is returned at once.
+    """
+    for attempt in range(attempts):
+        got = run('ros2', 'service', 'call', f'/controller/{service}', 'std_srvs/srv/Trigger',
+                  env=env, timeout=120)
+        assert got.returncode == 0, got
+        found = re.search(r"success=(True|False), message=(['\"])(.*)\2\)", got.stdout)
+        assert found, got.stdout
+        if found[1] == 'True' or not LOAD_STALL.search(found[3]):
+            break
+        time.sleep(2.0)
+    return found[1] == 'True', found[3]
+
+
+def set_object(env, value):
+    """``ros2 service call /controller/set_object ...``: (successful, reason)."""
+    request = f"{{parameters: [{{name: object_kind, value: {{type: 4, string_value: {value}}}}}]}}"
+    got = run('ros2', 'service', 'call', '/controller/set_object',
+              'rcl_interfaces/srv/SetParameters', request, env=env, timeout=60)
+    assert got.returncode == 0, got
+    found = re.search(r"successful=(True|False), reason=(['\"])(.*?)\2\)", got.stdout)
+    assert found, got.stdout
+    return found[1] == 'True', found[3]
+
+
+def wait_gripping(probe, timeout=60.0):
+    """The controller holds the needle at its force (target grip_force_max at the closed master)."""
+    target = PARAMS.grip_force_max
+    return wait_until(lambda: probe.mode() == 'grip' and len(probe.forces) > 10
+                      and abs(probe.forces[-1] - target) < 0.1 * target, timeout)
+
+
+def slew_violations(commands):
+    """Every pair of commands against the slew limit (the fault probe's judge), each with the
+    commands around it ((receipt s, stamp s, A), times from the first of them)."""
+    period = 1.0 / PARAMS.expected_state_rate
+    monitor = LimitMonitor(PARAMS.max_current, PARAMS.max_current_slew * period, period,
+                           PARAMS.watchdog_timeout)
+    found = []
+    for k, (receipt, stamp, value) in enumerate(commands):
+        monitor.check(value, receipt, stamp)
+        if len(monitor.violations) > len(found):
+            around = commands[max(k - 3, 0):k + 2]
+            t0 = around[0][0]
+            found.append((monitor.violations[-1],
+                          [(round(r - t0, 4), round(s - t0, 4), round(a, 4)) for r, s, a in around]))
+    return found
+
+
+def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
+    probe, env = rig.probe, rig.env
+    rig.master(CLOSED)
+    ctl = rig.controller()
+    assert wait_gripping(probe), (probe.status[-3:], probe.forces[-3:], rig.log('controller'))
+    got = lifecycle(env, 'get', '/controller')
+    assert got.stdout.split() == ['active', '[3]'], got
+    nodes = retry(lambda: run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time', '2',
+                              env=env, timeout=60),
+                  lambda r: '/controller' in r.stdout.split(), timeout=60)
+    assert '/controller' in nodes.stdout.split(), nodes
+
+    # while the jaw holds the needle with force, the services refuse, saying why
+    ok, reason = set_object(env, 'tissue')
+    assert not ok and 'while gripping' in reason, reason
+    assert param(env, 'object_kind') == 'needle'
+    ok, message = trigger(env, 'tare', attempts=5)
+    assert not ok and 'gripping' in message, message
+    ok, message = trigger(env, 'calibrate', attempts=5)
+    assert not ok and 'a grasp is held' in message, message
+
+    hold = probe.commands[-1][2]
+    assert hold > 0.05                       # A: the grip's current, to be ramped down
+    before = len(probe.commands)
+    got = lifecycle(env, 'set', '/controller', 'deactivate')
+    assert 'Transitioning successful' in got.stdout, (got, rig.log('controller'))
+    time.sleep(1.0)
+    after = [c[2] for c in probe.commands[before:]]
+    # the transition has returned: the last command is 0 A and (below) nothing follows it;
+    # the way down is checked against the slew limit with all the commands at the end (on
+    # this loaded machine the loop may also have gone safe for a stale input before)
+    assert after and after[-1] == 0.0, after[-5:]
+    quiet_since = probe.now()
+    time.sleep(0.5)
+    assert len(probe.commands) == before + len(after)            # still nothing
+    # the sim's drive carries 0 A (its measurement: within 6 noise sigmas of 0)
+    recent = [i for t, i in probe.currents if t > quiet_since]
+    assert recent and max(abs(i) for i in recent) < 6 * CURRENT_NOISE, recent[-5:]
+    assert lifecycle(env, 'get', '/controller').stdout.split() == ['inactive', '[2]']
+    assert wait_until(lambda: probe.status and probe.status[-1].startswith('inactive'), 5.0), \
+        probe.status[-3:]
+
+    resumed = len(probe.commands)
+    got = lifecycle(env, 'set', '/controller', 'activate')
+    assert 'Transitioning successful' in got.stdout, got
+    assert wait_gripping(probe), (probe.status[-3:], rig.log('controller'))
+    first = probe.commands[resumed][2]
+    # bumpless: a fresh controller from 0 A, its first step over the nominal state period,
+    # so one slew step at most (0.1 A, below the 0.2-0.3 A the needle grip held)
+    assert abs(first) <= PARAMS.max_current_slew / PARAMS.expected_state_rate + 1e-12, first
+    assert slew_violations(probe.commands) == [], slew_violations(probe.commands)[:5]
+    assert ctl.poll() is None, rig.log('controller')
+
+    # cleanup releases the topics: back to unconfigured, no publisher on the drive's topic
+    for transition in ('deactivate', 'cleanup'):
+        got = lifecycle(env, 'set', '/controller', transition)
+        assert 'Transitioning successful' in got.stdout, (got, rig.log('controller'))
+    assert lifecycle(env, 'get', '/controller').stdout.split() == ['unconfigured', '[1]']
+    servo = f'/{topics.SERVO_CURRENT}'
+    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+                 lambda r: 'Publisher count: 0' in r.stdout, timeout=30)
+    assert 'Publisher count: 0' in info.stdout, info
+    assert ctl.poll() is None and 'Traceback' not in rig.log('controller'), rig.log('controller')
+
+
+def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
+    probe, env, tmp = rig.probe, rig.env, rig.tmp
+    rig.master(OPEN)
+    # a wrong current-sensor zero to begin with: the tare must find the sim's (0 A)
+    rig.controller('-p', 'current_sensor_offset:=0.05')
+    assert wait_until(lambda: probe.mode() == 'free', 60.0), (probe.status[-3:],
+                                                              rig.log('controller'))
+    ok, message = trigger(env, 'tare', attempts=5)
+    assert ok, (message, rig.log('controller'))
+    # the sim's load cell reads 0.3 N too much (force_sensor_offset) and its current sensor
+    # has no offset; 200 samples of noise (0.02 N, 0.002 A) leave 1.4 mN and 0.14 mA of
+    # error: 10 mN and 2 mA are several standard errors
+    assert float(param(env, 'load_cell_offset')) == pytest.approx(0.3, abs=0.01), message
+    assert float(param(env, 'current_sensor_offset')) == pytest.approx(0.0, abs=0.002), message
+    assert 'load_cell_offset +0.29' in message or 'load_cell_offset +0.30' in message, message
+    assert 'was +0.0500' in message, message
+
+    ok, reason = set_object(env, 'tissue')
+    assert ok, reason
+    assert param(env, 'object_kind') == 'tissue'
+    ok, reason = set_object(env, 'bone')
+    assert not ok and "'bone' is not one of" in reason, reason
+    ok, reason = set_object(env, 'needle')     # what the sim holds: the calibration's object
+    assert ok and param(env, 'object_kind') == 'needle', reason
+
+    ok, message = trigger(env, 'calibrate', attempts=5)
+    assert ok, (message, rig.log('controller'))
+    written = tmp / 'cal.yaml'
+    fitted = load_params_file(written).pulley_friction_coefficient
+    # the sim's pulleys have 0.8 x the YAML's friction; as the offline fit of the same
+    # staircase (test_procedures.py), the plateaus fix mu to a few thousandths
+    assert fitted == pytest.approx(0.8 * PARAMS.pulley_friction_coefficient, abs=0.004), message
+    assert f'{fitted:.5f}' in message and str(written) in message
+    grasp = tmp / 'cal.log.csv'
+    assert str(grasp) in written.read_text() and grasp.stat().st_size > 0
+    values = read_params_yaml(written)
+    assert values['instrument_name'] == 'paper_needle_driver'
+    # the loop is the controller's again, following the open master
+    assert wait_until(lambda: probe.mode() == 'free', 10.0), probe.status[-3:]
+
+
+def test_autostart_false_waits_unconfigured_without_command(rig):
+    probe, env = rig.probe, rig.env
+    rig.master(OPEN)
+    # and without a load cell: the controller listens on a topic nobody publishes
+    ctl = rig.controller('-p', 'autostart:=false',
+                         '-r', f'{topics.MEASURED_FORCE}:=grip/no_load_cell')
+    got = lifecycle(env, 'get', '/controller')
+    assert got.stdout.split() == ['unconfigured', '[1]'], (got, rig.log('controller'))
+    time.sleep(1.0)
+    assert probe.commands == []
+    servo = f'/{topics.SERVO_CURRENT}'
+    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+                 lambda r: 'Subscription count: 1' in r.stdout, timeout=30)   # the sim's
+    assert 'Publisher count: 0' in info.stdout, info
+    recent = [i for t, i in probe.currents[-200:]]
+    assert recent and max(abs(i) for i in recent) < 6 * CURRENT_NOISE, recent[-5:]
+    ok, message = trigger(env, 'tare', attempts=5)
+    assert not ok and 'lifecycle state unconfigured' in message, message
+
+    got = lifecycle(env, 'set', '/controller', 'configure')
+    assert 'Transitioning successful' in got.stdout, (got, rig.log('controller'))
+    assert lifecycle(env, 'get', '/controller').stdout.split() == ['inactive', '[2]']
+    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+                 lambda r: 'Publisher count: 1' in r.stdout, timeout=30)
+    assert 'Publisher count: 1' in info.stdout, info
+    time.sleep(0.5)
+    assert probe.commands == []              # inactive: the publisher is idle
+
+    got = lifecycle(env, 'set', '/controller', 'activate')
+    assert 'Transitioning successful' in got.stdout, got
+    assert wait_until(lambda: probe.mode() == 'free' and len(probe.commands) > 100, 30.0), \
+        (probe.status[-3:], rig.log('controller'))
+    ok, message = trigger(env, 'calibrate', attempts=5)
+    assert not ok and 'no load cell' in message, message
+    ok, message = trigger(env, 'tare', attempts=5)
+    assert ok and 'no load cell' in message, message
+
+    got = lifecycle(env, 'set', '/controller', 'shutdown')
+    assert 'Transitioning successful' in got.stdout, got
+    assert ctl.wait(timeout=30) == 0, rig.log('controller')
+    log = rig.log('controller')
+    assert 'finalized' in log and 'Traceback' not in log, log
+
+
+def test_bad_parameter_file_still_exits_2_in_one_line(tmp_path):
+    require_ros_tools()
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(CONFIG.read_text().replace('max_current: 0.5', 'max_current: -1.0'))
+    got = run('ros2', 'run', 'grip_force_ros', 'controller', '--ros-args', '--params-file',
+              str(bad), timeout=60)
+    assert got.returncode == 2, got
+    lines = [line for line in got.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "'max_current'" in lines[0], got.stderr
+    assert Path(bad).is_file()
