@@ -77,6 +77,11 @@ class CrtkSimIO(SimIO):
     """The ``crtk`` profile: this package's topics, the current in A."""
 
     interface = 'crtk'
+    #: True: the joint state and load cell of a step go out once the command answering its
+    #: actuator state came in (the control step then uses them one period old); False: before
+    #: the actuator state, so the step on it uses all three of one sample. The benchmark's A/B
+    #: switch (``grip_force_ros.bench.order_ab``, BENCHMARKS.md), not a parameter.
+    defer_sensors = True
 
     def __init__(self, node, params, names: topics.TopicSet):
         super().__init__(node, params, names)
@@ -101,13 +106,9 @@ class CrtkSimIO(SimIO):
             self.publish_sensors()
 
     def publish_state(self, m, stamp) -> None:
-        """Publish a step's actuator state now, its joints and load cell once answered."""
+        """Publish a step's sensors: joint state and load cell first, or once answered."""
         if self.sensors_pending:        # no answer to the previous state came: now
             self.publish_sensors()
-        act = self._actuator_msg
-        act.header.stamp = stamp
-        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
-        self._actuator_pub.publish(act)
         js = self._joint_msg
         js.header.stamp = stamp
         js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
@@ -115,7 +116,13 @@ class CrtkSimIO(SimIO):
         force = self._force_msg
         force.header.stamp = stamp
         force.wrench.force.z = m.grip_force
-        self.sensors_pending = True     # sent once the command answering this state is in
+        if not self.defer_sensors:      # the step on the actuator state finds them in
+            self.publish_sensors()
+        act = self._actuator_msg
+        act.header.stamp = stamp
+        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
+        self._actuator_pub.publish(act)
+        self.sensors_pending = self.defer_sensors   # sent once the answering command is in
 
     def publish_sensors(self) -> None:
         """Joint state and load cell of the last step (stamped with the actuator state's time)."""
