@@ -20,8 +20,9 @@ import argparse
 import json
 import os
 import sys
+from dataclasses import replace
 
-from grip_force_ros.bench.loop import compare, run_floor, run_product
+from grip_force_ros.bench.loop import BEST, compare, run_floor, run_product
 from grip_force_ros.bench.procs import DomainLock
 from grip_force_ros.bench.run import parse_domains
 from grip_force_ros.params.files import instrument_path
@@ -52,7 +53,7 @@ def _row(name: str, loop: dict) -> dict:
 
 
 def run_ab(rounds: int, seconds: float, variants=tuple(VARIANTS), config: str | None = None,
-           domains=None, say=None) -> dict:
+           domains=None, rt_priority: int = 0, say=None) -> dict:
     """Measure ``rounds`` interleaved rounds: the floor, then each variant (rotated order).
 
     Returns
@@ -67,12 +68,12 @@ def run_ab(rounds: int, seconds: float, variants=tuple(VARIANTS), config: str | 
     runs = []
     with DomainLock(domains) as domain:
         for k in range(rounds):
-            floor = run_floor(seconds, domain)
+            floor = run_floor(seconds, domain, replace(BEST, rt_priority=rt_priority))
             order = list(variants[k % len(variants):]) + list(variants[:k % len(variants)])
             for name in order:
                 sensor_order, force_outputs = VARIANTS[name]
-                product = run_product(seconds, domain, config, sensor_order=sensor_order,
-                                      force_outputs=force_outputs)
+                product = run_product(seconds, domain, config, rt_priority=rt_priority,
+                                      sensor_order=sensor_order, force_outputs=force_outputs)
                 row = {'round': k, **_row(name, compare(floor, product))}
                 say(json.dumps(row))
                 runs.append(row)
@@ -83,7 +84,8 @@ def run_ab(rounds: int, seconds: float, variants=tuple(VARIANTS), config: str | 
                    'p99_ratio': [r['p99_ratio'] for r in rows],
                    'missed_over_floor': [r['missed_fraction'] - r['floor_missed_fraction'] for r in rows]}
         summary[name] = {key: {'mean': sum(v) / len(v), 'worst': max(v)} for key, v in figures.items() if v}
-    return {'rounds': rounds, 'seconds': seconds, 'config': config, 'runs': runs, 'summary': summary}
+    return {'rounds': rounds, 'seconds': seconds, 'config': config, 'rt_priority': rt_priority,
+            'runs': runs, 'summary': summary}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,13 +97,15 @@ def main(argv: list[str] | None = None) -> int:
                         help=f'comma-separated subset of {list(VARIANTS)}')
     parser.add_argument('--config', default=None, help='instrument YAML (path or shipped name)')
     parser.add_argument('--domain-ids', default=None, help="candidate ROS domains, e.g. '70-99'")
+    parser.add_argument('--rt-priority', type=int, default=0,
+                        help='SCHED_FIFO priority of the 1 kHz processes of floor and product (0: normal)')
     args = parser.parse_args(argv)
     variants = tuple(v.strip() for v in args.variants.split(',') if v.strip())
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         parser.error(f'unknown variant(s) {unknown}')
     result = run_ab(args.rounds, args.seconds, variants, args.config, parse_domains(args.domain_ids),
-                    say=lambda msg: print(msg, file=sys.stderr, flush=True))
+                    args.rt_priority, say=lambda msg: print(msg, file=sys.stderr, flush=True))
     print(json.dumps(result, indent=2))
     return 0
 
