@@ -62,7 +62,7 @@ class ControllerIO:
     #: True: the estimated and target force of a step go out when the instrument's next joint
     #: state comes in (before the next command at the latest); False: right after the command.
     #: The benchmark's A/B switch (BENCHMARKS.md), not a parameter.
-    defer_forces = True
+    defer_forces = False
 
     def __init__(self, node, params, names: topics.TopicSet):
         self.node = node
