@@ -61,7 +61,7 @@ class BenchController(ControllerNode):
         self.io.publish = noting_publish
 
     def records(self) -> dict[str, np.ndarray]:
-        """The noted steps, oldest first: one int64 array (ns) per column of :data:`COLUMNS`."""
+        """Return the noted steps, oldest first: one int64 array (ns) per column of :data:`COLUMNS`."""
         size = len(self._rows)
         rows = self._rows[:self._n] if self._n <= size else np.roll(self._rows, -(self._n % size), axis=0)
         return {name: rows[:, i].copy() for i, name in enumerate(COLUMNS)}
