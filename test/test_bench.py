@@ -73,6 +73,37 @@ def test_floor_and_product_count_unanswered_periods_alike():
     assert missed_periods(answered, 1e-3)['missed'] == 2
 
 
+def test_full_path_joins_each_answer_to_the_stamps_its_step_used():
+    """Arrival minus the oldest input's sample stamp; per input its path and its age at the step."""
+    from grip_force_ros.bench.stats import full_path
+    ms, us = 1_000_000, 1_000
+    n = 1000
+    states = 10**18 + np.arange(n, dtype=np.int64) * ms          # ns, sim sample stamps at 1 kHz
+    round_trip = np.full(n, 300 * us)                            # every command 0.3 ms after its state
+    stale = np.arange(n) % 2 == 1                                # odd steps: jaw one period old
+    jaw = np.where(stale, states - ms, states)
+    load_cell = states - ms                                      # always one period old
+    load_cell[:10] = 0                                           # none yet: not an input of those steps
+    steps = {'answered_ns': states[:-5], 'step_ns': states[:-5] + 100 * us,   # the last 5: no record
+             'actuator_ns': states[:-5], 'jaw_ns': jaw[:-5], 'load_cell_ns': load_cell[:-5]}
+    r = full_path(states, round_trip, steps, 1e-3)
+    assert r['samples'] == n - 5 and r['matched_fraction'] == pytest.approx((n - 5) / n)
+    # the first 10 steps had no load cell and a fresh jaw on even steps: 0.3 ms; the rest 1.3 ms
+    assert r['full_path']['max_ms'] == pytest.approx(1.3)
+    assert r['full_path']['p50_ms'] == pytest.approx(1.3)
+    assert r['full_path']['samples'] == n - 5
+    act, jaw_f, cell = (r['inputs'][k] for k in ('actuator', 'jaw', 'load_cell'))
+    assert act['to_command']['max_ms'] == pytest.approx(0.3)               # = the round trip
+    assert act['age_at_step']['max_ms'] == pytest.approx(0.1)
+    assert act['same_sample_fraction'] == 1.0
+    assert jaw_f['same_sample_fraction'] == pytest.approx(0.5, abs=0.002)
+    assert jaw_f['age_at_step']['max_ms'] == pytest.approx(1.1)
+    assert cell['used'] == n - 5 - 10 and cell['same_sample_fraction'] == 0.0
+    assert cell['to_command']['p50_ms'] == pytest.approx(1.3)
+    # never shorter than the round trip, whatever the inputs
+    assert r['full_path']['p50_ms'] >= act['to_command']['p50_ms']
+
+
 def test_model_speed_structure():
     from grip_force_ros.bench.model_speed import run_model
     from grip_force_ros.params.files import instrument_path
@@ -110,13 +141,28 @@ def test_bench_all_parts_tiny(tmp_path):
                   model_size=2000)
     json.dumps(r)                                             # serialisable as --json prints it
     loop, model, diag = r['loop'], r['model'], r['diagnosis']
-    for value in (loop['p99_ratio'], loop['missed_fraction'], model['forward_ratio'],
-                  model['step_share'], diag['load_ratio']):
+    for value in (loop['p99_ratio'], loop['full_path_p99_ratio'], loop['missed_fraction'],
+                  loop['floor_missed_fraction'], model['forward_ratio'], model['step_share'],
+                  diag['load_ratio']):
         assert math.isfinite(value) and value >= 0
-    for side in ('floor', 'product'):
+    for side in ('floor', 'product', 'full_path'):
         s = loop[side]
         assert s['samples'] > 100                             # ~1000 round trips in 1 s
         assert 0 < s['p50_ms'] <= s['p99_ms'] <= s['max_ms'] < 1000
+    # the full path starts at the oldest input a step used, the round trip at the actuator
+    # state: never shorter; the round trip is the actuator's own path
+    full, product = loop['full_path'], loop['product']
+    assert all(full[k] >= product[k] for k in ('p50_ms', 'p99_ms', 'max_ms'))
+    assert loop['full_path_p99_ratio'] >= loop['p99_ratio']
+    inputs = full['inputs']
+    assert set(inputs) == {'actuator', 'jaw', 'load_cell'}
+    # the controller keeps stamps as float seconds: 1.8e9 s in a float64 is exact to 0.24 us
+    assert inputs['actuator']['to_command']['p99_ms'] == pytest.approx(product['p99_ms'], abs=1e-3)
+    for name, f in inputs.items():                            # every sensor was an input
+        assert f['used'] > 100, name
+        assert 0 <= f['age_at_step']['p50_ms'] <= f['to_command']['p50_ms'], name
+    assert set(loop['goals_met']) == {'p99_ratio', 'full_path_p99_ratio', 'missed_fraction'}
+    assert loop['goals']['missed_fraction'] == pytest.approx(loop['floor_missed_fraction'] + 0.0005)
     assert 0 <= loop['missed_fraction'] <= 1
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
     assert set(loop['cpu_percent']['product']) == {'sim', 'controller', 'master'}
@@ -130,4 +176,4 @@ def test_bench_all_parts_tiny(tmp_path):
     assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
-    assert 'timer skipped' in text
+    assert 'timer skipped' in text and 'full path' in text and 'goals:' in text

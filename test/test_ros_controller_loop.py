@@ -213,21 +213,28 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
     assert servo.sec > 0
 
 
+class _Recorder:
+    """Stands in for a publisher: notes its name in ``log`` on every publish."""
+
+    def __init__(self, name, log):
+        self.name, self.log = name, log
+
+    def publish(self, msg):
+        self.log.append(self.name)
+
+
+def _record_outputs(ctl, log) -> None:
+    ctl.io._servo_pub, ctl.io._estimate_pub, ctl.io._target_pub = (
+        _Recorder('command', log), _Recorder('estimate', log), _Recorder('target', log))
+
+
 def test_command_at_once_forces_once_the_loop_has_closed(node):
     """The current command goes out in the step; estimated and target force when the
-    instrument's joint state comes in, or before the next step's command."""
+    instrument's joint state comes in, or before the next step's command (deferred)."""
     ctl, clock, steps = node
     log = []
-
-    class Recorder:
-        def __init__(self, name):
-            self.name = name
-
-        def publish(self, msg):
-            log.append(self.name)
-
-    ctl.io._servo_pub, ctl.io._estimate_pub, ctl.io._target_pub = (
-        Recorder('command'), Recorder('estimate'), Recorder('target'))
+    ctl.io.defer_forces = True
+    _record_outputs(ctl, log)
     _state(ctl)
     assert log == ['command']
     ctl.io._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
@@ -238,3 +245,16 @@ def test_command_at_once_forces_once_the_loop_has_closed(node):
     clock.now += ctl._period
     _state(ctl)                                                     # no joint state in between
     assert log[3:] == ['command', 'estimate', 'target', 'command']
+
+
+def test_forces_right_after_the_command_when_not_deferred(node):
+    """The plain order: command, estimated and target force in the step; a joint state sends nothing."""
+    ctl, clock, steps = node
+    log = []
+    ctl.io.defer_forces = False
+    _record_outputs(ctl, log)
+    _state(ctl)
+    assert log == ['command', 'estimate', 'target']
+    ctl.io._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
+                                      [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
+    assert log == ['command', 'estimate', 'target']

@@ -47,6 +47,7 @@ def _answer(node, stamp_ns, current=0.1):
 
 def test_actuator_state_first_the_rest_once_answered(sim):
     node, log = sim
+    node.io.defer_sensors = True
     node._last -= 1e-3
     node._tick()
     assert [name for name, _ in log] == ['actuator'], 'only the loop-closing state at once'
@@ -62,6 +63,7 @@ def test_actuator_state_first_the_rest_once_answered(sim):
 
 def test_unanswered_state_sends_its_sensors_before_the_next_step(sim):
     node, log = sim
+    node.io.defer_sensors = True
     node._last -= 1e-3
     node._tick()
     first = log[0][1]
@@ -77,3 +79,18 @@ def test_unanswered_state_sends_its_sensors_before_the_next_step(sim):
     assert len(log) == 6
     summary = node.loop.summary()
     assert summary['answered'] == 1 and summary['other_commands'] == 1
+
+
+def test_sensors_first_the_step_finds_the_same_sample(sim):
+    """The plain order: joint state and load cell of a sample before its actuator state, all at once."""
+    node, log = sim
+    node.io.defer_sensors = False
+    node._last -= 1e-3
+    node._tick()
+    assert [name for name, _ in log] == ['joint', 'force', 'actuator']
+    assert len({s for _, s in log}) == 1, 'one measurement time on all three'
+    _answer(node, log[0][1])
+    assert len(log) == 3, 'nothing left to send once answered'
+    node._last -= 1e-3
+    node._tick()                                  # the next step: the same order, a newer stamp
+    assert [name for name, _ in log[3:]] == ['joint', 'force', 'actuator'] and log[3][1] > log[0][1]

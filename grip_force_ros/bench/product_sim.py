@@ -21,6 +21,7 @@ import functools
 import sys
 import time
 
+import numpy as np
 from rclpy.utilities import remove_ros_args
 
 from grip_force_ros.bench.child import _Window
@@ -60,6 +61,9 @@ class BenchSim(SimInstrumentNode):
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, gc_freeze=False)
         self.finished = self.window.finished          # run_node stops when the window is over
         self.loop = _RecordingLoopLatency(self.window)
+        self._record_path = opts.record
+        if opts.sensor_order is not None:
+            self.io.defer_sensors = opts.sensor_order == 'deferred'
         self._bench_timer = self.create_timer(0.05, lambda: self.window.advance(self.summary))
 
     def _tick(self) -> None:
@@ -73,7 +77,11 @@ class BenchSim(SimInstrumentNode):
         w = self.window
         out = w.answer_summary(self.period)
         out.update({'states': w.sent, 'answered': w.n_latencies,
-                    'other_commands': self.loop.other_in_window})
+                    'other_commands': self.loop.other_in_window,
+                    'sensors_deferred': self.io.defer_sensors, 'period_s': self.period})
+        if self._record_path:          # every answer of the window, for the full path
+            np.savez(self._record_path, answered_ns=w.answered[:w.n_latencies],
+                     round_trip_ns=w.latencies[:w.n_latencies])
         return out
 
 
@@ -81,6 +89,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.product_sim')
     p.add_argument('--seconds', type=float, default=10.0, help='measurement window (s)')
     p.add_argument('--warmup', type=float, default=2.0, help='after the first answer (s)')
+    p.add_argument('--record', default=None, help='.npz of every answer of the window (stamp, round trip)')
+    p.add_argument('--sensor-order', choices=('deferred', 'first'), default=None,
+                   help='joint state and load cell once answered, or before the actuator state '
+                        "(default: the node's)")
     return p
 
 

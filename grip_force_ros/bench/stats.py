@@ -76,3 +76,60 @@ def ratio(numerator: float, denominator: float) -> float:
     except TypeError:
         pass
     return float('nan')
+
+
+#: The sensors a control step uses, by the controller's record column (product_controller.COLUMNS).
+FULL_PATH_INPUTS = {'actuator': 'actuator_ns', 'jaw': 'jaw_ns', 'load_cell': 'load_cell_ns'}
+
+
+def full_path(answered_ns, round_trip_ns, steps: dict, period_s: float) -> dict:
+    """Sensing-to-actuation latency: from the sample of every input a step used to its command.
+
+    The sim knows when each command arrived (``answered + round trip``, its clock); the
+    controller noted, per command, the sample stamps (the sim's measurement times) of the
+    inputs its step used. Joined on the answered actuator-state stamp.
+
+    Parameters
+    ----------
+    answered_ns, round_trip_ns : array_like of int
+        The sim's answers of one window: stamp of the actuator state answered, and
+        arrival minus that stamp (ns).
+    steps : dict of array_like of int
+        The controller's steps (ns): ``answered_ns``, ``step_ns`` (its clock at the step)
+        and the sample stamp of each input of :data:`FULL_PATH_INPUTS` (0: none).
+    period_s : float
+        Sample period of the sim (s): an input is of the same sample as the actuator
+        state when their stamps are less than half a period apart.
+
+    Returns
+    -------
+    dict
+        ``samples`` (answers joined to a step), ``matched_fraction`` (of the answers),
+        ``full_path`` (:func:`latency_summary` of arrival minus the oldest input's
+        stamp, ms), and per input ``inputs[name]``: ``to_command`` (arrival minus its
+        stamp), ``age_at_step`` (step time minus its stamp), ``same_sample_fraction``
+        (the step used the sample of the state it answers), ``used`` (steps that had one).
+        The full path is never shorter than the round trip (the actuator state is an input).
+    """
+    answered = np.asarray(answered_ns, np.int64)
+    arrival = answered + np.asarray(round_trip_ns, np.int64)
+    keys, first = np.unique(np.asarray(steps['answered_ns'], np.int64), return_index=True)
+    at = np.clip(np.searchsorted(keys, answered), 0, max(keys.size - 1, 0))
+    matched = (keys[at] == answered) if keys.size else np.zeros(answered.shape, bool)
+    rows = first[at[matched]]
+    arrival, answered = arrival[matched], answered[matched]
+    step = np.asarray(steps['step_ns'], np.int64)[rows]
+    oldest = answered.copy()              # the actuator state answered: exact, from the sim
+    inputs = {}
+    for name, column in FULL_PATH_INPUTS.items():
+        stamp = np.asarray(steps[column], np.int64)[rows]
+        used = stamp > 0
+        oldest = np.where(used, np.minimum(oldest, stamp), oldest)
+        same = np.abs(stamp[used] - answered[used]) < 0.5 * period_s * 1e9
+        inputs[name] = {'to_command': latency_summary(arrival[used] - stamp[used]),
+                        'age_at_step': latency_summary(step[used] - stamp[used]),
+                        'same_sample_fraction': float(same.mean()) if same.size else float('nan'),
+                        'used': int(used.sum())}
+    return {'samples': int(answered.size),
+            'matched_fraction': float(matched.mean()) if matched.size else float('nan'),
+            'full_path': latency_summary(arrival - oldest), 'inputs': inputs}

@@ -13,14 +13,10 @@ Subscribes (KEEP_LAST 1; only the newest sample matters):
     grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
 Publishes, every control step (one per instrument state, ``expected_state_rate``):
     instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
-        at once;
     grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
     grip/target_force                 force.z = target grip force (N)
-        when the instrument's next joint state comes in (the sim sends it once the
-        command reached it), at the latest before the next step's command, so that
-        they do not compete with the loop for the CPU while it closes (measured:
-        BENCHMARKS.md, "The controller sends the estimated and target force after
-        the loop has closed").
+        in this order, in the step (deferring the two forces until the loop had closed was
+        measured and dropped: BENCHMARKS.md, "Full path").
 and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
 
 Loop timing, as hardware interfaces do it: the control step runs when a fresh

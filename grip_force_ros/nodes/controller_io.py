@@ -63,6 +63,10 @@ class ControllerIO:
     """
 
     interface = ''
+    #: True: the estimated and target force of a step go out when the instrument's next joint
+    #: state comes in (before the next command at the latest); False: right after the command.
+    #: The benchmark's A/B switch (BENCHMARKS.md), not a parameter.
+    defer_forces = False
 
     def __init__(self, node, params, names: topics.TopicSet):
         self.node = node
@@ -173,6 +177,8 @@ class ControllerIO:
         target.header.stamp = stamp_msg
         target.wrench.force.z = out.target_force
         self.forces_pending = True
+        if not self.defer_forces:
+            self.publish_forces()
 
     def publish_forces(self) -> None:
         """Estimated and target force of the last step (stamped with its time)."""

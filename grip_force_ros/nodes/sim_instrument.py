@@ -13,16 +13,14 @@ simulation by the time actually elapsed since the last step (capped at
 :data:`MAX_STEP` or 2.5 periods, so a stalled process slows the simulation instead of
 integrating one huge step), with the last accepted current command held.
 Publishes each step's measurements, all with the same stamp (the time of the
-measurement), in this order:
-    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
-                                      effort = measured current (A)
-        at once: the controller steps on it;
+measurement), at once, in this order:
     instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s)
     grip/measured_force               force.z = load-cell grip force (N)
-        when the current command answering that state has come in (or at the next
-        step, if none came), so that they do not compete with the loop for the CPU
-        while it is closing (2 cores on the bench machine: in an interleaved A/B
-        this took ~40 us off the median round trip, BENCHMARKS.md).
+    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
+                                      effort = measured current (A)
+        last: the controller steps on it, so the step finds the jaw angle and load cell of
+        the same sample (sending those two only after the answering command shortened the
+        round trip but made the step use them one period old: BENCHMARKS.md, "Full path").
 and its status on ``/diagnostics`` at 1 Hz, with the loop's round trip over the
 last second: a command that carries the stamp of an actuator state it answers
 (the controller's convention) took arrival minus stamp, both on this node's clock

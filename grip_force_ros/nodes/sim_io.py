@@ -6,8 +6,9 @@ command and its drive-side timeout, and publishes /diagnostics; the profile obje
 
 ``crtk`` (:class:`CrtkSimIO`)
     command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A); sensors
-    ``instrument/actuator/measured_js`` (at once: the controller steps on it), then
-    ``instrument/measured_js`` and ``grip/measured_force`` once the answering command came.
+    ``instrument/measured_js`` and ``grip/measured_force``, then
+    ``instrument/actuator/measured_js`` (the controller steps on it, with the jaw angle and
+    load cell of the same sample).
 ``dvrk`` (:class:`DvrkSimIO`): the sim as a dVRK PSM named ``arm``
     command ``<arm>/jaw/servo_jf`` (jaw, effort = jaw effort, N*m; turned into the motor
     current with the dVRK's conversion, :mod:`grip_force_ros.model.dvrk_jaw`), taken only
@@ -15,8 +16,9 @@ command and its drive-side timeout, and publishes /diagnostics; the profile obje
     (``dvrk_jaw_effort_max``), refused with a warning otherwise; sensors ``<arm>/measured_js``
     (the PSM's six joints by name, :data:`grip_force_ros.topics.DVRK_PSM_JOINTS`; the sim
     moves only the wrist pitch, the others hold 0), ``<arm>/jaw/measured_js`` (jaw position,
-    velocity, effort computed from the measured current as the dVRK does) and the load cell
-    ``<arm>/grip/measured_force`` (not a dVRK topic: the sim's extra); the arm's
+    velocity, effort computed from the measured current as the dVRK does; sent last, the
+    controller steps on it) and the load cell ``<arm>/grip/measured_force`` (not a dVRK topic:
+    the sim's extra; sent before the jaw); the arm's
     ``<arm>/operating_state`` (crtk_msgs/OperatingState: published on every change and in
     answer to every state command, and a service of the same name) driven by
     ``<arm>/state_command`` (crtk_msgs/StringStamped: enable, disable, pause, resume, home,
@@ -77,6 +79,11 @@ class CrtkSimIO(SimIO):
     """The ``crtk`` profile: this package's topics, the current in A."""
 
     interface = 'crtk'
+    #: True: the joint state and load cell of a step go out once the command answering its
+    #: actuator state came in (the control step then uses them one period old); False: before
+    #: the actuator state, so the step on it uses all three of one sample. The benchmark's A/B
+    #: switch (``grip_force_ros.bench.order_ab``, BENCHMARKS.md), not a parameter.
+    defer_sensors = False
 
     def __init__(self, node, params, names: topics.TopicSet):
         super().__init__(node, params, names)
@@ -101,13 +108,9 @@ class CrtkSimIO(SimIO):
             self.publish_sensors()
 
     def publish_state(self, m, stamp) -> None:
-        """Publish a step's actuator state now, its joints and load cell once answered."""
+        """Publish a step's sensors: joint state and load cell first, or once answered."""
         if self.sensors_pending:        # no answer to the previous state came: now
             self.publish_sensors()
-        act = self._actuator_msg
-        act.header.stamp = stamp
-        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
-        self._actuator_pub.publish(act)
         js = self._joint_msg
         js.header.stamp = stamp
         js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
@@ -115,7 +118,13 @@ class CrtkSimIO(SimIO):
         force = self._force_msg
         force.header.stamp = stamp
         force.wrench.force.z = m.grip_force
-        self.sensors_pending = True     # sent once the command answering this state is in
+        if not self.defer_sensors:      # the step on the actuator state finds them in
+            self.publish_sensors()
+        act = self._actuator_msg
+        act.header.stamp = stamp
+        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
+        self._actuator_pub.publish(act)
+        self.sensors_pending = self.defer_sensors   # sent once the answering command is in
 
     def publish_sensors(self) -> None:
         """Joint state and load cell of the last step (stamped with the actuator state's time)."""
@@ -230,20 +239,20 @@ class DvrkSimIO(SimIO):
 
     # ------------------------------------------------------------------ sensors
     def publish_state(self, m, stamp) -> None:
-        """Publish a step's arm joints, then the jaw (the controller steps on it), then the cell."""
+        """Publish a step's arm joints and load cell, then the jaw (the controller steps on it)."""
         arm = self._arm_msg
         arm.header.stamp = stamp
         arm.position[self._wrist_index] = m.wrist_angle
         self._arm_pub.publish(arm)
+        force = self._force_msg
+        force.header.stamp = stamp
+        force.wrench.force.z = m.grip_force
+        self._force_pub.publish(force)
         jaw = self._jaw_msg
         jaw.header.stamp = stamp
         jaw.position[0], jaw.velocity[0] = m.jaw_angle, m.jaw_velocity
         jaw.effort[0] = self.conversion.effort(m.current)   # the dVRK: from the measured current
         self._jaw_pub.publish(jaw)
-        force = self._force_msg
-        force.header.stamp = stamp
-        force.wrench.force.z = m.grip_force
-        self._force_pub.publish(force)
 
     def status(self) -> dict[str, str]:
         """Key/value strings of the dvrk profile for /diagnostics."""
