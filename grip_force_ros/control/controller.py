@@ -18,9 +18,6 @@ PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
 #: Default time (s) in which the force target climbs from the estimate to the force map's
 #: target when grip resumes after the safe state (the map's target is then a step).
 RESUME_RAMP_TIME = 0.1
-#: Band (fraction of the largest force target) around the feedback force inside which the
-#: feedforward keeps its branch (loading / unloading) instead of switching.
-BRANCH_BAND = 0.02
 #: Time constant (s) of the low-pass on the measured current that moves the stick band's
 #: state: white current noise would otherwise ratchet the state to the noise's envelope.
 STICK_FILTER_TIME = 0.002
@@ -385,7 +382,7 @@ class GripController:
             # unloading has arrived, 'middle' holds it with the drum mid-band, where
             # current noise cannot ratchet the force along an edge.
             if hysteresis is not None:
-                band = BRANCH_BAND * self.force_max
+                band = self.params.stick_branch_band * self.force_max
                 branch = self.branch
                 if target_force > force + band:
                     branch = 'loading'

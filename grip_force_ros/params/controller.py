@@ -76,6 +76,13 @@ CONTROLLER = [
     _P('feedforward_enabled', 'bool', True, '',
        'Add the inverse-model current for the target force at the measured wrist and jaw angles.',
        group=_G),
+    _P('stick_branch_band', 'double', 0.02, '-',
+       'Sensorless: band (fraction of max_grip_force) around the estimated force inside which the '
+       "feedforward keeps its stick-band branch (loading / unloading) instead of switching. The "
+       'switch is a relay inside the force loop: too narrow a band on an instrument whose '
+       'friction grows with tension runs a limit cycle (four_pulley_needle_driver: 20 Hz at 0.02, '
+       'docs/control.md); a wide one leaves an unloading hold up to the band above its target.',
+       min=0.005, max=0.25, group=_G),
     # --- force map: master gripper angle -> jaw angle target or grip force target ------
     _P('master_angle_min', 'double', 0.0, 'rad',
        'Master gripper angle when fully closed; below it the angle is clamped and flagged.',
