@@ -224,6 +224,13 @@ def silence() -> Mutator:
     return mutate
 
 
+def then_silence(first: Mutator, ticks: int) -> Mutator:
+    """Apply ``first`` for ``ticks`` probe ticks, then publish nothing."""
+    def mutate(sample: dict, k: int) -> list:
+        return first(sample, k) if k < ticks else []
+    return mutate
+
+
 # ---------------------------------------------------------------------------- the catalogue
 def _message_cases() -> list[FaultCase]:
     C = FaultCase
@@ -351,6 +358,15 @@ def _message_cases() -> list[FaultCase]:
           'load cell stuck at 0 N (a dead sensor) while gripping: the force loop drives the current '
           'up, the current and slew limits must hold', 'bounded', 'force', set_field('force', 0, 0.0),
           ticks=150, sensor=True),
+        # the same dead sensor, then silent: the safe ramp starts from the wound-up current
+        # (max_current), the largest a safe ramp takes down. At the probe's default grip the
+        # paper instrument holds ~0.06-0.08 A, less than one slew step, where a missing slew
+        # limit cannot be seen at all.
+        C('force_sensor_stuck_then_silent', 'silence',
+          'load cell stuck at 0 N for 120 ms (the current winds up to max_current), then silent for '
+          '120 ms: the current and slew limits hold through the safe ramp from max_current',
+          'bounded', 'force', then_silence(set_field('force', 0, 0.0), 120), ticks=240,
+          sensor=True),
     ]
     # --- the simulated instrument restarts
     cases += [

@@ -52,7 +52,7 @@ DEFECTS = {d.name: d for d in (
     Defect('current_limit_off', 'the current limit is gone (slew limit kept)',
            ('force_sensor_stuck_at_zero',)),
     Defect('slew_limit_off', 'the slew limit is gone: the command may jump (current limit kept)',
-           ('silence_instrument', 'jaw_angle_above_range')),
+           ('silence_instrument', 'jaw_angle_above_range', 'force_sensor_stuck_then_silent')),
     Defect('watchdog_off', 'no input is ever stale: the watchdogs never trip',
            ('silence_master', 'silence_instrument', 'silence_actuator', 'frozen_stamp_actuator')),
     Defect('nan_passed_through', 'non-finite input values are stored as good samples',
