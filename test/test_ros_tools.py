@@ -102,13 +102,13 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
                        lambda r: '/instrument/actuator/servo_jf' in r.stdout.split(), timeout=30)
         assert {'/instrument/actuator/servo_jf', '/grip/estimated_force', '/diagnostics'} <= \
             set(topics.stdout.split()), topics.stdout
-        # ros2lifecycle: imports, lists its verbs, and finds no lifecycle node (yet).
+        # ros2lifecycle: imports, lists its verbs, and finds the controller, a lifecycle node
         helped = run('ros2', 'lifecycle', '--help', env=env)
         assert helped.returncode == 0, helped.stderr
         assert {'get', 'list', 'nodes', 'set'} <= set(re.findall(r'^\s+(\w+)\s', helped.stdout, re.M))
         lifecycle = run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time', '2', env=env)
         assert lifecycle.returncode == 0, lifecycle.stderr
-        assert '/controller' not in lifecycle.stdout.split()
+        assert '/controller' in lifecycle.stdout.split(), lifecycle.stdout
         assert proc.poll() is None
     finally:
         # ros2 run does not pass SIGINT on to its child: signal the process group.
