@@ -468,14 +468,15 @@ class CableFrictionObserver:
     # -- fitting ---------------------------------------------------------------------
     def _design(self, source, cache: dict | None = None):
         key = (id(source), self.settings)
-        if cache is not None and key in cache:
-            return cache[key]
+        hit = _cached(cache, key, source)
+        if hit is not None:
+            return hit
         inputs = motor_side_inputs(source)
         sig = _signals(inputs, self.settings)
         names, nuisance = _nuisance_columns(sig, self.settings)
         dt = _sample_period(inputs['t'])
         if cache is not None:
-            cache[key] = (sig, names, nuisance, dt)
+            cache[key] = (source, (sig, names, nuisance, dt))
         return sig, names, nuisance, dt
 
     def _rows(self, source, cache=None):
@@ -548,12 +549,13 @@ class CableFrictionObserver:
     def _normal_equations(self, source, cache=None):
         """(names, A'A, A'y, sliding samples, sum of torque, samples) of one run."""
         key = (id(source), self.settings, 'normal')
-        if cache is not None and key in cache:
-            return cache[key]
+        hit = _cached(cache, key, source)
+        if hit is not None:
+            return hit
         names, a, y, tau = self._rows(source, cache)
         out = (names, a.T @ a, a.T @ y, a.shape[0], float(np.sum(tau)), tau.size)
         if cache is not None:
-            cache[key] = out
+            cache[key] = (source, out)
         return out
 
     # -- coefficients ----------------------------------------------------------------
@@ -673,3 +675,16 @@ def rmse(estimator, runs: Sequence, *, skip_s: float = 0.0) -> float:
         se += float(np.sum(err ** 2))
         n += err.size
     return math.sqrt(se / n)
+
+
+def _cached(cache, key, source):
+    """Return the value cached under ``key`` for ``source``, or None.
+
+    Caches are keyed by ``id(source)``; Python reuses an id once an object is freed, so an
+    entry holds its source and counts only for that very object (a freed run's signals were
+    once served for a new run of another length).
+    """
+    if cache is None:
+        return None
+    entry = cache.get(key)
+    return entry[1] if entry is not None and entry[0] is source else None

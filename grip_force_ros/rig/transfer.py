@@ -661,9 +661,10 @@ def _alias(cache: dict, copy, original) -> list:
     object id, which Python reuses after an object is freed).
     """
     added = []
-    for key in [k for k in cache if isinstance(k, tuple) and len(k) == 2 and k[0] == id(original)]:
+    for key in [k for k in cache if isinstance(k, tuple) and len(k) == 2 and k[0] == id(original)
+                and cache[k][0] is original]:
         new = (id(copy),) + key[1:]
-        cache[new] = cache[key]
+        cache[new] = (copy, cache[key][1])       # the copy owns its alias (estimator._cached)
         added.append(new)
     return added
 
