@@ -82,10 +82,18 @@ def start(*args: str, log: Path, cwd: Path | str | None = None,
 
 
 def retry(fn, ok, timeout: float = 60.0, pause: float = 0.5):
-    """Call ``fn()`` until ``ok(result)`` or the timeout; return the last result."""
+    """Call ``fn()`` until ``ok(result)`` or the timeout; return the last result.
+
+    A ros2 CLI call that hangs past its own timeout (seen once in CI: ``ros2 lifecycle get``
+    before the node's services were discovered) is a failed try (return code -1), not the end
+    of the test.
+    """
     deadline = time.monotonic() + timeout
     while True:
-        result = fn()
+        try:
+            result = fn()
+        except subprocess.TimeoutExpired as exc:
+            result = subprocess.CompletedProcess(exc.cmd, -1, str(exc.stdout or ''), 'timed out')
         if ok(result) or time.monotonic() > deadline:
             return result
         time.sleep(pause)
