@@ -155,6 +155,23 @@ def test_limit_monitor_counts_every_kind_of_violation():
     assert 'non-finite' in m.violations[2]
 
 
+def test_limit_monitor_across_a_stall_of_its_own_process():
+    """The probe's receipt times do not span a stall of its own process: the command that
+    waited through it and the controller's first step after it arrive back to back. Those
+    two are bounded by max_current and finiteness only; the slew bound is back after them."""
+    from grip_force_ros.faults.probe import LimitMonitor
+    m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
+    m.check(0.30, t=0.000, stamp=0.000)
+    m.observer_stalled()                       # 35 ms without a callback of the probe
+    m.check(0.30, t=0.035, stamp=0.001)       # waited in the queue through the stall
+    m.check(0.00, t=0.0351, stamp=0.002)      # the step over the stall: from the measured current
+    assert m.violations == []
+    m.check(0.6, t=0.0352, stamp=0.003)       # max_current holds even then
+    m.check(0.25, t=0.0362, stamp=0.004)      # -0.35 A in a period: slew bound back
+    assert len(m.violations) == 2
+    assert 'max_current' in m.violations[0] and 'slew' in m.violations[1]
+
+
 def test_time_message_conversion():
     from grip_force_ros.faults.probe import to_time_msg
     t = to_time_msg(12.25)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
@@ -87,8 +88,21 @@ class LimitMonitor:
         self.previous: float | None = None
         self.previous_time = math.nan
         self.previous_stamp = math.nan
+        self.unbounded_left = 0
         self.count = 0
         self.violations: list[str] = []
+
+    def observer_stalled(self) -> None:
+        """Note that the checking process itself was stalled longer than ``max_period``.
+
+        Receipt times across the stall are not the controller's timing: a command that
+        waited in this process's queue through the stall is received just before the first
+        command the controller sent after it, and that one may be a step over the whole
+        stall (from the measured current, by design). The next two commands (whichever of
+        the two this process takes first) are checked for finiteness and ``max_current``
+        only.
+        """
+        self.unbounded_left = 2
 
     def check(self, command: float, t: float = math.nan, stamp: float = math.nan) -> None:
         """Check one command received at ``t`` (s, the probe's clock; nan: one period).
@@ -109,6 +123,9 @@ class LimitMonitor:
             dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
                   else max(gap, self.period) + DELIVERY_JITTER * self.period)
             step = self.max_step * dt / self.period
+        if self.unbounded_left > 0:
+            self.unbounded_left -= 1
+            step = math.inf
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
         elif abs(command) > self.max_current * (1 + 1e-9) + 1e-12:
@@ -195,6 +212,8 @@ class FaultProbe(Node):
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, RECORD_QOS)
         self.ticks = 0
+        self._last_wake = math.inf   # time.monotonic() of the last callback (see _woken)
+        self.own_stalls = 0          # stalls of this process longer than the watchdog
         self.timer = self.create_timer(self.period, self._tick)
 
     # ------------------------------------------------------------------ clock
@@ -245,6 +264,7 @@ class FaultProbe(Node):
         }
 
     def _tick(self) -> None:
+        self._woken()
         self.ticks += 1
         if self.relay is None:
             self.plant.step(self.command, self.period)
@@ -351,7 +371,16 @@ class FaultProbe(Node):
     def _stamp(msg) -> float:
         return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
+    def _woken(self) -> None:
+        """Note a callback of this process; a gap longer than the watchdog is its own stall."""
+        now = time.monotonic()
+        if now - self._last_wake > self.limits.max_period:
+            self.limits.observer_stalled()
+            self.own_stalls += 1
+        self._last_wake = now
+
     def _on_command(self, msg: JointState) -> None:
+        self._woken()
         value = float(msg.effort[0]) if len(msg.effort) else math.nan
         self.command = value if math.isfinite(value) else 0.0
         self.limits.check(value, self.now(), self._stamp(msg))

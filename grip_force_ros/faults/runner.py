@@ -376,17 +376,19 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         else:
             grip_share = (len(window) - len(safe_rows)) / max(len(window), 1)
         detail['grip_share'] = round(grip_share, 3)
-        # A watchdog trip from a scheduling stall of a loaded machine is not this fault's
-        # doing; a safe state for any other reason is.
+        # A watchdog trip from a scheduling stall of a loaded machine (an input gone stale,
+        # or the controller's own step interval beyond the watchdog: 'the controller was
+        # stalled') is not this fault's doing; a safe state for any other reason is.
         unsafe = [d[1] for d in probe.diagnostics
-                  if d[0] <= t1 + 0.005 and _diag_mode(d[2]) is Mode.SAFE and 'stale' not in d[1]]
+                  if d[0] <= t1 + 0.005 and _diag_mode(d[2]) is Mode.SAFE
+                  and not _scheduling_stall(d[1])]
         if unsafe:
             problems.append(f'went to the safe state: {unsafe[0][:200]}')
         if grip_share < 0.5 and unsafe:
             problems.append(f'left grip in {1 - grip_share:.0%} of the fault window')
-        elif grip_share < 0.5:   # only for stale inputs: the machine starved the loop
+        elif grip_share < 0.5:   # only for stale inputs or stalls: the machine starved the loop
             detail['spoiled'] = (f'left grip in {1 - grip_share:.0%} of the fault window for '
-                                 'stale inputs only (a starved process)')
+                                 'stale inputs or a stalled controller only (a starved process)')
     if case.outcome == 'bounded':   # a wrong but plausible input: only the limits stand
         commands = [abs(r[2]) for r in window]
         detail['peak_command'] = max(commands) if commands else math.nan
@@ -407,13 +409,23 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     return detail
 
 
+def _scheduling_stall(reason: str) -> bool:
+    """Whether a safe-state reason is a stall of the machine.
+
+    An input gone stale, or the controller's own step interval beyond its watchdog
+    (control/controller.py: 'the controller was stalled').
+    """
+    return 'stale' in reason or 'the controller was stalled' in reason
+
+
 def run_case_redoing_spoiled(session: Session, case: FaultCase) -> dict:
     """Run a message case; a trial spoiled by the machine is redone, at most twice.
 
     Spoiled: a watchdog case whose output went safe before its own input's timeout because
     another input was lost first, or a case that must not leave grip whose output did for
-    stale inputs only (a starved process on a loaded machine: found with 10 kHz bursts
-    relayed from the sim process at load 11). The third spoiled trial fails with its cause.
+    stale inputs or a stall of the controller's own process only (a starved process on a
+    loaded machine: found with 10 kHz bursts relayed from the sim process at load 11, and a
+    33 ms stall of the in-process controller at load 5). The third spoiled trial fails with its cause.
     """
     spoiled = []
     for _ in range(CASE_ATTEMPTS):
@@ -423,7 +435,8 @@ def run_case_redoing_spoiled(session: Session, case: FaultCase) -> dict:
         spoiled.append(detail['spoiled'])
     else:
         detail['passed'] = False
-        detail['why'] = f'spoiled {CASE_ATTEMPTS} times by another lost input: ' + ' | '.join(spoiled)
+        detail['why'] = (f'spoiled {CASE_ATTEMPTS} times by another lost input or a stall: '
+                         + ' | '.join(spoiled))
     detail['spoiled_trials'] = spoiled
     return detail
 
