@@ -12,8 +12,9 @@ from grip_force_ros import topics
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.compare import calibration_csv, plant_scales
 from grip_force_ros.demo.naive_node import closing_share
-from grip_force_ros.nodes.processes import (ProcessGroup, domain_in_use, pick_domain_ids, ros_args,
-                                            ros_environment)
+from grip_force_ros.nodes.processes import (NodeProcess, ProcessGroup, can_use_realtime,
+                                            domain_in_use, pick_domain_ids, ros_args,
+                                            ros_environment, scheduling_of)
 from grip_force_ros.demo.run import TaskClock
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
@@ -72,6 +73,36 @@ def test_group_reports_a_dead_process_with_its_output(tmp_path):
         time.sleep(0.8)
         with pytest.raises(Exception, match='(?s)broken exited with code 1.*bad parameter file'):
             group.check_alive()
+
+
+def test_rt_priority_puts_every_thread_of_the_child_under_sched_fifo(tmp_path):
+    """The 1 kHz nodes' scheduling: SCHED_FIFO for the process and every thread it starts
+    later (the DDS receive threads, the executor), as chrt -f would; where the machine does
+    not permit it, normal scheduling and the reason."""
+    script = ('import os, threading, time\n'
+              'seen = []\n'
+              't = threading.Thread(target=lambda: seen.append(os.sched_getscheduler(0)))\n'
+              't.start(); t.join()\n'
+              'print(os.sched_getscheduler(0), seen[0], os.sched_getparam(0).sched_priority, flush=True)\n'
+              'time.sleep(30)\n')
+    with pytest.raises(ValueError, match='1..99'):
+        NodeProcess('bad', command=[sys.executable, '-c', 'pass'], rt_priority=120)
+    proc = NodeProcess('rt', command=[sys.executable, '-c', script], rt_priority=50,
+                       log_path=tmp_path / 'rt.log')
+    try:
+        deadline = time.monotonic() + 20.0
+        while not proc.log_tail() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        main_policy, thread_policy, priority = map(int, proc.log_tail().split())
+        if can_use_realtime(50):
+            assert proc.scheduling == 'SCHED_FIFO 50' == scheduling_of(proc.pid)
+            assert main_policy == thread_policy == os.SCHED_FIFO and priority == 50
+        else:   # e.g. a container without CAP_SYS_NICE: the node still runs, and says so
+            assert 'not permitted' in proc.scheduling and scheduling_of(proc.pid) == 'normal'
+            assert main_policy == thread_policy == os.SCHED_OTHER and priority == 0
+    finally:
+        proc.signal(signal.SIGKILL)
+        proc.popen.wait()
 
 
 # ---------------------------------------------------------------- trajectories of the demo

@@ -14,7 +14,7 @@ from typing import Sequence
 
 import psutil
 
-from grip_force_ros.nodes.processes import NodeProcess, ProcessError, held_domains, reserve_domains
+from grip_force_ros.nodes.processes import NodeProcess, ProcessError, held_domains, realtime, reserve_domains
 
 
 class BenchError(RuntimeError):
@@ -61,30 +61,6 @@ class DomainLock:
         if self._reservation is not None:
             self._reservation.release()
             self._reservation = None
-
-
-def realtime(priority: int):
-    """Return a ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
-
-    Set before ``exec``, so every thread the process starts (the executor, the DDS
-    receive threads) inherits it, as ``chrt -f <priority> <cmd>`` would. Needs
-    CAP_SYS_NICE (root or an rtprio limit); raises in the child otherwise. The
-    kernel's RT throttling (``sched_rt_runtime_us``) still leaves other work 5 %.
-    """
-    def apply() -> None:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    return apply
-
-
-def can_use_realtime(priority: int = 1) -> bool:
-    """Whether this process may start SCHED_FIFO children."""
-    try:
-        before = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        os.sched_setscheduler(0, before[0], before[1])
-        return True
-    except (OSError, AttributeError):
-        return False
 
 
 class Child(NodeProcess):

@@ -140,7 +140,7 @@ def run(args) -> int:
         print('grip-force bench: --rt-priority must be in 0..99', file=sys.stderr)
         return 2
     if args.rt_priority:
-        from grip_force_ros.bench.procs import can_use_realtime
+        from grip_force_ros.nodes.processes import can_use_realtime
         if not can_use_realtime(args.rt_priority):
             print('grip-force bench: SCHED_FIFO not permitted here (needs CAP_SYS_NICE or an rtprio '
                   'limit); run without --rt-priority', file=sys.stderr)

@@ -52,6 +52,11 @@ def add_arguments(parser) -> None:
     parser.add_argument('--master', default='MTML',
                         help='--interface dvrk: the master (default MTML)')
     parser.add_argument('--quiet', action='store_true', help='no live progress')
+    parser.add_argument('--rt-priority', type=int, default=None, metavar='N',
+                        help='SCHED_FIFO priority of the 1 kHz nodes (sim, controller), like chrt -f N '
+                             '(default 50 where the machine permits it, as ros2_control runs its '
+                             'loop; else normal scheduling, said in the JSON "scheduling"; '
+                             '0 = normal scheduling)')
 
 
 def _default_out(kind: str) -> Path:
@@ -103,6 +108,9 @@ def print_report(result: dict, stream=sys.stdout) -> None:
       + (' (an input lost: older than its watchdog timeout)' if events else '') + '\n')
     for problem in result.get('problems') or []:
         w(f"WARNING           {problem} (a starved node: the machine is overloaded)\n")
+    sched = result.get('scheduling') or {}
+    if sched:
+        w('scheduling        ' + ', '.join(f'{k} {v}' for k, v in sched.items()) + '\n')
     w(f"bag               {result['bag']} ({sum(result['messages'].values())} messages)\n")
     w(f"plot              {result['plot']}\n")
 
@@ -115,6 +123,9 @@ def run(args) -> int:
     _sigterm_as_interrupt()
     if args.duration is not None and args.duration <= 0:
         print('error: --duration must be > 0 s', file=sys.stderr)
+        return 2
+    if args.rt_priority is not None and not 0 <= args.rt_priority <= 99:
+        print('error: --rt-priority must be 0 (normal scheduling) or 1..99', file=sys.stderr)
         return 2
     if args.out and Path(args.out).exists() and any(Path(args.out).iterdir()):
         # a run writes bags, which are never overwritten: refuse before starting any node
@@ -132,7 +143,7 @@ def run(args) -> int:
                 out, configs=configs, plant_error=args.plant_error,
                 parallel=args.parallel, domain_id=args.domain_id,
                 task_duration=args.duration or TASK_DURATION,
-                log=None if args.quiet else sys.stderr)
+                log=None if args.quiet else sys.stderr, rt_priority=args.rt_priority)
             if args.json:
                 print(json.dumps(report, indent=1))
             else:
@@ -149,7 +160,8 @@ def run(args) -> int:
         domain = args.domain_id if held is None else held.domain_id
         spec = RunSpec(config=config, duration=args.duration or DEMO_DURATION,
                        label=params.instrument_name, interface=args.interface, arm=args.arm,
-                       master=args.master)
+                       master=args.master,
+                       **({} if args.rt_priority is None else {'rt_priority': args.rt_priority}))
         progress = None if args.quiet else Progress(sys.stderr)
         if progress is not None:
             sys.stderr.write(f'grip-force demo: {params.instrument_name}, {args.interface} '

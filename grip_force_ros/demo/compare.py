@@ -158,7 +158,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                         plant_error: float = 0.2, parallel: bool = False,
                         domain_id: int | None = None, task_duration: float = TASK_DURATION,
                         log: TextIO | None = None, conditions: Sequence[str] = CONDITIONS,
-                        plot: bool = True) -> dict[str, Any]:
+                        plot: bool = True, rt_priority: int | None = None) -> dict[str, Any]:
     """Calibrate, then run the four conditions on every instrument; return the report.
 
     Parameters
@@ -183,6 +183,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         of the calibrated sensorless spread runs 'controlled' only).
     plot : bool
         Draw ``compare.png`` (needs every condition).
+    rt_priority : int, optional
+        SCHED_FIFO priority of every run's sim and controller (default: :class:`RunSpec`'s;
+        0: normal scheduling).
 
     Returns
     -------
@@ -215,6 +218,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         held = reserve_domains(n)
         domains = held.ids
     scales = [plant_scales(k, plant_error) for k in range(n)]
+    scheduling = {} if rt_priority is None else {'rt_priority': rt_priority}
     gain = naive_gain(configs[0])
     _log(log, f'compare: {n} instruments {names}, plants off by {plant_error:.0%} '
               f'(friction, stiffness), naive gain {gain:.4f} A, domains {domains}')
@@ -235,7 +239,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                                       'naive_current_closed': calibration_current(params)},
                                   sim_overrides=scales[k],
                                   master_overrides={'trajectory': 'csv',
-                                                    'trajectory_file': str(csv_path.resolve())}),
+                                                    'trajectory_file': str(csv_path.resolve())},
+                                  **scheduling),
                      'out_dir': str(out_dir / names[k] / 'calibration'),
                      'domain_id': domains[k], 'analyse': False, 'plot': False})
     calib_runs = _run_all(jobs, parallel, log)
@@ -255,7 +260,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     # --- 2..5. the four conditions -------------------------------------------------------
     def spec_for(condition: str, k: int) -> dict:
         base = dict(config=configs[k], sim_config=configs[k], duration=task_duration,
-                    label=f'{names[k]}/{condition}', sim_overrides=scales[k])
+                    label=f'{names[k]}/{condition}', sim_overrides=scales[k], **scheduling)
         if condition == 'controlled':
             base.update(config=calibrated[k], controller_overrides={'force_sensor_enabled': False})
         elif condition == 'uncalibrated':
@@ -287,6 +292,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                 'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag'],
                 'problems': r.get('problems', []), 'spoiled_attempts': r['spoiled_attempts'],
                 'late_inputs': r.get('late_inputs') or {},
+                'scheduling': r.get('scheduling') or {},
                 'safe_state_entries': len(r.get('safe_state_entries') or [])}
         instruments.append(per)
     report: dict[str, Any] = {'instruments': instruments, 'conditions': list(conditions)}

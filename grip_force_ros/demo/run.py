@@ -23,8 +23,9 @@ from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import RecordedTopics, recorded_topics
-from grip_force_ros.nodes.processes import (ProcessError, ProcessGroup, node_command, python_module,
-                                            ros_args, ros_environment, ros_tools_environment)
+from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, ProcessError, ProcessGroup,
+                                            node_command, python_module, ros_args,
+                                            ros_environment, ros_tools_environment)
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
 
@@ -73,6 +74,11 @@ class RunSpec:
         The nodes' interface profile (``crtk``, or ``dvrk`` with the dVRK arm and master
         names): the sim plays the arm, the master is the dVRK master, the controller asks
         the arm to enable and home (``request_enable``: no console here).
+    rt_priority : int
+        SCHED_FIFO priority of the two 1 kHz processes (sim and controller) where the
+        machine permits it (default :data:`~grip_force_ros.nodes.processes.DEFAULT_RT_PRIORITY`,
+        as ros2_control's controller manager runs its loop); 0: normal scheduling. The
+        master (250 Hz, 0.1 s watchdog) and the recorder keep normal scheduling.
     """
 
     config: Path
@@ -86,6 +92,7 @@ class RunSpec:
     interface: str = 'crtk'
     arm: str = 'PSM1'
     master: str = 'MTML'
+    rt_priority: int = DEFAULT_RT_PRIORITY
 
     def profile(self) -> dict[str, Any]:
         """Return the interface parameters every node gets (``-p``)."""
@@ -135,6 +142,7 @@ class RunResult:
     safe_events: list = field(default_factory=list)
     late_inputs: dict = field(default_factory=dict)
     problems: list = field(default_factory=list)
+    scheduling: dict = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -151,7 +159,7 @@ class RunResult:
             'messages': self.counts, 'exit_codes': self.exit_codes,
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
             'metrics': self.metrics, 'safe_state_entries': self.safe_events,
-            'late_inputs': self.late_inputs,
+            'late_inputs': self.late_inputs, 'scheduling': self.scheduling,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
@@ -349,6 +357,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     recorded = spec.recorded()
     names = recorded.names
     timing: dict[str, float] = {}
+    scheduling: dict[str, str] = {}
     t_begin = time.monotonic()
     # dvrk: the nodes need crtk_msgs, which the sourced ROS tools environment provides
     env = ros_environment(domain_id, base=ros_tools_environment() if spec.interface == 'dvrk'
@@ -363,9 +372,11 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
         spinner = SpinThread(recorder).start()
         with group:
             # all three at once: the master starts held, so nothing happens before it is told
-            group.start('sim_instrument', _node_argv('sim_instrument', spec))
-            group.start('controller', _node_argv('controller', spec))
+            for name in ('sim_instrument', 'controller'):
+                proc = group.start(name, _node_argv(name, spec), rt_priority=spec.rt_priority)
+                scheduling[name] = proc.scheduling
             master = group.start('master', _node_argv('master', spec))
+            scheduling['master'] = master.scheduling
             # (dvrk: the controller sends its first command once it has enabled the arm)
             needed = [names.actuator_js, names.instrument_js, names.command, names.master_js]
             _wait_for(lambda: all(recorder.count(t) > 0 for t in needed),
@@ -399,7 +410,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             recorder.destroy_node()
         rclpy.shutdown(context=context)
     result = RunResult(spec, out_dir, bag_path, domain_id, counts, exit_codes, trajectory,
-                       timing=timing)
+                       timing=timing, scheduling=scheduling)
     if analyse:
         analyse_run(result, plot=plot)
     timing['total'] = time.monotonic() - t_begin

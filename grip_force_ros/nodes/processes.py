@@ -12,6 +12,9 @@ The one owner of
 * the process (:class:`NodeProcess`): started with its output in a log file,
   paused, stopped with escalation (SIGINT, SIGTERM, SIGKILL) whatever happens;
   :class:`ProcessGroup` starts several and stops them together, in reverse order;
+* the scheduling of a 1 kHz node (:func:`realtime`, :func:`can_use_realtime`,
+  :func:`scheduling_of`): SCHED_FIFO as ``chrt -f N`` or ros2_control's controller manager
+  (``thread_priority``, 50) give it, where the machine permits;
 * a free ROS domain on this machine (:func:`pick_domain_ids`), held for a run
   (:func:`reserve_domains`: no DDS port bound, and a lock file no other run holds).
 
@@ -234,6 +237,52 @@ def node_command(name: str, params_file: str | os.PathLike | None = None,
     return node_executable(name) + ros_args(params_file, params, **ros_options)
 
 
+# ---------------------------------------------------------------- scheduling
+#: SCHED_FIFO priority of the 1 kHz nodes (sim, controller) where permitted: ros2_control's
+#: controller manager uses 50 for its control thread (its ``thread_priority`` default).
+DEFAULT_RT_PRIORITY = 50
+
+
+def realtime(priority: int) -> Callable[[], None]:
+    """Return a ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
+
+    Set before ``exec``, so every thread the process starts (the executor, the DDS
+    receive threads) inherits it, as ``chrt -f <priority> <cmd>`` would. Needs
+    CAP_SYS_NICE (root or an rtprio limit); raises in the child otherwise. The
+    kernel's RT throttling (``sched_rt_runtime_us``) still leaves other work 5 %.
+    """
+    if not 1 <= priority <= 99:
+        raise ValueError(f'SCHED_FIFO priority must be 1..99, got {priority}')
+
+    def apply() -> None:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    return apply
+
+
+def can_use_realtime(priority: int = 1) -> bool:
+    """Whether this process may start SCHED_FIFO children (tried on itself, then undone)."""
+    try:
+        before = os.sched_getscheduler(0), os.sched_getparam(0)
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, before[0], before[1])
+        return True
+    except (OSError, AttributeError):
+        return False
+
+
+def scheduling_of(pid: int) -> str:
+    """Return the scheduling policy of process ``pid`` as text ('SCHED_FIFO 50', 'normal')."""
+    try:
+        policy = os.sched_getscheduler(pid)
+        if policy == os.SCHED_FIFO:
+            return f'SCHED_FIFO {os.sched_getparam(pid).sched_priority}'
+        if policy == os.SCHED_RR:
+            return f'SCHED_RR {os.sched_getparam(pid).sched_priority}'
+        return 'normal'
+    except OSError:
+        return 'unknown'
+
+
 # ---------------------------------------------------------------- processes
 def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
@@ -247,6 +296,14 @@ def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
         if preexec_fn is not None:
             preexec_fn()
     return setup
+
+
+def _both(first: Callable[[], None], then: Callable[[], None] | None) -> Callable[[], None]:
+    def run() -> None:
+        first()
+        if then is not None:
+            then()
+    return run
 
 
 class NodeProcess:
@@ -273,6 +330,10 @@ class NodeProcess:
         instead of a log file.
     preexec_fn : callable, optional
         Run in the child before ``exec`` (e.g. a scheduling policy).
+    rt_priority : int
+        0 (normal scheduling), or the SCHED_FIFO priority of the child (1..99) where this
+        machine permits it (:func:`can_use_realtime`); where not, the child runs with
+        normal scheduling and :attr:`scheduling` says why.
 
     Raises
     ------
@@ -284,8 +345,18 @@ class NodeProcess:
                  params: Mapping[str, Any] | None = None, *, command: Sequence[str] | None = None,
                  env: Mapping[str, str] | None = None, log_path: str | os.PathLike | None = None,
                  own_session: bool = False, pipe: bool = False,
-                 preexec_fn: Callable[[], None] | None = None):
+                 preexec_fn: Callable[[], None] | None = None, rt_priority: int = 0):
         self.name = name
+        #: The child's scheduling as asked and got ('normal', 'SCHED_FIFO 50', or why not).
+        self.scheduling = 'normal'
+        if not 0 <= rt_priority <= 99:
+            raise ValueError(f'rt_priority must be 0 (normal) or 1..99, got {rt_priority}')
+        if rt_priority:
+            if can_use_realtime(rt_priority):
+                preexec_fn = _both(realtime(rt_priority), preexec_fn)
+                self.scheduling = f'SCHED_FIFO {rt_priority}'
+            else:
+                self.scheduling = f'normal (SCHED_FIFO {rt_priority} not permitted here)'
         self.command = list(command) if command is not None else node_command(name, params_file, params)
         self.log_path = Path(log_path) if log_path is not None else None
         self.own_session = own_session
@@ -385,11 +456,16 @@ class ProcessGroup:
     grace: float = 3.0
     processes: list[NodeProcess] = field(default_factory=list)
 
-    def start(self, name: str, argv: Sequence[str], *, label: str | None = None) -> NodeProcess:
-        """Start ``argv`` (its output goes to ``<log_dir>/<label>.log``)."""
+    def start(self, name: str, argv: Sequence[str], *, label: str | None = None,
+              rt_priority: int = 0) -> NodeProcess:
+        """Start ``argv``; its output goes to ``<log_dir>/<label>.log``.
+
+        ``rt_priority``: as :class:`NodeProcess`.
+        """
         label = label or name
         log_path = self.log_dir / f'{label}.log' if self.log_dir is not None else None
-        proc = NodeProcess(label, command=argv, env=self.env, log_path=log_path, own_session=True)
+        proc = NodeProcess(label, command=argv, env=self.env, log_path=log_path, own_session=True,
+                           rt_priority=rt_priority)
         self.processes.append(proc)
         return proc
 
