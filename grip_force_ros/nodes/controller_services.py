@@ -47,6 +47,7 @@ from std_srvs.srv import Trigger
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
+from grip_force_ros.objects import OBJECTS
 from grip_force_ros.identify.procedures import (CurrentStaircase, GraspRecording, SensorZero,
                                                 calibration_current)
 from grip_force_ros.nodes.processes import python_module
@@ -459,8 +460,8 @@ class ControllerServices:
         node = self.node
         change = next((p for p in parameters if p.name == 'object_kind'
                        and p.value != node.params.object_kind), None)
-        if change is None:
-            return None
+        if change is None or change.value not in OBJECTS:
+            return None   # no change, or a value the schema's own check refuses, with its reason
         if isinstance(node.procedure, Calibration):
             return f'object_kind cannot change during ~/calibrate ({node.procedure.status()})'
         out = node.last_output
