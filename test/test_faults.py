@@ -156,20 +156,25 @@ def test_limit_monitor_counts_every_kind_of_violation():
 
 
 def test_limit_monitor_across_a_stall_of_its_own_process():
-    """The probe's receipt times do not span a stall of its own process: the command that
-    waited through it and the controller's first step after it arrive back to back. Those
-    two are bounded by max_current and finiteness only; the slew bound is back after them."""
+    """The probe's receipt times do not span a stall of its own thread: the command that
+    waited through it and the controller's first step after it (which integrated the stall)
+    arrive back to back. The stall's duration is added to the time of those two commands;
+    past the watchdog they are bounded by max_current and finiteness only; the plain slew
+    bound is back after them."""
     from grip_force_ros.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
-    m.check(0.30, t=0.000, stamp=0.000)
-    m.observer_stalled()                       # 35 ms without a callback of the probe
-    m.check(0.30, t=0.035, stamp=0.001)       # waited in the queue through the stall
-    m.check(0.00, t=0.0351, stamp=0.002)      # the step over the stall: from the measured current
+    m.check(0.10, t=0.000, stamp=0.000)
+    m.observer_stalled(0.004)                 # the thread held 4 ms (a slow callback)
+    m.check(0.10, t=0.005, stamp=0.001)       # waited in the queue through it
+    m.check(0.46, t=0.0052, stamp=0.002)      # +0.36 A over a 5 ms step: 100 A/s allows 0.6 A
     assert m.violations == []
-    m.check(0.6, t=0.0352, stamp=0.003)       # max_current holds even then
-    m.check(0.25, t=0.0362, stamp=0.004)      # -0.35 A in a period: slew bound back
-    assert len(m.violations) == 2
-    assert 'max_current' in m.violations[0] and 'slew' in m.violations[1]
+    m.check(0.20, t=0.0062, stamp=0.003)      # -0.26 A in one period: the slew bound is back
+    assert len(m.violations) == 1 and 'slew' in m.violations[0]
+    m.observer_stalled(0.035)                 # beyond the watchdog (30 ms)
+    m.check(0.20, t=0.040, stamp=0.004)
+    m.check(-0.30, t=0.0401, stamp=0.005)     # the step over the stall: from the measured current
+    m.check(0.6, t=0.0411, stamp=0.006)       # max_current holds whatever the stall
+    assert len(m.violations) == 2 and 'max_current' in m.violations[1]
 
 
 def test_time_message_conversion():

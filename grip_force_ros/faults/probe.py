@@ -88,21 +88,26 @@ class LimitMonitor:
         self.previous: float | None = None
         self.previous_time = math.nan
         self.previous_stamp = math.nan
-        self.unbounded_left = 0
+        self.unbounded_left = 0      # commands whose time is extended by a stall of this process
+        self.stall_time = 0.0        # s: that stall
         self.count = 0
         self.violations: list[str] = []
 
-    def observer_stalled(self) -> None:
-        """Note that the checking process itself was stalled longer than ``max_period``.
+    def observer_stalled(self, duration: float) -> None:
+        """Note that the checking process itself was stalled for ``duration`` (s).
 
-        Receipt times across the stall are not the controller's timing: a command that
-        waited in this process's queue through the stall is received just before the first
-        command the controller sent after it, and that one may be a step over the whole
-        stall (from the measured current, by design). The next two commands (whichever of
-        the two this process takes first) are checked for finiteness and ``max_current``
-        only.
+        The probe shares its process and executor thread with the controller: while one
+        callback holds the thread (a stall of the process, or a slow callback such as a
+        rejection's warning on a loaded machine), the commands queue, and the command that
+        waited is received just before the controller's first step after the stall, which
+        integrated the whole stall (its measured step time). For the next two commands
+        (whichever of the two this process takes first) the stall's duration is added to
+        the time between them; a stall longer than ``max_period`` leaves them bounded by
+        ``max_current`` and finiteness only (the controller restarts from the measured
+        current after such a stall, by design).
         """
         self.unbounded_left = 2
+        self.stall_time = max(self.stall_time, duration)
 
     def check(self, command: float, t: float = math.nan, stamp: float = math.nan) -> None:
         """Check one command received at ``t`` (s, the probe's clock; nan: one period).
@@ -118,6 +123,8 @@ class LimitMonitor:
             gap = t - self.previous_time
             if stamp == stamp and self.previous_stamp == self.previous_stamp:
                 gap = max(gap, stamp - self.previous_stamp)
+            if self.unbounded_left > 0:
+                gap += self.stall_time
             # after a stall longer than the watchdog the controller restarts from the measured
             # current (what the drive did is unknown): no slew bound on that step
             dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
@@ -125,7 +132,10 @@ class LimitMonitor:
             step = self.max_step * dt / self.period
         if self.unbounded_left > 0:
             self.unbounded_left -= 1
-            step = math.inf
+            if not self.period:      # no timing: nothing to extend
+                step = math.inf
+            if not self.unbounded_left:
+                self.stall_time = 0.0
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
         elif abs(command) > self.max_current * (1 + 1e-9) + 1e-12:
@@ -372,10 +382,11 @@ class FaultProbe(Node):
         return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
     def _woken(self) -> None:
-        """Note a callback of this process; a gap longer than the watchdog is its own stall."""
+        """Note a callback of this process; a gap over 1.5 periods is a stall of its thread."""
         now = time.monotonic()
-        if now - self._last_wake > self.limits.max_period:
-            self.limits.observer_stalled()
+        gap = now - self._last_wake
+        if gap > 1.5 * self.period:     # the probe's timer and commands come every period
+            self.limits.observer_stalled(gap)
             self.own_stalls += 1
         self._last_wake = now
 
