@@ -156,25 +156,39 @@ def test_limit_monitor_counts_every_kind_of_violation():
 
 
 def test_limit_monitor_across_a_stall_of_its_own_process():
-    """The probe's receipt times do not span a stall of its own thread: the command that
-    waited through it and the controller's first step after it (which integrated the stall)
-    arrive back to back. The stall's duration is added to the time of those two commands;
-    past the watchdog they are bounded by max_current and finiteness only; the plain slew
-    bound is back after them."""
+    """The probe's receipt times do not span a stall of its own process: the command that
+    waited through it and the controller's first step after it arrive back to back. Those
+    two are bounded by max_current and finiteness only; the slew bound is back after them."""
     from grip_force_ros.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
-    m.check(0.10, t=0.000, stamp=0.000)
-    m.observer_stalled(0.004)                 # the thread held 4 ms (a slow callback)
-    m.check(0.10, t=0.005, stamp=0.001)       # waited in the queue through it
-    m.check(0.46, t=0.0052, stamp=0.002)      # +0.36 A over a 5 ms step: 100 A/s allows 0.6 A
+    m.check(0.30, t=0.000, stamp=0.000)
+    m.observer_stalled()                       # 35 ms without a callback of the probe
+    m.check(0.30, t=0.035, stamp=0.001)       # waited in the queue through the stall
+    m.check(0.00, t=0.0351, stamp=0.002)      # the step over the stall: from the measured current
     assert m.violations == []
-    m.check(0.20, t=0.0062, stamp=0.003)      # -0.26 A in one period: the slew bound is back
-    assert len(m.violations) == 1 and 'slew' in m.violations[0]
-    m.observer_stalled(0.035)                 # beyond the watchdog (30 ms)
-    m.check(0.20, t=0.040, stamp=0.004)
-    m.check(-0.30, t=0.0401, stamp=0.005)     # the step over the stall: from the measured current
-    m.check(0.6, t=0.0411, stamp=0.006)       # max_current holds whatever the stall
-    assert len(m.violations) == 2 and 'max_current' in m.violations[1]
+    m.check(0.6, t=0.0352, stamp=0.003)       # max_current holds even then
+    m.check(0.25, t=0.0362, stamp=0.004)      # -0.35 A in a period: slew bound back
+    assert len(m.violations) == 2
+    assert 'max_current' in m.violations[0] and 'slew' in m.violations[1]
+
+
+def test_a_slew_step_is_judged_on_the_controllers_own_step_time():
+    """Receipt gaps can be shorter than the controller's step (commands that waited in the
+    probe's queue while a slow callback held the shared thread): a step beyond the receipt
+    bound is a violation only if the controller's step that sent it was not long enough."""
+    from grip_force_ros.faults.probe import LimitMonitor
+    m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
+    # (controller clock at the step, command, its receipt): step 2 came 4 ms after step 1,
+    # and step 1's command waited in the queue until just before it
+    steps = [(0.000, 0.10, 0.0002), (0.001, 0.10, 0.0051), (0.005, 0.46, 0.0053),
+             (0.006, 0.40, 0.0062), (0.007, 0.10, 0.0072)]
+    steps += [(0.001 * k + 0.003, 0.10, 0.001 * k + 0.0032) for k in range(5, 10)]
+    for stamp, command, receipt in steps:
+        m.check(command, t=receipt, stamp=receipt)
+        m.note_step(receipt + 0.00005, stamp)   # its target force, right after the command
+    # +0.36 A over the controller's 4 ms step: within 100 A/s; -0.30 A in a 1 ms step: not
+    assert len(m.violations) == 1, m.violations
+    assert '-0.300000' in m.violations[0] and 'step that sent it 1.00 ms' in m.violations[0]
 
 
 def test_time_message_conversion():

@@ -13,9 +13,11 @@ force, /diagnostics) and checks every command against the hardware limits as it 
 """
 from __future__ import annotations
 
+import bisect
 import math
 import threading
 import time
+from collections import deque
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
@@ -58,6 +60,8 @@ def to_time_msg(seconds: float):
 #: runaway command is still caught. (The exact per-step check, on the controller's own
 #: clock, is test/test_control_properties.py.)
 DELIVERY_JITTER = 1.0
+#: Control steps kept to judge slew steps on (about 2 s at 1 kHz).
+STEP_RECORDS = 2000
 
 
 class LimitMonitor:
@@ -88,26 +92,72 @@ class LimitMonitor:
         self.previous: float | None = None
         self.previous_time = math.nan
         self.previous_stamp = math.nan
-        self.unbounded_left = 0      # commands whose time is extended by a stall of this process
-        self.stall_time = 0.0        # s: that stall
+        self.unbounded_left = 0
         self.count = 0
-        self.violations: list[str] = []
+        self._violations: list[str] = []
+        # the controller's steps as the probe saw them: (receipt s, controller clock s), from
+        # the target force each step publishes after its command; and slew steps beyond the
+        # receipt-time bound, judged against the controller's own step times (resolve)
+        self.steps: deque = deque(maxlen=STEP_RECORDS)
+        self.pending: list[tuple[float, float, str]] = []
 
-    def observer_stalled(self, duration: float) -> None:
-        """Note that the checking process itself was stalled for ``duration`` (s).
+    @property
+    def violations(self) -> list[str]:
+        """Every limit violation so far (slew steps judged on the steps seen by now)."""
+        self.resolve(final=True)
+        return self._violations
 
-        The probe shares its process and executor thread with the controller: while one
-        callback holds the thread (a stall of the process, or a slow callback such as a
-        rejection's warning on a loaded machine), the commands queue, and the command that
-        waited is received just before the controller's first step after the stall, which
-        integrated the whole stall (its measured step time). For the next two commands
-        (whichever of the two this process takes first) the stall's duration is added to
-        the time between them; a stall longer than ``max_period`` leaves them bounded by
-        ``max_current`` and finiteness only (the controller restarts from the measured
-        current after such a stall, by design).
+    def note_step(self, t: float, controller_stamp: float) -> None:
+        """Record a control step: received at ``t`` (s), the controller's clock at it (s)."""
+        self.steps.append((t, controller_stamp))
+        if self.pending:
+            self.resolve()
+
+    def resolve(self, final: bool = False) -> None:
+        """Judge the pending slew steps on the controller's own step intervals.
+
+        A command step beyond the receipt-time bound is a violation unless the controller's
+        step that sent it was long enough for it: the controller limits each change to slew
+        times its own measured step time, and a receipt gap can be shorter than that step
+        time when the commands waited in this process's queue (the probe shares the
+        controller's thread: a slow callback, a stall of the process). That step is the one
+        whose target force arrives first after the command (published right after it); the
+        next one is looked at too (delivery order across two topics). An interval beyond
+        ``max_period`` is a stall after which the controller restarts from the measured
+        current (not bounded). Steps not yet followed by two control steps wait, unless
+        ``final``.
+        """
+        if not self.pending:
+            return
+        steps = list(self.steps)
+        receipts = [r for r, _ in steps]
+        still = []
+        for t, change, why in self.pending:
+            first = bisect.bisect_left(receipts, t)
+            if not final and len(steps) - first < 2:
+                still.append((t, change, why))
+                continue
+            intervals = [steps[j][1] - steps[j - 1][1] for j in (first, first + 1)
+                         if 1 <= j < len(steps)]
+            longest = max((d for d in intervals if d == d), default=0.0)
+            allowed = self.max_step * (longest / self.period + DELIVERY_JITTER)
+            if longest > self.max_period or abs(change) <= allowed * (1 + 1e-6) + 1e-12:
+                continue
+            self._violations.append(f'{why}; the controller\'s step that sent it '
+                                    f'{longest * 1e3:.2f} ms')
+        self.pending = still
+
+    def observer_stalled(self) -> None:
+        """Note that the checking process itself was stalled longer than ``max_period``.
+
+        Receipt times across the stall are not the controller's timing: a command that
+        waited in this process's queue through the stall is received just before the first
+        command the controller sent after it, and that one may be a step over the whole
+        stall (from the measured current, by design). The next two commands (whichever of
+        the two this process takes first) are checked for finiteness and ``max_current``
+        only.
         """
         self.unbounded_left = 2
-        self.stall_time = max(self.stall_time, duration)
 
     def check(self, command: float, t: float = math.nan, stamp: float = math.nan) -> None:
         """Check one command received at ``t`` (s, the probe's clock; nan: one period).
@@ -123,8 +173,6 @@ class LimitMonitor:
             gap = t - self.previous_time
             if stamp == stamp and self.previous_stamp == self.previous_stamp:
                 gap = max(gap, stamp - self.previous_stamp)
-            if self.unbounded_left > 0:
-                gap += self.stall_time
             # after a stall longer than the watchdog the controller restarts from the measured
             # current (what the drive did is unknown): no slew bound on that step
             dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
@@ -132,10 +180,7 @@ class LimitMonitor:
             step = self.max_step * dt / self.period
         if self.unbounded_left > 0:
             self.unbounded_left -= 1
-            if not self.period:      # no timing: nothing to extend
-                step = math.inf
-            if not self.unbounded_left:
-                self.stall_time = 0.0
+            step = math.inf
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
         elif abs(command) > self.max_current * (1 + 1e-9) + 1e-12:
@@ -144,8 +189,10 @@ class LimitMonitor:
                 abs(command - self.previous) > step * (1 + 1e-6) + 1e-12:
             why = (f'command step {command - self.previous:+.6f} A beyond the slew limit '
                    f'{step:.6f} A over the time between the commands')
-        if why is not None:
-            self.violations.append(why)
+        if why is not None and why.startswith('command step') and self.period:
+            self.pending.append((t, command - self.previous, why))   # judged by resolve
+        elif why is not None:
+            self._violations.append(why)
         self.previous = command if math.isfinite(command) else self.previous
         self.previous_time = t
         self.previous_stamp = stamp
@@ -382,11 +429,10 @@ class FaultProbe(Node):
         return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
     def _woken(self) -> None:
-        """Note a callback of this process; a gap over 1.5 periods is a stall of its thread."""
+        """Note a callback of this process; a gap longer than the watchdog is its own stall."""
         now = time.monotonic()
-        gap = now - self._last_wake
-        if gap > 1.5 * self.period:     # the probe's timer and commands come every period
-            self.limits.observer_stalled(gap)
+        if now - self._last_wake > self.limits.max_period:
+            self.limits.observer_stalled()
             self.own_stalls += 1
         self._last_wake = now
 
@@ -402,6 +448,7 @@ class FaultProbe(Node):
         if not (math.isfinite(f) and f <= self.force_cap * (1 + 1e-9) + 1e-12):
             self.force_violations.append(f'target force {f!r} N above max_grip_force {self.force_cap} N')
         now, stamp = self.now(), self._stamp(msg)
+        self.limits.note_step(now, stamp)
         self.targets.append((now, stamp, f))
         if self.commands:
             self.steps.append((now, stamp, self.commands[-1][2], f))
