@@ -29,9 +29,12 @@ else:
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402
 
-settings.register_profile('ci', derandomize=True, print_blob=True)
-if os.environ.get('CI'):
-    settings.load_profile('ci')
+# No per-example deadline: hypothesis's 200 ms default measures the machine, not the code
+# (test_motor_angle_inverts_jaw_angle exceeded it on a 2-core machine running the loaded ROS
+# tests beside it); speed is what the benchmarks measure.
+settings.register_profile('dev', deadline=None)
+settings.register_profile('ci', deadline=None, derandomize=True, print_blob=True)
+settings.load_profile('ci' if os.environ.get('CI') else 'dev')
 
 
 # A CPU load for the whole session (`./dev test --with-load ...`): one busy process per
