@@ -43,6 +43,8 @@ from grip_force_ros.params import load_params_file
 #: How long after a SIGKILL of the controller the sim's current must be 0 (s): the drive's
 #: 30 ms command timeout, its 1 ms check, the 0.2 ms current loop, and 3.8 ms of slack.
 KILL_TO_ZERO = 0.035
+#: Longest wait (s) for a sim state past KILL_TO_ZERO after the kill (a starved machine).
+KILL_STATE_WAIT = 5.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
 ZERO_NOISE_STD = 5.0
 #: Longest wait for the loop to grip before a case starts (s; process start and discovery).
@@ -218,20 +220,28 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
     loop.procs['controller'].signal(signal.SIGKILL)
     time.sleep(0.5)
     zero = _zero_current(loop)
-    with loop.probe.lock:
-        after = [(t, i) for t, i in loop.probe.states if t >= kill]
-    first_zero = next((t for t, i in after if abs(i) < zero), math.nan)
-    # The drive's timeout runs from the last command that reached it, which may arrive after
-    # the kill (in flight, or queued in the sim's executor on a busy machine: 35.4-36.7 ms
-    # from the kill at load 2-3, 30.5 ms quiet). The sim says how long it had been without a
-    # command when it cut; the bound runs from the later of the kill and that arrival.
-    silence = re.search(r'no command for ([0-9.]+) ms', loop.log('sim_instrument'))
-    arrival = first_zero - float(silence.group(1)) * 1e-3 if silence else kill
-    start = max(kill, arrival)
+    # on a starved machine the sim's states (or the probe taking them) can lag the kill by
+    # more than the first 0.5 s: wait for a state past the bound, up to KILL_STATE_WAIT
+    deadline = time.monotonic() + KILL_STATE_WAIT
+    while True:
+        with loop.probe.lock:
+            after = [(t, i) for t, i in loop.probe.states if t >= kill]
+        first_zero = next((t for t, i in after if abs(i) < zero), math.nan)
+        # The drive's timeout runs from the last command that reached it, which may arrive
+        # after the kill (in flight, or queued in the sim's executor on a busy machine:
+        # 35.4-36.7 ms from the kill at load 2-3, 30.5 ms quiet). The sim says how long it
+        # had been without a command when it cut; the bound runs from the later of the kill
+        # and that arrival.
+        silence = re.search(r'no command for ([0-9.]+) ms', loop.log('sim_instrument'))
+        arrival = first_zero - float(silence.group(1)) * 1e-3 if silence else kill
+        start = max(kill, arrival)
+        late = [(t, i) for t, i in after if t >= start + KILL_TO_ZERO]
+        if late or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
     detail['last_command_after_kill_ms'] = round(max(0.0, arrival - kill) * 1e3, 1)
-    late = [(t, i) for t, i in after if t >= start + KILL_TO_ZERO]
     if not late:
-        return ['no sim state after the kill']
+        return [f'no sim state after the kill (waited {KILL_STATE_WAIT:g} s)']
     detail['current_at_kill_A'] = round(after[0][1], 4) if after else None
     if not after or after[0][1] < GRIP_CURRENT:
         problems.append('the sim carried no grip current at the kill')
