@@ -118,10 +118,16 @@ def rig(tmp_path):
         stop_daemon(env)
 
 
-def _cli(env, *args, timeout=60.0):
-    """``ros2 ARGS``, again while the short-lived CLI node has not discovered the controller."""
+def _cli(env, *args, timeout=150.0):
+    """``ros2 ARGS``, again while the short-lived CLI node has not discovered the controller.
+
+    A call that hung past its own 60 s (return code -1: a loaded run saw ``ros2 lifecycle set
+    /controller activate`` and ``shutdown`` hang) is tried again too; ``timeout`` leaves room
+    for two such hangs and a third try.
+    """
     return retry(lambda: run('ros2', *args, env=env, timeout=60),
-                 lambda r: 'Node not found' not in r.stdout + r.stderr, timeout=timeout)
+                 lambda r: r.returncode != -1 and 'Node not found' not in r.stdout + r.stderr,
+                 timeout=timeout)
 
 
 def lifecycle(env, *args):
