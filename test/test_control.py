@@ -505,3 +505,50 @@ def test_a_stale_actuator_trips_at_its_own_timeout(params):
             break
     assert any('stale actuator input' in r and '> 10.0 ms' in r for r in out.reasons)
     assert now - (last + 0.01) <= 2 * PERIOD
+
+
+def test_a_jaw_resting_open_past_its_target_is_not_an_object():
+    """Started (or resumed after a safe state at 0 A) with the jaw resting open wider than the
+    master asks, here at its open stop, the controller stays in free motion and closes the
+    jaw to the master's angle: the rest is not a blocked jaw (it moves once pulled). Before
+    CONTACT_CONFIRM_TIME it read the resting jaw as an object and held a 0 N grip."""
+    from grip_force_ros.params.files import instrument_path
+    from grip_force_ros.params import load_params_file
+    from grip_force_ros.sim import InstrumentSim
+    params = load_params_file(instrument_path('paper_needle_driver'))
+    sim = InstrumentSim(params, obj='needle', seed=0)
+    for _ in range(300):                       # 0.3 s at -0.03 A: the jaw opens to its stop
+        sim.step(-0.03, 1e-3)
+    assert sim.measure().jaw_angle > 1.5
+    ctrl = GripController(params)
+    inputs = ctrl.new_inputs()
+    modes = set()
+    for k in range(2000):
+        t = k * 1e-3
+        m = sim.measure()
+        inputs.set_master(t, 0.8)
+        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
+        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
+        out = ctrl.step(t, inputs)
+        modes.add(out.mode)
+        sim.step(out.current_command, 1e-3)
+    assert Mode.GRIP not in modes
+    assert sim.measure().jaw_angle == pytest.approx(0.8, abs=0.01)
+
+
+def test_a_blocked_jaw_is_contact_after_the_confirm_time():
+    """An object keeps the jaw blocked: contact once it has been blocked for the confirm time
+    (master still, jaw 0.1 rad above its target, not moving); a jaw that moves again resets
+    the count."""
+    from grip_force_ros.control.force_map import CONTACT_CONFIRM_TIME
+    fmap = ForceMap(master_angle_min=0.0, master_contact_angle=0.2, master_to_jaw_gain=1.0,
+                    jaw_angle_max=1.5, force_max=4.0)
+    dt = 1e-3
+    steps = round(CONTACT_CONFIRM_TIME / dt)
+    for _ in range(steps - 1):
+        assert fmap.update(0.5, 0.6, 0.0, dt) == (False, 0.5)
+    assert fmap.update(0.5, 0.6, 1.0, dt) == (False, 0.5)      # moving: not blocked
+    for _ in range(steps - 1):
+        assert fmap.update(0.5, 0.6, 0.0, dt)[0] is False
+    gripping, target = fmap.update(0.5, 0.6, 0.0, dt)
+    assert gripping and target == 0.0 and fmap.contact_angle == 0.5

@@ -358,7 +358,7 @@ class GripController:
             if not _isfinite(force):
                 return self._safe(('force estimate not finite',), inputs)
 
-        gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity)
+        gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity, dt)
         previous_mode = self.mode
         retuned, self.retuned = self.retuned, False
         feedforward = 0.0

@@ -3,6 +3,15 @@ from __future__ import annotations
 
 import math
 
+#: How long (s) the jaw must stay blocked before that counts as contact. A jaw that merely
+#: rests above its target (at the open stop, or where friction left it after a safe state
+#: at 0 A) starts moving within a few ms once the jaw loop pulls it; an object keeps it
+#: blocked. Without it, a controller that starts or resumes with the jaw open wider than the
+#: master asks read the resting jaw as an object and held a 0 N grip for as long as the
+#: master stayed where it was (loaded ROS runs; offline: the jaw at its open stop, the
+#: master at 0.8 rad).
+CONTACT_CONFIRM_TIME = 0.02
+
 
 class ForceMap:
     """Map the master gripper angle to a jaw target (free motion) or a force target (grip).
@@ -11,8 +20,8 @@ class ForceMap:
     clipped to [0, jaw_angle_max] (rad). The map switches to grip when the master closes
     below ``master_contact_angle``, or when contact is detected: the measured jaw stays more
     than ``contact_jaw_margin`` above its target while nearly still (``|jaw velocity| <
-    contact_jaw_speed``), i.e. the jaw is blocked by an object. The master angle at that
-    moment is the contact angle ``m_c``. In grip the target force is
+    contact_jaw_speed``) for ``contact_confirm_time`` (s), i.e. the jaw is blocked by an
+    object. The master angle at that moment is the contact angle ``m_c``. In grip the target force is
 
         F = force_max * s**exponent,   s = clip((m_c - master) / (m_c - master_angle_min), 0, 1)
 
@@ -39,17 +48,20 @@ class ForceMap:
         Contact only while |jaw velocity| is below this (rad/s).
     release_hysteresis : float
         Master opening past the contact angle that ends the grip (rad).
+    contact_confirm_time : float
+        How long the jaw must stay blocked before contact (s, :data:`CONTACT_CONFIRM_TIME`).
     """
 
     __slots__ = ('master_angle_min', 'master_contact_angle', 'master_to_jaw_gain',
                  'jaw_angle_max', 'force_max', 'exponent', 'contact_jaw_margin',
                  'contact_jaw_speed', 'release_hysteresis', 'contact_angle', 'gripping',
-                 'last_master')
+                 'last_master', 'contact_confirm_time', 'blocked_time')
 
     def __init__(self, *, master_angle_min: float, master_contact_angle: float,
                  master_to_jaw_gain: float, jaw_angle_max: float, force_max: float,
                  exponent: float = 1.0, contact_jaw_margin: float = 0.05,
-                 contact_jaw_speed: float = 0.5, release_hysteresis: float = 0.02):
+                 contact_jaw_speed: float = 0.5, release_hysteresis: float = 0.02,
+                 contact_confirm_time: float = CONTACT_CONFIRM_TIME):
         if not force_max >= 0.0:
             raise ValueError(f'force_max must be >= 0 N, got {force_max!r}')
         self.master_angle_min = float(master_angle_min)
@@ -64,6 +76,8 @@ class ForceMap:
         self.contact_angle = math.nan    # m_c [rad] while gripping
         self.gripping = False
         self.last_master = math.inf      # rad, previous master angle
+        self.contact_confirm_time = float(contact_confirm_time)
+        self.blocked_time = 0.0          # s the jaw has been blocked so far
 
     @classmethod
     def from_params(cls, params) -> 'ForceMap':
@@ -100,7 +114,8 @@ class ForceMap:
             share = share ** self.exponent
         return self.force_max * share
 
-    def update(self, master_angle: float, jaw_angle: float, jaw_velocity: float = 0.0):
+    def update(self, master_angle: float, jaw_angle: float, jaw_velocity: float = 0.0,
+               dt: float | None = None):
         """Advance the map by one sample.
 
         Parameters
@@ -111,6 +126,9 @@ class ForceMap:
             Measured jaw angle (rad).
         jaw_velocity : float
             Measured jaw velocity (rad/s).
+        dt : float, optional
+            Time since the previous sample (s): a blocked jaw counts as contact once it has
+            been blocked for ``contact_confirm_time``. None: at once (no timing).
 
         Returns
         -------
@@ -134,9 +152,14 @@ class ForceMap:
             return True, self.force_target(master_angle)
         if (not opening and jaw_angle - jaw_target > self.contact_jaw_margin
                 and abs(jaw_velocity) < self.contact_jaw_speed):
-            self.gripping = True
-            self.contact_angle = master_angle
-            return True, 0.0
+            self.blocked_time += dt if dt is not None else math.inf
+            if self.blocked_time >= self.contact_confirm_time:
+                self.gripping = True
+                self.contact_angle = master_angle
+                self.blocked_time = 0.0
+                return True, 0.0
+        else:
+            self.blocked_time = 0.0
         return False, jaw_target
 
     def reset(self) -> None:
@@ -144,3 +167,4 @@ class ForceMap:
         self.gripping = False
         self.contact_angle = math.nan
         self.last_master = math.inf
+        self.blocked_time = 0.0
