@@ -35,7 +35,7 @@ from pathlib import Path
 
 from grip_force_ros import topics
 from grip_force_ros.faults.catalogue import FaultCase
-from grip_force_ros.nodes.processes import (NodeProcess, ProcessError, node_command,
+from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError, node_command,
                                             pick_domain_ids, ros_environment,
                                             ros_tools_environment)
 from grip_force_ros.params import load_params_file
@@ -184,8 +184,13 @@ class _Loop:
             for name, extra in (('sim_instrument', profile),
                                 ('controller', {**profile, 'request_enable': interface == 'dvrk'}),
                                 ('master', held)):
-                self.procs[name] = NodeProcess(name, command=node_command(name, config, extra),
-                                               env=self.env, log_path=log_dir / f'{name}.log')
+                # the 1 kHz processes as the demo runs them (docs/demo.md): SCHED_FIFO where
+                # permitted; the sim is the drive's stand-in, whose 30 ms cut a starved
+                # process would make late (0.19 A past 35 ms at load 6)
+                self.procs[name] = NodeProcess(
+                    name, command=node_command(name, config, extra), env=self.env,
+                    log_path=log_dir / f'{name}.log',
+                    rt_priority=DEFAULT_RT_PRIORITY if name != 'master' else 0)
         except ProcessError:
             self.close()
             raise
