@@ -8,7 +8,7 @@ import pytest
 
 from _ros_tools import require_ros_tools
 from grip_force_ros.faults.catalogue import OUTCOMES, catalogue
-from grip_force_ros.faults.dvrk import KILL_TO_ZERO, dvrk_cases, run_process_cases
+from grip_force_ros.faults.dvrk import KILL_TO_ZERO, dvrk_cases, lines_since, run_process_cases
 from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros
@@ -20,6 +20,25 @@ def test_the_cases_are_in_the_catalogue_with_defined_outcomes():
     assert {c.name for c in cases} <= names
     assert all(c.kind == 'process' and c.outcome in OUTCOMES and c.reason for c in cases)
     assert {'drive_cut', 'arm_interlock', 'effort_refused'} <= {c.outcome for c in cases}
+
+
+def test_the_kill_case_reads_the_sims_cut_after_the_kill_only():
+    """The sim can cut at start-up too, before the controller's commands flow; the kill case
+    read that first cut (334.5 ms) as its own check running late (a loaded run, 2026-11-25)."""
+    log = ('[INFO] [1795635729.361478012] [sim_instrument]: paper_needle_driver: crtk interface, '
+           'drive command timeout 30 ms\n'
+           '[WARN] [1795635729.836104930] [sim_instrument]: no command for 334.5 ms (command '
+           'timeout 30 ms): drive current cut from 0.0000 A to 0 A\n'
+           '[WARN] [1795635733.669077292] [sim_instrument]: no command for 30.6 ms (command '
+           'timeout 30 ms): drive current cut from 0.2172 A to 0 A\n'
+           'a continuation line without a stamp\n')
+    kill = 1795635733.63
+    after = lines_since(log, kill)
+    assert 'no command for 30.6 ms' in after and '334.5' not in after
+    assert after.endswith('a continuation line without a stamp')
+    assert 'drive command timeout' not in after
+    assert lines_since(log, float('-inf')) == log.rstrip('\n')
+    assert lines_since(log, 1795635734.0) == ''
 
 
 def test_dvrk_and_drive_faults_on_real_processes():

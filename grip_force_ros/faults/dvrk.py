@@ -40,6 +40,8 @@ from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, Pr
                                             ros_tools_environment)
 from grip_force_ros.params import load_params_file
 
+#: The stamp of a ROS console line: ``[WARN] [1795635733.669077292] [sim_instrument]: ...``.
+LOG_STAMP = re.compile(r'\[[A-Z]+\] \[([0-9]+\.[0-9]+)\]')
 #: How long after a SIGKILL of the controller the sim's current must be 0 (s): the drive's
 #: 30 ms command timeout, its 1 ms check, the 0.2 ms current loop, and 3.8 ms of slack.
 KILL_TO_ZERO = 0.035
@@ -200,8 +202,9 @@ class _Loop:
             self.close()
             raise
 
-    def log(self, name: str) -> str:
-        return (self.log_dir / f'{name}.log').read_text(errors='replace')
+    def log(self, name: str, since: float = -math.inf) -> str:
+        """Read the log of process ``name``, from its first line stamped at or after ``since``."""
+        return lines_since((self.log_dir / f'{name}.log').read_text(errors='replace'), since)
 
     def state_command(self, command: str) -> bool:
         """Send a crtk state command to the arm with the ros2 CLI (crtk_msgs, sourced env)."""
@@ -216,6 +219,22 @@ class _Loop:
         for proc in reversed(list(self.procs.values())):
             proc.stop()
         self.probe.close()
+
+
+def lines_since(text: str, since: float) -> str:
+    """Keep the lines of a ROS console log stamped at or after ``since`` (s, wall clock).
+
+    A line is ``[LEVEL] [stamp] [node]: text`` (stamp = the ROS system clock, as
+    ``time.time()``); a line without a stamp goes with the stamped line before it.
+    """
+    kept, keep = [], since == -math.inf
+    for line in text.splitlines():
+        stamp = LOG_STAMP.match(line)
+        if stamp:
+            keep = float(stamp.group(1)) >= since
+        if keep:
+            kept.append(line)
+    return '\n'.join(kept)
 
 
 def _zero_current(loop: _Loop) -> float:
@@ -242,7 +261,9 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         # 35.4-36.7 ms from the kill at load 2-3, 30.5 ms quiet). The sim says how long it
         # had been without a command when it cut; the bound runs from the later of the kill
         # and that arrival.
-        silence = re.search(r'no command for ([0-9.]+) ms', loop.log('sim_instrument'))
+        # the cut after the kill (the sim may also have cut at start-up, before the
+        # controller's commands flowed: 'no command for 334.5 ms ... from 0.0000 A')
+        silence = re.search(r'no command for ([0-9.]+) ms', loop.log('sim_instrument', kill))
         arrival = first_zero - float(silence.group(1)) * 1e-3 if silence else kill
         start = max(kill, arrival)
         # the sim's own check of the timeout can run late when its process is not scheduled
@@ -269,7 +290,7 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
     if max(abs(i) for _, i in late) >= zero:
         problems.append(f'current {max(abs(i) for _, i in late):.4f} A at or after '
                         f'{KILL_TO_ZERO * 1e3:g} ms from the kill or the last command')
-    if not re.search(r'command timeout', loop.log('sim_instrument')):
+    if not re.search(r'no command for .* drive current cut', loop.log('sim_instrument', kill)):
         problems.append('the sim did not report the command timeout')
     return problems
 
@@ -325,7 +346,7 @@ def _units_case(loop: _Loop, detail: dict) -> list[str]:
         problems.append(f'only {refused} of 50 refused by the effort limit')
     if not currents or max(map(abs, currents)) >= _zero_current(loop):
         problems.append('the current-sized effort drove the jaw')
-    if not re.search(r'beyond the tool limit', loop.log('sim_instrument')):
+    if not re.search(r'beyond the tool limit', loop.log('sim_instrument', start)):
         problems.append('no warning in the sim log')
     return problems
 
