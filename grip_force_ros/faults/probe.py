@@ -16,7 +16,6 @@ from __future__ import annotations
 import bisect
 import math
 import threading
-import time
 from collections import deque
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -52,13 +51,12 @@ def to_time_msg(seconds: float):
     return Time(sec=sec, nanosec=nanosec)
 
 
-#: Delivery jitter allowed between a command's step and its receipt in the probe, as a share
-#: of the nominal period: the controller steps on the time it measured, which the probe sees
-#: only as receive times, and one executor thread delivers the probe's callbacks behind
-#: others on a loaded 2-core machine (half a period was exceeded by 5 % at load 10). So one
-#: pair of commands may differ by up to two slew steps when their receipts came bunched; a
-#: runaway command is still caught. (The exact per-step check, on the controller's own
-#: clock, is test/test_control_properties.py.)
+#: Slack on the controller's own step time when a slew step is judged (LimitMonitor.resolve),
+#: in nominal periods: which step sent a command is known only to within its neighbours
+#: (delivery order across two topics), and two commands received as consecutive can be two
+#: steps apart. A runaway command is still caught: a missing slew limit jumps 0.5 A at once,
+#: which needs a controller step of 4 ms to be allowed. (The exact per-step check, on the
+#: controller's own clock, is test/test_control_properties.py.)
 DELIVERY_JITTER = 1.0
 #: Control steps kept to judge slew steps on (about 2 s at 1 kHz).
 STEP_RECORDS = 2000
@@ -75,12 +73,12 @@ class LimitMonitor:
         Largest change between consecutive commands one nominal period apart (A) =
         max_current_slew / expected_state_rate.
     period : float, optional
-        The nominal period (s). Given, a change may be ``max_step * dt / period`` for the time
-        ``dt`` between the commands' receipts (at least one period, plus
-        :data:`DELIVERY_JITTER` periods): the controller steps on the measured time; after a
-        gap longer than ``max_period`` (a stall) the step is not bounded.
+        The nominal period (s). Given, a change beyond ``max_step`` is judged on the
+        controller's own step time (:meth:`resolve`, from the steps noted by
+        :meth:`note_step`); without it, ``max_step`` is the bound.
     max_period : float
-        The longest step time the controller integrates (its watchdog timeout, s).
+        The longest step time the controller integrates (its watchdog timeout, s): after a
+        longer step (a stall) it restarts from the measured current, not bounded.
     """
 
     def __init__(self, max_current: float, max_step: float, period: float | None = None,
@@ -90,16 +88,13 @@ class LimitMonitor:
         self.period = period
         self.max_period = max_period
         self.previous: float | None = None
-        self.previous_time = math.nan
-        self.previous_stamp = math.nan
-        self.unbounded_left = 0
         self.count = 0
         self._violations: list[str] = []
         # the controller's steps as the probe saw them: (receipt s, controller clock s), from
-        # the target force each step publishes after its command; and slew steps beyond the
-        # receipt-time bound, judged against the controller's own step times (resolve)
+        # the target force each step publishes after its command; and the command steps
+        # beyond one period's slew, to be judged on the controller's own step times (resolve)
         self.steps: deque = deque(maxlen=STEP_RECORDS)
-        self.pending: list[tuple[float, float, str]] = []
+        self.pending: list[tuple[float, float]] = []
 
     @property
     def violations(self) -> list[str]:
@@ -114,15 +109,16 @@ class LimitMonitor:
             self.resolve()
 
     def resolve(self, final: bool = False) -> None:
-        """Judge the pending slew steps on the controller's own step intervals.
+        """Judge the pending slew steps on the controller's own step times.
 
-        A command step beyond the receipt-time bound is a violation unless the controller's
-        step that sent it was long enough for it: the controller limits each change to slew
-        times its own measured step time, and a receipt gap can be shorter than that step
-        time when the commands waited in this process's queue (the probe shares the
-        controller's thread: a slow callback, a stall of the process). That step is the one
-        whose target force arrives first after the command (published right after it); the
-        next one is looked at too (delivery order across two topics). An interval beyond
+        The controller limits each change to slew times its own measured step time, the
+        interval between the stamps of its target forces (its clock at each step). Receipt
+        times say little of it: commands queue in this process (the probe shares the
+        controller's executor thread; a slow callback, a stall of the process) and arrive
+        back to back, or late. The step that sent a command is the one whose target force
+        arrives first after it (published right after it); its neighbours are looked at too
+        (delivery order across two topics). The longest of these intervals, plus
+        :data:`DELIVERY_JITTER` periods, bounds the change; an interval beyond
         ``max_period`` is a stall after which the controller restarts from the measured
         current (not bounded). Steps not yet followed by two control steps wait, unless
         ``final``.
@@ -132,70 +128,44 @@ class LimitMonitor:
         steps = list(self.steps)
         receipts = [r for r, _ in steps]
         still = []
-        for t, change, why in self.pending:
+        for t, change in self.pending:
             first = bisect.bisect_left(receipts, t)
             if not final and len(steps) - first < 2:
-                still.append((t, change, why))
+                still.append((t, change))
                 continue
-            intervals = [steps[j][1] - steps[j - 1][1] for j in (first, first + 1)
+            intervals = [steps[j][1] - steps[j - 1][1] for j in (first - 1, first, first + 1)
                          if 1 <= j < len(steps)]
-            longest = max((d for d in intervals if d == d), default=0.0)
+            longest = max((d for d in intervals if d == d), default=self.period)
             allowed = self.max_step * (longest / self.period + DELIVERY_JITTER)
             if longest > self.max_period or abs(change) <= allowed * (1 + 1e-6) + 1e-12:
                 continue
-            self._violations.append(f'{why}; the controller\'s step that sent it '
-                                    f'{longest * 1e3:.2f} ms')
+            self._violations.append(
+                f'command step {change:+.6f} A beyond the slew limit {allowed:.6f} A over '
+                f"the controller's step that sent it {longest * 1e3:.2f} ms")
         self.pending = still
 
-    def observer_stalled(self) -> None:
-        """Note that the checking process itself was stalled longer than ``max_period``.
+    def check(self, command: float, t: float = math.nan) -> None:
+        """Check one command received at ``t`` (s, the probe's clock).
 
-        Receipt times across the stall are not the controller's timing: a command that
-        waited in this process's queue through the stall is received just before the first
-        command the controller sent after it, and that one may be a step over the whole
-        stall (from the measured current, by design). The next two commands (whichever of
-        the two this process takes first) are checked for finiteness and ``max_current``
-        only.
-        """
-        self.unbounded_left = 2
-
-    def check(self, command: float, t: float = math.nan, stamp: float = math.nan) -> None:
-        """Check one command received at ``t`` (s, the probe's clock; nan: one period).
-
-        ``stamp``: the command's header stamp (s; the state it answers, or the controller's
-        clock at the step): the larger of the gaps between receipts and between stamps is
-        the time the controller can have stepped over.
+        A change beyond ``max_step`` waits for :meth:`resolve` when the monitor has a
+        ``period`` and ``t`` is given; otherwise it is judged against ``max_step`` now.
         """
         self.count += 1
         why = None
-        step = self.max_step
-        if self.period and t == t and self.previous_time == self.previous_time:
-            gap = t - self.previous_time
-            if stamp == stamp and self.previous_stamp == self.previous_stamp:
-                gap = max(gap, stamp - self.previous_stamp)
-            # after a stall longer than the watchdog the controller restarts from the measured
-            # current (what the drive did is unknown): no slew bound on that step
-            dt = (math.inf if gap > self.max_period + DELIVERY_JITTER * self.period
-                  else max(gap, self.period) + DELIVERY_JITTER * self.period)
-            step = self.max_step * dt / self.period
-        if self.unbounded_left > 0:
-            self.unbounded_left -= 1
-            step = math.inf
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
         elif abs(command) > self.max_current * (1 + 1e-9) + 1e-12:
             why = f'command {command:.6f} A above max_current {self.max_current} A'
         elif self.previous is not None and \
-                abs(command - self.previous) > step * (1 + 1e-6) + 1e-12:
-            why = (f'command step {command - self.previous:+.6f} A beyond the slew limit '
-                   f'{step:.6f} A over the time between the commands')
-        if why is not None and why.startswith('command step') and self.period:
-            self.pending.append((t, command - self.previous, why))   # judged by resolve
-        elif why is not None:
+                abs(command - self.previous) > self.max_step * (1 + 1e-6) + 1e-12:
+            if self.period and t == t:
+                self.pending.append((t, command - self.previous))   # judged by resolve
+            else:
+                why = (f'command step {command - self.previous:+.6f} A beyond the slew limit '
+                       f'{self.max_step:.6f} A of one period')
+        if why is not None:
             self._violations.append(why)
         self.previous = command if math.isfinite(command) else self.previous
-        self.previous_time = t
-        self.previous_stamp = stamp
 
 
 class FaultProbe(Node):
@@ -269,8 +239,6 @@ class FaultProbe(Node):
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, RECORD_QOS)
         self.ticks = 0
-        self._last_wake = math.inf   # time.monotonic() of the last callback (see _woken)
-        self.own_stalls = 0          # stalls of this process longer than the watchdog
         self.timer = self.create_timer(self.period, self._tick)
 
     # ------------------------------------------------------------------ clock
@@ -321,7 +289,6 @@ class FaultProbe(Node):
         }
 
     def _tick(self) -> None:
-        self._woken()
         self.ticks += 1
         if self.relay is None:
             self.plant.step(self.command, self.period)
@@ -428,19 +395,10 @@ class FaultProbe(Node):
     def _stamp(msg) -> float:
         return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
-    def _woken(self) -> None:
-        """Note a callback of this process; a gap longer than the watchdog is its own stall."""
-        now = time.monotonic()
-        if now - self._last_wake > self.limits.max_period:
-            self.limits.observer_stalled()
-            self.own_stalls += 1
-        self._last_wake = now
-
     def _on_command(self, msg: JointState) -> None:
-        self._woken()
         value = float(msg.effort[0]) if len(msg.effort) else math.nan
         self.command = value if math.isfinite(value) else 0.0
-        self.limits.check(value, self.now(), self._stamp(msg))
+        self.limits.check(value, self.now())
         self.commands.append((self.now(), self._stamp(msg), value))
 
     def _on_target(self, msg: WrenchStamped) -> None:
