@@ -198,7 +198,10 @@ def slew_violations(commands):
                            PARAMS.watchdog_timeout)
     found = []
     for k, (receipt, stamp, value) in enumerate(commands):
-        monitor.check(value, receipt, stamp)
+        monitor.check(value, receipt)
+        # the controller steps on each state and its command carries that state's stamp:
+        # the stamps' intervals are its step times (the probe has its target forces too)
+        monitor.note_step(receipt, stamp)
         if len(monitor.violations) > len(found):
             around = commands[max(k - 3, 0):k + 2]
             t0 = around[0][0]
@@ -304,7 +307,11 @@ def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
     # the sim's pulleys have 0.8 x the YAML's friction; as the offline fit of the same
     # staircase (test_procedures.py), the plateaus fix mu to a few thousandths
     assert fitted == pytest.approx(0.8 * PARAMS.pulley_friction_coefficient, abs=0.004), message
-    assert f'{fitted:.5f}' in message and str(written) in message
+    # the message gives the fit to 5 decimals, the file to 6 (round(value, 6)): 0.119965 in
+    # the file and 0.11996 in the message are one fit (a loaded run read them as two)
+    said = re.search(r'pulley_friction_coefficient ([0-9.]+) \+/-', message)
+    assert said and abs(float(said[1]) - fitted) <= 6e-6, message
+    assert str(written) in message
     grasp = tmp / 'cal.log.csv'
     assert str(grasp) in written.read_text() and grasp.stat().st_size > 0
     values = read_params_yaml(written)
