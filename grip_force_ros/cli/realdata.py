@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 HELP = ('real instrument data: held-out jaw torque RMSE from motor-side signals, effects, '
@@ -52,6 +53,10 @@ def add_arguments(parser) -> None:
                         help='transfer: leave out the session consistency (the motor side of '
                              'every test run moving the calibration groups); zero-shot is then '
                              'the trained model as it is')
+    parser.add_argument('--no-load-model', action='store_true',
+                        help='transfer: the observer averages the jaw torque itself instead of '
+                             'the load level with the load\'s learned shape along the stroke '
+                             '(the model before the load model)')
 
 
 def _summary(result) -> str:
@@ -104,7 +109,7 @@ def _transfer_summary(result) -> str:
 def _run_transfer(args) -> int:
     from grip_force_ros.rig import RigDataError
     from grip_force_ros.rig.estimator import EstimatorError
-    from grip_force_ros.rig.transfer import GROUP_NAMES, transfer
+    from grip_force_ros.rig.transfer import GROUP_NAMES, TRANSFER_SETTINGS, transfer
     if not args.test:
         print('error: --train needs --test', file=sys.stderr)
         return 2
@@ -113,7 +118,8 @@ def _run_transfer(args) -> int:
         result = transfer(args.train, args.test, calibrate_runs=list(args.calibrate),
                           groups=tuple(args.groups) if args.groups else GROUP_NAMES,
                           with_sweep=args.sweep, with_ablation=args.ablation,
-                          consistency=not args.no_consistency, progress=progress)
+                          consistency=not args.no_consistency, progress=progress,
+                          settings=replace(TRANSFER_SETTINGS, load_model=not args.no_load_model))
     except (RigDataError, EstimatorError) as exc:
         print(f'error: {exc}', file=sys.stderr)
         return 1
@@ -133,6 +139,11 @@ def _floor_summary(result) -> str:
     bound = result['two_sided_bound_even_odd']
     lines.append(f"two-sided (non-causal) bound, even/odd: {bound['rmse_mNm']:.2f} "
                  f"({bound['rmse_after_startup_mNm']:.2f} after 1 s) mN m")
+    start = result['startup_bound']
+    lines.append(f"start-up ({100 * start['startup_fraction_of_samples']:.1f} % of samples) alone: "
+                 f"whole-run RMSE >= {start['bound_one_value_mNm']:.2f} mN m with one start-up "
+                 f"value, >= {start['bound_linear_in_startup_current_mNm']:.2f} linear in the "
+                 f"start-up current (oracles; published {start['published_rmse_mNm']:.2f})")
     for row in result['breakdown']['transfer_model']['by_phase']:
         lines.append(f"  {row['phase']:36s} {100 * row['fraction_of_samples']:5.1f} % of samples, "
                      f"RMSE {row['rmse_mNm']:6.2f}, "

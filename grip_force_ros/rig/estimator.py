@@ -255,6 +255,16 @@ class ObserverSettings:
         Causal low-pass of the measured current and the velocity (Hz).
     velocity_window_s : float
         Backward-difference window of the velocity (s).
+    load_model : bool
+        Estimate the *level* of the load the jaw holds, and the jaw torque as that level
+        plus a learned model of how the grasped load's torque moves with the stroke
+        direction and position (:class:`LoadModel`: on the rig, the resisting motor's
+        own friction and lever). Fitted on the training runs' jaw torque with the
+        forward model. Off by default; on in the transfer model.
+    level_time_constant : float
+        Averaging time constant (s) of the level while sliding (with ``load_model``):
+        the level of a held load changes slowly, its within-stroke changes are the load
+        model's.
     """
 
     efficiency: bool = True
@@ -273,6 +283,8 @@ class ObserverSettings:
     observer_time_constant: float = 0.1
     current_filter_hz: float = 10.0
     velocity_window_s: float = 0.02
+    load_model: bool = False
+    level_time_constant: float = 1.0
 
     def __post_init__(self):
         if self.backlash_angle not in ('motor_shaft_angle', 'motor_angle'):
@@ -282,6 +294,8 @@ class ObserverSettings:
             raise EstimatorError(f'sliding_threshold must be in [0, 1), got {self.sliding_threshold!r}')
         if self.spring_order < 0 or self.observer_time_constant < 0 or self.current_delay_s < 0:
             raise EstimatorError('spring_order, observer_time_constant and current_delay_s must be >= 0')
+        if self.load_model and not (self.hysteresis and self.level_time_constant > 0):
+            raise EstimatorError('load_model needs hysteresis (the hold) and level_time_constant > 0 s')
 
 
 @dataclass
@@ -451,6 +465,87 @@ def invert_forward(current, a, quad, beta):
     return 2.0 * y / (a + root), root
 
 
+#: Seconds at the start of a training run left out when its load level is taken (the
+#: front end switches the load on at t = 0).
+LEVEL_SKIP_S = 1.0
+
+
+@dataclass(frozen=True)
+class LoadModel:
+    """How the torque of a held load moves around its level along the stroke.
+
+    A grasped load is rarely a pure constant torque. On the rig, the resisting motor
+    holds one level per run, but the jaw torque steps with the stroke direction (the
+    front end's own friction) and changes along the stroke (its lever and spring),
+    by 4-9 mN*m std within a run (docs/real_data.md). The observer then estimates the
+    slowly changing *level* and adds the load's known shape::
+
+        tau = level * (1 + B(s, x) . proportional) + A(s, x) . constant
+        A = [s, P1(x), P2(x), s * P1(x), 1]       B = [s, P1(x)]
+
+    with s the friction direction (the jaw moves with the disk) and x the scaled disk
+    position (Legendre P1, P2). Fitted by least squares on the training runs' jaw
+    torque, each run's level its mean after :data:`LEVEL_SKIP_S`.
+
+    Attributes
+    ----------
+    constant : tuple of float
+        Coefficients of A (N*m).
+    proportional : tuple of float
+        Coefficients of B (dimensionless, per unit of level).
+    residual_std : float
+        Training jaw torque minus the model at the true level (N*m).
+    """
+
+    constant: tuple
+    proportional: tuple
+    residual_std: float = float('nan')
+
+    #: Smallest factor level -> torque allowed (a fit that would invert the load's sign
+    #: somewhere along the stroke is clipped there).
+    MIN_SCALE = 0.2
+
+    @staticmethod
+    def columns(direction, position):
+        """Return the columns A (n, 5) and B (n, 2) of the load model."""
+        s = np.asarray(direction, dtype=np.float64)
+        x = np.asarray(position, dtype=np.float64)
+        p2 = 0.5 * (3.0 * x * x - 1.0)
+        return np.column_stack([s, x, p2, s * x, np.ones_like(s)]), np.column_stack([s, x])
+
+    def terms(self, direction, position) -> tuple[np.ndarray, np.ndarray]:
+        """Return the offset (N*m) and the factor on the level along (s, x)."""
+        a, b = self.columns(direction, position)
+        return a @ np.asarray(self.constant), np.maximum(1.0 + b @ np.asarray(self.proportional),
+                                                         self.MIN_SCALE)
+
+    @classmethod
+    def fit(cls, samples: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> 'LoadModel':
+        """Least squares on ``(jaw torque, direction, position)`` per run, after its start.
+
+        Parameters
+        ----------
+        samples : sequence of (ndarray, ndarray, ndarray)
+            Per training run: the jaw torque (N*m), s and x of the samples after
+            :data:`LEVEL_SKIP_S`.
+        """
+        rows, target = [], []
+        for tau, s, x in samples:
+            if tau.size == 0:
+                continue
+            level = float(np.mean(tau))
+            a, b = cls.columns(s, x)
+            rows.append(np.column_stack([a, level * b]))
+            target.append(tau - level)
+        if not rows:
+            raise EstimatorError('the load model needs training runs longer than '
+                                 f'{LEVEL_SKIP_S} s')
+        design, y = np.vstack(rows), np.concatenate(target)
+        coef = np.linalg.lstsq(design, y, rcond=None)[0]
+        return cls(tuple(float(c) for c in coef[:5]), tuple(float(c) for c in coef[5:]),
+                   float(np.std(y - design @ coef)))
+
+
 class CableFrictionObserver:
     """Interpretable jaw torque estimator (see the module docstring for the physics).
 
@@ -463,6 +558,7 @@ class CableFrictionObserver:
     def __init__(self, settings: ObserverSettings | None = None, **changes):
         self.settings = replace(settings or ObserverSettings(), **changes)
         self.fit_result: FitResult | None = None
+        self.load_model: LoadModel | None = None
         self._prior = 0.0
 
     # -- fitting ---------------------------------------------------------------------
@@ -527,7 +623,17 @@ class CableFrictionObserver:
             physical[key] = (value, sd)
         self.fit_result = FitResult(names, values, std, physical, sum(b[3] for b in blocks))
         self._prior = sum(b[4] for b in blocks) / sum(b[5] for b in blocks)   # mean torque
+        self.load_model = self._fit_load_model(runs, cache) if self.settings.load_model else None
         return self
+
+    def _fit_load_model(self, runs: Sequence, cache: dict | None) -> LoadModel:
+        samples = []
+        for run in runs:
+            sig = self._design(run, cache)[0]
+            t = motor_side_inputs(run)['t']
+            late = t - t[0] >= LEVEL_SKIP_S
+            samples.append((_target(run)[late], sig.direction[late], sig.position[late]))
+        return LoadModel.fit(samples)
 
     @staticmethod
     def _solve(names, ata, aty):
@@ -595,6 +701,7 @@ class CableFrictionObserver:
                                     _physical(self.fit_result.names, values).items()},
                                    self.fit_result.training_samples)
         out._prior = self._prior if prior_torque is None else float(prior_torque)
+        out.load_model = self.load_model
         return out
 
     # -- prediction ------------------------------------------------------------------
@@ -622,9 +729,27 @@ class CableFrictionObserver:
         inverted, weight, dt = self.inversion(source, cache=cache)
         if not self.settings.hysteresis:
             return inverted
+        if self.load_model is not None:
+            return self._predict_level(source, inverted, weight, dt, cache)
         tc = self.settings.observer_time_constant
         gain_per_sample = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
         return hold_observer(inverted, weight, gain_per_sample, self._prior)
+
+    def _predict_level(self, source, inverted, weight, dt, cache) -> np.ndarray:
+        """Jaw torque (N*m) as the observed level of the load plus its shape (:class:`LoadModel`).
+
+        Each sliding sample's inverted torque gives the level it implies,
+        (tau - A)/(1 + B); the observer averages that level (weights as for the torque,
+        ``level_time_constant``) and holds it through stick; the estimate is the level
+        put back through the load's shape at the current (s, x). Before the first
+        sliding sample: the prior torque.
+        """
+        sig = self._design(source, cache)[0]
+        offset, scale = self.load_model.terms(sig.direction, sig.position)
+        gain = 1.0 - math.exp(-dt / self.settings.level_time_constant)
+        level = hold_observer((inverted - offset) / scale, weight, gain, np.nan)
+        out = level * scale + offset
+        return np.where(np.isnan(level), self._prior, out)
 
     def alpha_max(self) -> float:
         """Return the largest branch slope at zero load, |alpha0| + |alpha1| + |alpha2| (A/(N*m))."""

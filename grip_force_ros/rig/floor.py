@@ -44,10 +44,18 @@ FAST_HZ = 10.0
 #: when the stick band after a reversal is measured.
 SWING_FRACTION = 0.9
 
+#: Disk encoder counts the input disk must move before a run counts as started
+#: (:func:`startup_bound`): a few counts of the 8192 per turn, above the encoder's jitter.
+STANDSTILL_COUNTS = 4
+
 #: Candidate structures tried against the floor (settings changed from the transfer model).
 CANDIDATES = (
-    ('previous transfer model (no friction map)', {'friction_map_order': 0}),
-    ('transfer model (friction map P1)', {}),
+    ('previous transfer model (no friction map, no load model)',
+     {'friction_map_order': 0, 'load_model': False}),
+    ('friction map P1, no load model', {'load_model': False}),
+    ('transfer model (friction map P1, load model)', {}),
+    ('level time constant 0.3 s', {'level_time_constant': 0.3}),
+    ('level time constant 3 s', {'level_time_constant': 3.0}),
     ('friction map to P2', {'friction_map_order': 2}),
     ('Dahl width 0.03 rad (stick band wider)', {'hysteresis_width': 0.03}),
     ('Dahl width 0.04 rad', {'hysteresis_width': 0.04}),
@@ -306,13 +314,59 @@ def startup_observability(folder: Folder, settings: ObserverSettings = TRANSFER_
     return {'startup_mean_current': fit(before), 'first_closing_slide_current': fit(after)}
 
 
-def plot_floor(before: Sequence[HeldOut], after: Sequence[HeldOut], path: Path) -> Path:
-    """Held-out error against the disk angle per friction branch, without and with the friction map."""
+def startup_bound(folder: Folder, settings: ObserverSettings = TRANSFER_SETTINGS) -> dict:
+    """Bound the whole-run RMSE by what the start-up alone costs, before the load can be seen.
+
+    Before the first slide the motor side does not carry the load (correlation 0.3,
+    :func:`startup_observability`). An estimator that gives those samples one value,
+    whatever it is, is at best the mean of the folder's start-up torques (an oracle:
+    chosen on the scored runs themselves); a linear function of the start-up mean current
+    fitted on the scored runs (another oracle) does a little better. Their squared error
+    spread over every sample of the folder is a lower bound on the whole-run RMSE,
+    whatever the estimator does after the start-up. Also the bound from the samples
+    before the disk has moved at all (:data:`STANDSTILL_COUNTS` encoder counts): there
+    the current is a static friction, and the load cannot be seen from the motor side.
+
+    Returns
+    -------
+    dict
+        Sample fractions and whole-run RMSE bounds (mN*m) for the start-up (until the
+        first sliding sample of ``settings``' observer) and the standstill.
+    """
+    est = CableFrictionObserver(settings)
+    total, startup, currents, standstill = 0, [], [], []
+    for run in folder.runs:
+        sig = est._design(run)[0]
+        on = np.flatnonzero(sig.sliding > 0)
+        first = int(on[0]) if on.size else run.t.size
+        total += run.t.size
+        startup.append(run.jaw_torque[:first])
+        currents.append(np.full(first, float(np.mean(sig.current[:first])) if first else 0.0))
+        moved = np.flatnonzero(np.abs(run.motor_angle - run.motor_angle[0])
+                               > STANDSTILL_COUNTS * C.TWO_PI / C.DISK_COUNTS_PER_REV)
+        standstill.append(run.jaw_torque[:int(moved[0]) if moved.size else run.t.size])
+    tau, current = np.concatenate(startup), np.concatenate(currents)
+    still = np.concatenate(standstill)
+    design = np.column_stack([current, np.ones_like(current)])
+    linear = tau - design @ np.linalg.lstsq(design, tau, rcond=None)[0]
+
+    def bound(residual):
+        return round(1e3 * math.sqrt(float(residual @ residual) / total), 3)
+    return {'startup_fraction_of_samples': round(tau.size / total, 4),
+            'startup_torque_std_mNm': round(1e3 * float(np.std(tau)), 2),
+            'bound_one_value_mNm': bound(tau - tau.mean()),
+            'bound_linear_in_startup_current_mNm': bound(linear),
+            'standstill_fraction_of_samples': round(still.size / total, 4),
+            'bound_standstill_one_value_mNm': bound(still - still.mean()),
+            'published_rmse_mNm': C.PUBLISHED_RMSE_NM * 1e3}
+
+
+def plot_floor(panels: Sequence[tuple[str, Sequence[HeldOut]]], path: Path) -> Path:
+    """Held-out error against the disk angle per friction branch, one panel per model."""
     from grip_force_ros.plotting import pyplot, save
     plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(13, 4.6), sharey=True)
-    for ax, items, title in ((axes[0], before, 'previous transfer model'),
-                             (axes[1], after, 'with the friction map (Coulomb friction along the stroke)')):
+    fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 4.6), sharey=True)
+    for ax, (title, items) in zip(np.atleast_1d(axes), panels):
         for h in items:
             colour = plt.cm.viridis(h.run.torque_level_percent / 100.0)
             for side, offset in ((1, 40.0), (-1, 0.0)):
@@ -321,7 +375,7 @@ def plot_floor(before: Sequence[HeldOut], after: Sequence[HeldOut], path: Path) 
                         color=colour, alpha=0.5)
         ax.axhline(40.0, color='k', lw=0.6)
         ax.axhline(0.0, color='k', lw=0.6)
-        ax.set_title(f'{title}: {rmse_mNm(items, skip_s=C.STARTUP_S):.2f} mN m after 1 s', fontsize=9)
+        ax.set_title(f'{title}:\n{rmse_mNm(items, skip_s=C.STARTUP_S):.2f} mN m after 1 s', fontsize=9)
         ax.set_xlabel('disk angle (rad, 0 = most closed)')
         ax.grid(alpha=0.3)
     axes[0].set_ylabel('held-out error (mN m): closing + 40, opening')
@@ -339,12 +393,17 @@ def analyse_floor(folder: Folder, *, quick: bool = False, out_dir=None, progress
     say = progress or (lambda msg: None)
     started = time.perf_counter()
     kinds = FOLD_KINDS[:2] if quick else FOLD_KINDS
-    previous = replace(TRANSFER_SETTINGS, friction_map_order=0)
+    models = (('previous', replace(TRANSFER_SETTINGS, friction_map_order=0, load_model=False)),
+              ('friction_map', replace(TRANSFER_SETTINGS, load_model=False)),
+              ('transfer_model', TRANSFER_SETTINGS))
     result: dict = {'folder': folder.name, 'runs': len(folder.runs),
                     'model': 'transfer model (TRANSFER_SETTINGS), trained as transfer.train does',
+                    'models': {'previous': 'no friction map, no load model',
+                               'friction_map': 'friction map P1, no load model',
+                               'transfer_model': 'friction map P1 and load model (the default)'},
                     'cross_validation': {}}
     keep = {}
-    for label, settings in (('previous', previous), ('transfer_model', TRANSFER_SETTINGS)):
+    for label, settings in models:
         say(f'cross-validating the {label} model')
         rows = {}
         for kind in kinds:
@@ -352,10 +411,10 @@ def analyse_floor(folder: Folder, *, quick: bool = False, out_dir=None, progress
             rows[kind] = {'rmse_mNm': round(rmse_mNm(items), 3),
                           'rmse_after_startup_mNm': round(rmse_mNm(items, skip_s=C.STARTUP_S), 3)}
             if kind == 'even_odd':
-                keep[label] = items
+                keep[settings] = items
         result['cross_validation'][label] = rows
     say('breaking the error down')
-    result['breakdown'] = {label: breakdown(items) for label, items in keep.items()}
+    result['breakdown'] = {label: breakdown(keep[settings]) for label, settings in models}
     say('non-causal bound, data checks, stick band')
     bound = held_out(folder, TRANSFER_SETTINGS, 'even_odd', two_sided=True)
     result['two_sided_bound_even_odd'] = {'rmse_mNm': round(rmse_mNm(bound), 3),
@@ -363,17 +422,13 @@ def analyse_floor(folder: Folder, *, quick: bool = False, out_dir=None, progress
                                               bound, skip_s=C.STARTUP_S), 3)}
     result['data'] = data_checks(folder)
     result['startup_observability'] = startup_observability(folder)
+    result['startup_bound'] = startup_bound(folder)
     result['stick_band'] = stick_band(folder)
     say('candidate terms')
     result['candidates'] = []
     for name, changes in (CANDIDATES[:2] if quick else CANDIDATES):
         settings = replace(TRANSFER_SETTINGS, **changes)
-        if settings == TRANSFER_SETTINGS:
-            items = keep['transfer_model']
-        elif settings == previous:
-            items = keep['previous']
-        else:
-            items = held_out(folder, settings, 'even_odd')
+        items = keep[settings] if settings in keep else held_out(folder, settings, 'even_odd')
         result['candidates'].append({'name': name, 'changes': changes,
                                      'even_odd_rmse_mNm': round(rmse_mNm(items), 3),
                                      'even_odd_after_startup_mNm': round(rmse_mNm(
@@ -381,7 +436,9 @@ def analyse_floor(folder: Folder, *, quick: bool = False, out_dir=None, progress
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        result['figure'] = str(plot_floor(keep['previous'], keep['transfer_model'],
-                                          out / 'realdata_floor.png'))
+        titles = ('previous transfer model', 'with the friction map (Coulomb friction along the '
+                  'stroke)', 'with the load model as well (the default)')
+        panels = [(title, keep[settings]) for title, (_, settings) in zip(titles, models)]
+        result['figure'] = str(plot_floor(panels, out / 'realdata_floor.png'))
     result['runtime_s'] = round(time.perf_counter() - started, 2)
     return result

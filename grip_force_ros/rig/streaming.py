@@ -76,6 +76,9 @@ class StreamingJawTorqueObserver:
         tc = s.observer_time_constant
         self._gain = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
         self._prior = float(estimator._prior)
+        self._load = estimator.load_model
+        if self._load is not None:
+            self._level_gain = 1.0 - math.exp(-dt / s.level_time_constant)
         self.reset()
 
     def reset(self) -> None:
@@ -90,6 +93,7 @@ class StreamingJawTorqueObserver:
         self._direction = self._slow = 0.0
         self._last_angle = None
         self._estimate, self._seen = self._prior, 0.0
+        self._level = None                      # load level (N*m), with a load model
 
     @staticmethod
     def _horner(coeffs, x: float) -> float:
@@ -181,11 +185,27 @@ class StreamingJawTorqueObserver:
         if not s.hysteresis:
             return inverted
         weight = sliding * min(slope / self._alpha_max, 1.0) ** 2   # information of this sample
+        if self._load is not None:
+            return self._level_step(inverted, weight, direction, x)
         if weight > 0.0:
             self._seen += weight
             g = max(self._gain * weight, weight / self._seen)
             self._estimate += g * (inverted - self._estimate)
         return self._estimate
+
+    def _level_step(self, inverted: float, weight: float, direction: float, x: float) -> float:
+        """Level observer with the load model (batch: ``CableFrictionObserver._predict_level``)."""
+        offset, scale = self._load.terms([direction], [x])
+        offset, scale = float(offset[0]), float(scale[0])
+        if weight > 0.0:
+            measured = (inverted - offset) / scale
+            self._seen += weight
+            if self._level is None:
+                self._level = measured
+            else:
+                g = max(self._level_gain * weight, weight / self._seen)
+                self._level += g * (measured - self._level)
+        return self._prior if self._level is None else self._level * scale + offset
 
 
 def benchmark(samples: int = 20000) -> dict:

@@ -75,8 +75,12 @@ TARE_OUTLIER_A = 0.05
 #: efficiency (the training folders together span 10-100 % loads) and a Coulomb friction
 #: that changes linearly along the disk stroke (friction map, Legendre P1): in
 #: ``Tool_4_Maryland_L_4`` it falls by 28 mN*m at the jaw from the open to the closed end,
-#: in ``L_2`` by 9 mN*m (docs/real_data.md, "The wide-load floor").
-TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True, friction_map_order=1)
+#: in ``L_2`` by 9 mN*m (docs/real_data.md, "The wide-load floor"); and the load model: the
+#: observer averages the held load's level and adds the load's shape along the stroke
+#: learned on the training folders (the rig's resisting motor has its own friction and
+#: lever; :class:`.estimator.LoadModel`).
+TRANSFER_SETTINGS = ObserverSettings(load_dependent_efficiency=True, friction_map_order=1,
+                                     load_model=True)
 
 
 # -- folders: read, orient, tare ---------------------------------------------------------------
