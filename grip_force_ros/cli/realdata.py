@@ -53,6 +53,10 @@ def add_arguments(parser) -> None:
                         help='transfer: leave out the session consistency (the motor side of '
                              'every test run moving the calibration groups); zero-shot is then '
                              'the trained model as it is')
+    parser.add_argument('--offline', action='store_true',
+                        help='transfer: score the offline estimate of the recorded runs (the '
+                             'observer forward and backward in time; the start of a run gets '
+                             'its own level) instead of the real-time one')
     parser.add_argument('--no-load-model', action='store_true',
                         help='transfer: the observer averages the jaw torque itself instead of '
                              'the load level with the load\'s learned shape along the stroke '
@@ -118,7 +122,8 @@ def _run_transfer(args) -> int:
         result = transfer(args.train, args.test, calibrate_runs=list(args.calibrate),
                           groups=tuple(args.groups) if args.groups else GROUP_NAMES,
                           with_sweep=args.sweep, with_ablation=args.ablation,
-                          consistency=not args.no_consistency, progress=progress,
+                          consistency=not args.no_consistency, offline=args.offline,
+                          progress=progress,
                           settings=replace(TRANSFER_SETTINGS, load_model=not args.no_load_model))
     except (RigDataError, EstimatorError) as exc:
         print(f'error: {exc}', file=sys.stderr)

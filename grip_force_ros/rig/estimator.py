@@ -202,6 +202,21 @@ def hold_observer(measurement: np.ndarray, weight: np.ndarray, gain: float,
     return out
 
 
+def two_sided_average(inverted: np.ndarray, weight: np.ndarray, time_constant: float,
+                      dt: float) -> np.ndarray:
+    """Run the observer forward and backward in time and average (N*m): the offline estimate.
+
+    Each direction holds through stick as the observer does; where only one has seen a
+    sliding sample (the start and the end of a run) that one is used; NaN where neither
+    has. Same model, same samples, no causality: what the motor side allows when the
+    future may be used (a recorded run; the in-folder floor's non-causal bound).
+    """
+    gain = 1.0 - math.exp(-dt / time_constant)
+    fwd = hold_observer(inverted, weight, gain, np.nan)
+    bwd = hold_observer(inverted[::-1], weight[::-1], gain, np.nan)[::-1]
+    return np.where(np.isnan(fwd), bwd, np.where(np.isnan(bwd), fwd, 0.5 * (fwd + bwd)))
+
+
 @dataclass(frozen=True)
 class ObserverSettings:
     """Structure and fixed settings of :class:`CableFrictionObserver`.
@@ -724,30 +739,44 @@ class CableFrictionObserver:
         weight = sig.sliding * self._information(slope)
         return inverted, weight, dt
 
-    def predict(self, source, *, cache: dict | None = None) -> np.ndarray:
-        """Jaw torque estimate (N*m) of a run or log, from its motor-side columns only."""
+    def predict(self, source, *, cache: dict | None = None, offline: bool = False) -> np.ndarray:
+        """Jaw torque estimate (N*m) of a run or log, from its motor-side columns only.
+
+        ``offline``: the estimate of a recorded run, not a real-time one: the observer
+        runs forward and backward in time and the two are averaged
+        (:func:`two_sided_average`); the start of a run then gets the level the run shows
+        once it slides. Default: causal, as the streaming observer.
+        """
         inverted, weight, dt = self.inversion(source, cache=cache)
         if not self.settings.hysteresis:
             return inverted
         if self.load_model is not None:
-            return self._predict_level(source, inverted, weight, dt, cache)
+            return self._predict_level(source, inverted, weight, dt, cache, offline)
         tc = self.settings.observer_time_constant
+        if offline:
+            out = two_sided_average(inverted, weight, tc, dt)
+            return np.where(np.isnan(out), self._prior, out)
         gain_per_sample = 1.0 if tc <= 0 else 1.0 - math.exp(-dt / tc)
         return hold_observer(inverted, weight, gain_per_sample, self._prior)
 
-    def _predict_level(self, source, inverted, weight, dt, cache) -> np.ndarray:
+    def _predict_level(self, source, inverted, weight, dt, cache, offline=False) -> np.ndarray:
         """Jaw torque (N*m) as the observed level of the load plus its shape (:class:`LoadModel`).
 
         Each sliding sample's inverted torque gives the level it implies,
         (tau - A)/(1 + B); the observer averages that level (weights as for the torque,
         ``level_time_constant``) and holds it through stick; the estimate is the level
         put back through the load's shape at the current (s, x). Before the first
-        sliding sample: the prior torque.
+        sliding sample: the prior torque. ``offline``: the level averaged forward and
+        backward in time.
         """
         sig = self._design(source, cache)[0]
         offset, scale = self.load_model.terms(sig.direction, sig.position)
-        gain = 1.0 - math.exp(-dt / self.settings.level_time_constant)
-        level = hold_observer((inverted - offset) / scale, weight, gain, np.nan)
+        measured = (inverted - offset) / scale
+        if offline:
+            level = two_sided_average(measured, weight, self.settings.level_time_constant, dt)
+        else:
+            gain = 1.0 - math.exp(-dt / self.settings.level_time_constant)
+            level = hold_observer(measured, weight, gain, np.nan)
         out = level * scale + offset
         return np.where(np.isnan(level), self._prior, out)
 

@@ -25,8 +25,7 @@ from scipy.signal import welch
 
 from grip_force_ros.rig import constants as C
 from grip_force_ros.rig.analysis import cv_folds
-from grip_force_ros.rig.estimator import (CableFrictionObserver, ObserverSettings, causal_lowpass,
-                                          hold_observer)
+from grip_force_ros.rig.estimator import CableFrictionObserver, ObserverSettings, causal_lowpass
 from grip_force_ros.rig.transfer import TRANSFER_SETTINGS, Folder, predict_session, train
 
 #: Cross-validations of the floor: even/odd runs in file order (2 folds, both directions),
@@ -111,7 +110,8 @@ def held_out(folder: Folder, settings: ObserverSettings, kind: str, *,
     """Held-out predictions of every run of ``folder`` by the transfer model fitted on the others.
 
     ``two_sided``: the non-causal bound instead of the observer: the same inverted torque
-    and weights averaged forward and backward in time (:func:`two_sided_average`).
+    and weights averaged forward and backward in time (:func:`.estimator.two_sided_average`; with a
+    load model, the level averaged so and put back through the load's shape).
     """
     out = []
     for test in folds(folder.runs, kind):
@@ -126,23 +126,9 @@ def held_out(folder: Folder, settings: ObserverSettings, kind: str, *,
             on = np.flatnonzero(weight > 0)
             first = int(on[0]) if on.size else weight.size
             if two_sided:
-                pred = two_sided_average(inverted, weight, est.settings.observer_time_constant, dt)
+                pred = est.predict(run, cache=cache, offline=True)
             out.append(HeldOut(run, pred, weight, sig.direction, sig.position, first, zero))
     return out
-
-
-def two_sided_average(inverted: np.ndarray, weight: np.ndarray, time_constant: float,
-                      dt: float) -> np.ndarray:
-    """Run the observer forward and backward in time and average (N*m): a non-causal bound.
-
-    Each direction holds through stick as the observer does; where only one has seen a
-    sliding sample (the start and the end of a run) that one is used. Same model, same
-    samples, no causality: what the motor side allows when the future may be used.
-    """
-    gain = 1.0 - math.exp(-dt / time_constant)
-    fwd = hold_observer(inverted, weight, gain, np.nan)
-    bwd = hold_observer(inverted[::-1], weight[::-1], gain, np.nan)[::-1]
-    return np.where(np.isnan(fwd), bwd, np.where(np.isnan(bwd), fwd, 0.5 * (fwd + bwd)))
 
 
 def rmse_mNm(items: Sequence[HeldOut], *, skip_s: float = 0.0) -> float:

@@ -950,7 +950,7 @@ SESSION_PRIOR_SKIP_S = C.STARTUP_S
 
 
 def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
-                    cache: dict | None = None) -> tuple[list, float]:
+                    cache: dict | None = None, *, offline: bool = False) -> tuple[list, float]:
     """Predictions (N*m) of a folder's runs with the session's start-up estimate.
 
     Before the first sliding sample of a run nothing is known about its load; the
@@ -958,7 +958,10 @@ def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
     second (a first pass, motor side only), not the training folders' mean torque
     (65.7 mN*m in ``Tool_4_Maryland_L_4`` against 29.5 in ``L_2``). After the first
     sliding sample the observer has forgotten its start value, so the second pass
-    only rewrites each run's start.
+    only rewrites each run's start. ``offline``: the estimate of recorded runs
+    (:meth:`.estimator.CableFrictionObserver.predict`), whose start takes the level the
+    run shows once it slides; the session's estimate then only fills a run that never
+    slides.
 
     Returns
     -------
@@ -967,7 +970,7 @@ def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
     """
     firsts, preds, means = [], [], []
     for run in runs:
-        pred = est.predict(run, cache=cache)
+        pred = est.predict(run, cache=cache, offline=offline)
         _, weight, _ = est.inversion(run, cache=cache)
         on = np.flatnonzero(weight > 0)
         firsts.append(int(on[0]) if on.size else pred.size)
@@ -979,14 +982,15 @@ def predict_session(est: CableFrictionObserver, runs: Sequence[RigRun],
     out = []
     for pred, first in zip(preds, firsts):
         pred = pred.copy()
-        pred[:first] = prior
+        if not offline or first == pred.size:      # offline: the run's own level fills its start
+            pred[:first] = prior
         out.append(pred)
     return out, prior
 
 
 def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int = 1,
           cache: dict | None = None, *, target_zero: float = 0.0,
-          session_prior: bool = True) -> dict:
+          session_prior: bool = True, offline: bool = False) -> dict:
     """Held-out RMSE over every sample of ``runs`` and per run (N*m).
 
     The target is ``target_sign * jaw_torque - target_zero`` (N*m). ``session_prior``:
@@ -994,12 +998,13 @@ def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int =
     else at the estimator's own prior. Also the RMSE after each run's first
     :data:`.constants.STARTUP_S` and the start-up's part: the samples before each run's
     first sliding sample (the estimate is the start-up value there) and their share of
-    the squared error.
+    the squared error. ``offline``: the estimate of recorded runs (:func:`predict_session`).
     """
     if session_prior:
-        preds, prior = predict_session(est, runs, cache)
+        preds, prior = predict_session(est, runs, cache, offline=offline)
     else:
-        preds, prior = [est.predict(run, cache=cache) for run in runs], est.prior_torque
+        preds = [est.predict(run, cache=cache, offline=offline) for run in runs]
+        prior = est.prior_torque
     se_total, n_total, per_run = 0.0, 0, []
     se_late = n_late = se_start = n_start = 0.0
     for run, pred in zip(runs, preds):
@@ -1023,7 +1028,8 @@ def score(est: CableFrictionObserver, runs: Sequence[RigRun], target_sign: int =
 
 
 def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NAMES,
-          candidates: Sequence[RigRun] | None = None, session: Session | None = None) -> dict:
+          candidates: Sequence[RigRun] | None = None, session: Session | None = None,
+          offline: bool = False) -> dict:
     """Held-out RMSE with every single run of ``test`` as the calibration run in turn.
 
     ``session``: the test folder's motor side in the update as well (:func:`calibrate`).
@@ -1038,7 +1044,7 @@ def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NA
         calib = calibrate(model, [cal], groups=groups, session=session)
         scored = [r for r in test.runs if r is not cal]
         res = score(calib.estimator, scored, calib.target_sign, cache,
-                    target_zero=calib.target_zero_Nm)
+                    target_zero=calib.target_zero_Nm, offline=offline)
         rows.append({'calibration_run': cal.file or cal.name, 'heldout_rmse': res['heldout_rmse']})
         top = max(res['per_run'], key=lambda p: p['rmse'])
         if top['rmse'] > worst_run['rmse']:
@@ -1050,7 +1056,7 @@ def sweep(model: TrainedModel, test: Folder, *, groups: Sequence[str] = GROUP_NA
 
 def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
              sweep_candidates: Sequence[RigRun] | None = None,
-             session: Session | None = None) -> list[dict]:
+             session: Session | None = None, offline: bool = False) -> list[dict]:
     """Held-out RMSE with each group calibrated alone, and with all but one.
 
     On the given calibration run(s), and (when ``sweep_candidates``) the mean over
@@ -1078,9 +1084,11 @@ def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
             calib = calibrate(model, cal_runs, groups=groups, session=source)
             est, sign, zero = calib.estimator, calib.target_sign, calib.target_zero_Nm
         row = {'groups': label, 'calibrated': list(groups),
-               'heldout_rmse': score(est, scored, sign, model.cache, target_zero=zero)['heldout_rmse']}
+               'heldout_rmse': score(est, scored, sign, model.cache, target_zero=zero,
+                                     offline=offline)['heldout_rmse']}
         if sweep_candidates and source != 'consistency only':
-            sw = sweep(model, test, groups=groups, candidates=sweep_candidates, session=source)
+            sw = sweep(model, test, groups=groups, candidates=sweep_candidates, session=source,
+                       offline=offline)
             row['sweep_mean'] = sw['mean']
             row['sweep_worst'] = sw['worst']
         out.append(row)
@@ -1090,7 +1098,7 @@ def ablation(model: TrainedModel, test: Folder, cal_runs: Sequence[RigRun], *,
 def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[str] = (),
              groups: Sequence[str] = GROUP_NAMES, with_sweep: bool = False,
              with_ablation: bool = False, settings: ObserverSettings | None = None,
-             consistency: bool = True, progress=None) -> dict:
+             consistency: bool = True, offline: bool = False, progress=None) -> dict:
     """Run the whole transfer evaluation, JSON-ready (the ``grip-force realdata --train`` result).
 
     Parameters
@@ -1112,6 +1120,9 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
         Update on the session consistency of the test folder's runs (motor side only,
         :mod:`.consistency`) as well, zero-shot and calibrated; False: the calibration
         run alone, and zero-shot the trained model as it is.
+    offline : bool
+        Score the offline estimate of the recorded runs (the observer forward and
+        backward in time) instead of the real-time, causal one.
     progress : callable, optional
         ``progress(message)`` at each stage.
     """
@@ -1136,11 +1147,13 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     scored = [r for r in test.runs if id(r) not in cal_ids]
     say(f'scoring {len(scored)} runs of {test.name}')
     self_calibrated = calibrate(model, [], groups=groups, session=session) if session else None
-    zero = score(self_calibrated.estimator if session else est, scored, zero_shot_sign, cache)
+    zero = score(self_calibrated.estimator if session else est, scored, zero_shot_sign, cache,
+                 offline=offline)
     result = {
         'train': [_folder_json(f) for f in trains],
         'test': _folder_json(test),
         'zero_shot': not cal_runs,
+        'estimate': 'offline (forward and backward in time)' if offline else 'real-time (causal)',
         'published_rmse_mNm': C.PUBLISHED_RMSE_NM * 1e3,
         'model': {'settings': {k: getattr(est.settings, k) for k in est.settings.__dataclass_fields__},
                   'coefficients': est.coefficients,
@@ -1176,7 +1189,7 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
         say('calibrating on ' + ', '.join(r.file or r.name for r in cal_runs))
         calib = calibrate(model, cal_runs, groups=groups, session=session)
         res = score(calib.estimator, scored, calib.target_sign, cache,
-                    target_zero=calib.target_zero_Nm)
+                    target_zero=calib.target_zero_Nm, offline=offline)
         result['calibration'] = calib.to_json()
         result['calibration']['rule'] = DEFAULT_RULE if 'auto' in calibrate_runs else 'given'
         result['calibration']['default_rule_run'] = default_calibration_run(test.runs).file
@@ -1196,7 +1209,7 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
     result['beats_published'] = bool(result['heldout_rmse'] <= C.PUBLISHED_RMSE_NM)
     if with_sweep:
         say(f'sweep: each of the {len(test.runs)} runs as the calibration run')
-        result['sweep'] = sweep(model, test, groups=groups, session=session)
+        result['sweep'] = sweep(model, test, groups=groups, session=session, offline=offline)
         result['sweep']['default_rule_run'] = default_calibration_run(test.runs).file
     if with_ablation:
         say('ablation of the calibration groups')
@@ -1204,7 +1217,7 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
         result['ablation'] = {'calibration_runs': [r.file for r in base],
                               'rows': ablation(model, test, base,
                                                sweep_candidates=test.runs if with_sweep else None,
-                                               session=session)}
+                                               session=session, offline=offline)}
     result['runtime_s'] = round(time.perf_counter() - started, 2)
     return result
 
