@@ -63,6 +63,56 @@ def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
                           cwd=cwd or ROOT, env=env or ros_env())
 
 
+#: Longest a ros2 CLI call that talks to a node's service may take (s) before it counts as
+#: hung. A normal call takes 3-10 s on a loaded 2-core machine (Python start-up, a 2 s
+#: spin). The verbs (``ros2 lifecycle``, ``ros2 service call``) wait for the answer without
+#: a timeout, and Fast DDS drops an answer whose client reader the server has not yet
+#: discovered 100 ms after the request (rmw_fastrtps #390, #467: "client will not receive
+#: response"): such a call never returns. py-spy on one under load: ``call_get_states``
+#: waiting in ``spin_until_future_complete``, the request sent.
+CLI_CALL_TIMEOUT = 30.0
+
+
+def cli(env, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess:
+    """``ros2 ARGS`` for a read-only verb, again while it hung or the node was not discovered yet.
+
+    A hung call (past :data:`CLI_CALL_TIMEOUT`, return code -1) is a lost answer, tried
+    again; ``timeout`` leaves room for several.
+    """
+    return retry(lambda: run('ros2', *args, env=env, timeout=CLI_CALL_TIMEOUT),
+                 lambda r: r.returncode != -1 and 'Node not found' not in r.stdout + r.stderr,
+                 timeout=timeout)
+
+
+def lifecycle_transition(env, node: str, transition: str, confirm,
+                         timeout: float = 240.0) -> tuple[subprocess.CompletedProcess, bool]:
+    """``ros2 lifecycle set NODE TRANSITION``; a call whose answer was lost is confirmed apart.
+
+    A transition is not idempotent: a call that hung (:data:`CLI_CALL_TIMEOUT`) may have
+    made it, and calling again would be refused. So after a hung call ``confirm()`` (for
+    example ``ros2 lifecycle get`` shows the target state, or the process ended after
+    ``shutdown``) decides: made, or tried again.
+
+    Returns
+    -------
+    (CompletedProcess, bool)
+        The last call, and whether its answer was lost and the transition confirmed apart
+        (the caller then checks the state itself, not the CLI's words).
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        got = retry(lambda: run('ros2', 'lifecycle', 'set', node, transition, '--no-daemon',
+                                '--spin-time', '2', env=env, timeout=CLI_CALL_TIMEOUT),
+                    lambda r: True, timeout=0)
+        if got.returncode != -1 and 'Node not found' not in got.stdout + got.stderr:
+            return got, False
+        if got.returncode == -1 and confirm():
+            return got, True
+        if time.monotonic() > deadline:
+            return got, False
+        time.sleep(0.5)
+
+
 def _default_sigint():
     # A process started in the background by a non-interactive shell inherits SIGINT
     # ignored, and Python then keeps ignoring it: give the child the default disposition.
