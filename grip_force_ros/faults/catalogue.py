@@ -44,6 +44,10 @@ from grip_force_ros.control.inputs import SOURCES  # noqa: F401 - re-exported fo
 NAN = math.nan
 INF = math.inf
 
+#: Trials of a case that a loaded machine spoils: a spoiled trial is redone, at most twice
+#: (runner.run_case_redoing_spoiled, dvrk.run_process_case_redoing_spoiled).
+CASE_ATTEMPTS = 3
+
 OUTCOMES = {
     'reject_safe': 'rejected with the reason on /diagnostics, last good input kept, output safe '
                    'while faulted, control resumes without a current jump',

@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 from grip_force_ros import topics
-from grip_force_ros.faults.catalogue import FaultCase
+from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, FaultCase
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError, node_command,
                                             pick_domain_ids, ros_environment,
                                             ros_tools_environment)
@@ -48,8 +48,15 @@ KILL_TO_ZERO = 0.035
 #: When the sim's 1 ms check must see the 30 ms timeout at the latest (s after the last
 #: command); a later check is its process's scheduling, measured and reported.
 COMMAND_CHECK_DUE = 0.031
-#: A check later than this (s) is a fault, not the machine.
+#: A check later than this (s) is a fault, not the machine, unless the sim says its own
+#: process was not scheduled for that long (within :data:`STARVED_SLACK`): a stalled
+#: machine, the trial spoiled and redone (:func:`run_process_case_redoing_spoiled`).
 MAX_CHECK_LATE = 0.1
+#: How much of a late check (s) the sim's own starvation may leave unexplained.
+STARVED_SLACK = 0.02
+#: The sim's cut line: its silence, and the starvation it reports before the check (ms).
+SIM_CUT = re.compile(r'no command for ([0-9.]+) ms .*drive current cut'
+                     r'(?:.*not scheduled for ([0-9.]+) ms)?')
 #: Longest wait (s) for a sim state past KILL_TO_ZERO after the kill (a starved machine).
 KILL_STATE_WAIT = 5.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
@@ -263,7 +270,7 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         # and that arrival.
         # the cut after the kill (the sim may also have cut at start-up, before the
         # controller's commands flowed: 'no command for 334.5 ms ... from 0.0000 A')
-        silence = re.search(r'no command for ([0-9.]+) ms', loop.log('sim_instrument', kill))
+        silence = SIM_CUT.search(loop.log('sim_instrument', kill))
         arrival = first_zero - float(silence.group(1)) * 1e-3 if silence else kill
         start = max(kill, arrival)
         # the sim's own check of the timeout can run late when its process is not scheduled
@@ -277,6 +284,12 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         time.sleep(0.05)
     detail['last_command_after_kill_ms'] = round(max(0.0, arrival - kill) * 1e3, 1)
     detail['sim_check_late_ms'] = round(check_late * 1e3, 1)
+    starved = float(silence.group(2)) * 1e-3 if silence and silence.group(2) else 0.0
+    detail['sim_not_scheduled_ms'] = round(starved * 1e3, 1)
+    if check_late > MAX_CHECK_LATE and starved >= check_late - STARVED_SLACK:
+        detail['spoiled'] = (f"the sim's timeout check came {check_late * 1e3:.0f} ms late: its "
+                             f'process was not scheduled for {starved * 1e3:.0f} ms (the machine)')
+        return [detail['spoiled']]
     if check_late > MAX_CHECK_LATE:
         problems.append(f"the sim's timeout check came {check_late * 1e3:.0f} ms late")
     if not late:
@@ -416,13 +429,33 @@ def run_process_case(case: FaultCase, config: Path, log_root: Path) -> dict:
     return detail
 
 
+def run_process_case_redoing_spoiled(case: FaultCase, config: Path, log_root: Path) -> dict:
+    """Run a process case; a trial the machine spoiled is redone, at most twice.
+
+    Spoiled: the sim's own process was not scheduled for most of a late timeout check (it
+    says so in its cut line; seen once in CI: 2.6 s, with the master 3.7 s late as well).
+    The third spoiled trial fails with its cause. The logs are the last trial's.
+    """
+    spoiled = []
+    for _ in range(CASE_ATTEMPTS):
+        detail = run_process_case(case, config, log_root)
+        if not detail.get('spoiled'):
+            break
+        spoiled.append(detail['spoiled'])
+    else:
+        detail['why'] = (f'spoiled {CASE_ATTEMPTS} times by a stalled machine: '
+                         + ' | '.join(spoiled))
+    detail['spoiled_trials'] = spoiled
+    return detail
+
+
 def run_process_cases(cases: list[FaultCase], config: Path, progress=None) -> list[dict]:
     """Run the process cases one after the other (each on its own ROS domain)."""
     import tempfile
     root = Path(tempfile.mkdtemp(prefix='grip_force_faults_'))
     details = []
     for case in cases:
-        detail = run_process_case(case, config, root)
+        detail = run_process_case_redoing_spoiled(case, config, root)
         detail['logs'] = str(root / case.name)
         details.append(detail)
         if progress:

@@ -32,7 +32,8 @@ from pathlib import Path
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
-from grip_force_ros.faults.catalogue import SOURCES, FaultCase, bad_params_text, catalogue
+from grip_force_ros.faults.catalogue import (CASE_ATTEMPTS, SOURCES, FaultCase, bad_params_text,
+                                             catalogue)
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
@@ -62,8 +63,6 @@ PROCESS_READY_TIMEOUT = 30.0
 #: SINGLE_SAMPLE_ATTEMPTS times in all) until the controller has taken one.
 SINGLE_SAMPLE_TICKS = 2
 SINGLE_SAMPLE_ATTEMPTS = 5
-#: Trials of a case that a loaded machine spoils (see run_case_redoing_spoiled).
-CASE_ATTEMPTS = 3
 #: Trials of a defect's cases in the negative control until one catches it: a defect is
 #: always there, but a loaded machine can hide one trial of it (a controller step of 4 ms
 #: is long enough for the 0.5 A jump of a missing slew limit; see run_negative_control).

@@ -84,6 +84,7 @@ class SimInstrumentNode(Node):
         self.capped_steps = 0            # periods whose elapsed time exceeded MAX_STEP
         self.drive = CommandTimeout(params.command_timeout)
         self._last_drive_check = time.monotonic()
+        self._starved: tuple[float, float] | None = None   # (when, for how long) s, monotonic
         self.loop = LoopLatency(capacity=int(2 * params.publish_rate * DIAGNOSTICS_PERIOD) + 16)
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                DIAGNOSTICS_QOS)
@@ -179,16 +180,25 @@ class SimInstrumentNode(Node):
 
     def _drive_expired(self, now: float) -> bool:
         """Tell whether the command timeout expired, unless this process was just starved."""
-        late = now - self._last_drive_check > DRIVE_CHECK_LATE
+        gap = now - self._last_drive_check
+        late = gap > DRIVE_CHECK_LATE
         self._last_drive_check = now
+        if late:
+            self._starved = (now, gap)
         return not late and self.drive.expired(now)
 
     def _cut(self) -> None:
         """Cut the drive current (the command timeout expired) and say so."""
+        # a check that came late because this process was not scheduled says so: on a real
+        # drive the watchdog is hardware; here a stalled machine delays the Python check
+        starved = ''
+        if self._starved and time.monotonic() - self._starved[0] <= self.drive.last_silence:
+            starved = (f'; this process was not scheduled for {self._starved[1] * 1e3:.1f} ms '
+                       'before the check')
         self.get_logger().warning(
             f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
             f'{self.drive.timeout * 1e3:g} ms): drive current cut from {self.current_command:.4f} A '
-            'to 0 A')
+            f'to 0 A{starved}')
         self.current_command = 0.0
 
     def _publish_diagnostics(self) -> None:
