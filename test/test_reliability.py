@@ -17,7 +17,7 @@ import statistics
 import pytest
 
 from grip_force_ros.control.inputs import source_timeouts
-from grip_force_ros.faults.catalogue import FaultCase, set_field, silence
+from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, FaultCase, set_field, silence
 from grip_force_ros.faults.runner import Session, run_case_redoing_spoiled, run_message_case
 from grip_force_ros.params.files import instrument_path
 
@@ -94,18 +94,25 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
                        'instrument', silence(), ticks=31, reason='stale instrument',
                        master_angle=0.0)
     resumed_from = []
-    for case in (silent, single_nan) * 3:
-        d = run_message_case(session, case)
-        # one bad sample or 31 ms of silence need not make a safe period (the next good
-        # sample may come first); when one happened, the resume must be bumpless
-        assert d['recovered'] and d['limit_violations'] == 0, d
-        assert d['max_resume_jump'] <= 0.5 * step, d
-        rows = session.probe.steps                  # (recv, stamp, command, target)
-        for (_, _, c0, f0), (_, _, c1, f1) in zip(rows, rows[1:]):
-            if f0 == 0.0 and f1 > 0.0:
-                resumed_from.append(abs(c0))
+    # a loaded machine can let every ramp finish before the inputs are back (a loaded run,
+    # load 6: six resumes, all from 0 A): the six trials are redone, at most twice, until
+    # one resume comes mid-ramp; every trial's resume is checked for bumps all the same
+    for _ in range(CASE_ATTEMPTS):
+        for case in (silent, single_nan) * 3:
+            d = run_message_case(session, case)
+            # one bad sample or 31 ms of silence need not make a safe period (the next good
+            # sample may come first); when one happened, the resume must be bumpless
+            assert d['recovered'] and d['limit_violations'] == 0, d
+            assert d['max_resume_jump'] <= 0.5 * step, d
+            rows = session.probe.steps                  # (recv, stamp, command, target)
+            for (_, _, c0, f0), (_, _, c1, f1) in zip(rows, rows[1:]):
+                if f0 == 0.0 and f1 > 0.0:
+                    resumed_from.append(abs(c0))
+        if any(i > 0.01 for i in resumed_from):
+            break
     print('resumed from |I| =', resumed_from)
-    assert any(i > 0.01 for i in resumed_from), resumed_from   # A: resumed mid-ramp
+    assert any(i > 0.01 for i in resumed_from), \
+        f'no resume mid-ramp in {CASE_ATTEMPTS} rounds (every ramp ended first): {resumed_from}'
 
 
 def test_safe_output_ramps_at_the_slew_limit(session):
