@@ -61,6 +61,9 @@ SIM_CUT = re.compile(r'no command for ([0-9.]+) ms .*drive current cut'
 KILL_STATE_WAIT = 5.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
 ZERO_NOISE_STD = 5.0
+#: How long (s) the ros2 CLI that sends a state command stays up after publishing it, so
+#: that the reliable message is delivered on a loaded machine (its default: 0.1 s).
+STATE_COMMAND_KEEP_ALIVE = 1.0
 #: Longest wait for the loop to grip before a case starts (s; process start and discovery).
 READY_TIMEOUT = 40.0
 #: Slack on a controller's reaction for DDS delivery and scheduling on a loaded machine (s).
@@ -214,9 +217,15 @@ class _Loop:
         return lines_since((self.log_dir / f'{name}.log').read_text(errors='replace'), since)
 
     def state_command(self, command: str) -> bool:
-        """Send a crtk state command to the arm with the ros2 CLI (crtk_msgs, sourced env)."""
+        """Send a crtk state command to the arm with the ros2 CLI (crtk_msgs, sourced env).
+
+        The CLI stays up for STATE_COMMAND_KEEP_ALIVE after publishing: with the default
+        0.1 s a loaded run's disable never reached the sim (its log shows no transition,
+        the case failed as if the controller had ignored a disabled arm).
+        """
         ros2 = shutil.which('ros2', path=self.env.get('PATH')) or 'ros2'
         done = subprocess.run([ros2, 'topic', 'pub', '--once', '-w', '1',
+                               '--keep-alive', str(STATE_COMMAND_KEEP_ALIVE),
                                '/' + self.names.state_command, 'crtk_msgs/msg/StringStamped',
                                f'{{string: {command}}}'],
                               env=self.env, capture_output=True, text=True, timeout=60)
