@@ -130,30 +130,51 @@ def test_cli_rejects_unknown_part(capsys):
     assert 'warp' in capsys.readouterr().err
 
 
+#: The loop sections of the tiny run; each should see ~1000 round trips in its 1 s window.
+LOOP_SIDES = ('floor', 'contract_floor', 'product', 'full_path')
+#: A run whose window saw 100 round trips or fewer on a side (a process not scheduled for
+#: most of that second: seen once under load, 5 round trips) is redone at most twice; a third
+#: such run fails with the counts of all three.
+TINY_ATTEMPTS = 3
+
+
 @pytest.mark.ros
-@pytest.mark.timeout(240)
+@pytest.mark.timeout(600)
 def test_bench_all_parts_tiny(tmp_path):
     """Floor, product (real node processes), model and diagnosis in one short run."""
     from grip_force_ros.bench.run import run_bench
     from grip_force_ros.cli.bench import render
     from grip_force_ros.params.files import instrument_path
-    r = run_bench(1.0, config=str(instrument_path('paper_needle_driver')), log_minutes=1.0,
-                  model_size=2000)
+    spoiled = []
+    for attempt in range(TINY_ATTEMPTS):
+        r = run_bench(1.0, config=str(instrument_path('paper_needle_driver')), log_minutes=1.0,
+                      model_size=2000)
+        short = {side: r['loop'][side]['samples'] for side in LOOP_SIDES
+                 if r['loop'][side]['samples'] <= 100}
+        if not short:
+            break
+        spoiled.append(f'attempt {attempt + 1}: round trips {short} (load average '
+                       f'{os.getloadavg()[0]:.1f})')
+    assert not short, f'spoiled {TINY_ATTEMPTS} times: ' + '; '.join(spoiled)
     json.dumps(r)                                             # serialisable as --json prints it
     loop, model, diag = r['loop'], r['model'], r['diagnosis']
     for value in (loop['p99_ratio'], loop['full_path_p99_ratio'], loop['missed_fraction'],
                   loop['floor_missed_fraction'], model['forward_ratio'], model['step_share'],
                   diag['load_ratio']):
         assert math.isfinite(value) and value >= 0
-    for side in ('floor', 'product', 'full_path'):
+    for side in LOOP_SIDES:
         s = loop[side]
-        assert s['samples'] > 100                             # ~1000 round trips in 1 s
         assert 0 < s['p50_ms'] <= s['p99_ms'] <= s['max_ms'] < 1000
     # the full path starts at the oldest input a step used, the round trip at the actuator
     # state: never shorter; the round trip is the actuator's own path
     full, product = loop['full_path'], loop['product']
     assert all(full[k] >= product[k] for k in ('p50_ms', 'p99_ms', 'max_ms'))
     assert loop['full_path_p99_ratio'] >= loop['p99_ratio']
+    # the split of the full path's excess: contract floor / floor x full path / contract floor
+    assert loop['contract_floor_p99_ratio'] * loop['full_path_over_contract_p99_ratio'] == \
+        pytest.approx(loop['full_path_p99_ratio'])
+    # the contract floor's echo answered with the sensors of the period (quiet: ~100 %)
+    assert loop['contract_floor_same_sample_fraction'] > 0.1
     inputs = full['inputs']
     assert set(inputs) == {'actuator', 'jaw', 'load_cell'}
     # the controller keeps stamps as float seconds: 1.8e9 s in a float64 is exact to 0.24 us
@@ -165,6 +186,7 @@ def test_bench_all_parts_tiny(tmp_path):
     assert loop['goals']['missed_fraction'] == pytest.approx(loop['floor_missed_fraction'] + 0.0005)
     assert 0 <= loop['missed_fraction'] <= 1
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
+    assert set(loop['cpu_percent']['contract_floor']) == {'ping', 'echo'}
     assert set(loop['cpu_percent']['product']) == {'sim', 'controller', 'master'}
     assert all(v > 0 for v in loop['cpu_percent']['product'].values())
     # the shipped controller answers the states, each command carrying its stamp: how many
@@ -177,3 +199,4 @@ def test_bench_all_parts_tiny(tmp_path):
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
     assert 'timer skipped' in text and 'full path' in text and 'goals:' in text
+    assert 'contract floor' in text

@@ -10,7 +10,12 @@ Run by :mod:`grip_force_ros.bench.loop`, one process each::
 wall clock (``time.time_ns``, the clock of rclpy's ROS time); ``echo`` plays the
 controller at its barest: it answers every state in the subscription callback
 with a current command (``JointState`` on :data:`topics.SERVO_CURRENT`) that
-carries the state's stamp. The round trip is the receive time minus that stamp;
+carries the state's stamp. With ``--sensors`` both play the topic contract's whole
+period: ``ping`` publishes the joint state (:data:`topics.INSTRUMENT_JS`) and the
+load cell (``geometry_msgs/WrenchStamped`` on :data:`topics.MEASURED_FORCE`) before
+the actuator state, as the sim node does, and ``echo`` takes both in (keeping their
+values) before it answers the actuator state: three messages out, one back, no
+model and no control law. The round trip is the receive time minus that stamp;
 a period is missed when its state got no answer. The product is measured the
 same way by the shipped sim node (:mod:`.product_sim`).
 
@@ -32,6 +37,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.task import Future
+from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
@@ -156,6 +162,14 @@ class Ping(Node):
         self.sub = self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_answer,
                                             state_qos(opts.depth), callback_group=sub_group)
         self.msg = _actuator_state()
+        self.sensors = None
+        self.sensors_same_sample = 0
+        if opts.sensors:      # the contract's joint state and load cell, sent first
+            self.sensors = (
+                (self.create_publisher(JointState, topics.INSTRUMENT_JS, state_qos(opts.depth)),
+                 _instrument_state()),
+                (self.create_publisher(WrenchStamped, topics.MEASURED_FORCE, state_qos(opts.depth)),
+                 WrenchStamped()))
         self.timer = self.create_timer(opts.period, self.on_tick, callback_group=group)
 
     def on_tick(self) -> None:
@@ -166,6 +180,12 @@ class Ping(Node):
         t = time.time_ns()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
         msg.position[0] = (t % 1_000_000) * 1e-6
+        if self.sensors is not None:
+            jaw, force = self.sensors[0][1], self.sensors[1][1]
+            jaw.header.stamp = force.header.stamp = msg.header.stamp
+            jaw.position[1] = force.wrench.force.z = msg.position[0]   # the echo answers with them
+            for pub, sensor in self.sensors:
+                pub.publish(sensor)
         self.pub.publish(msg)
         if w.measuring:
             w.sent += 1
@@ -178,11 +198,16 @@ class Ping(Node):
         w.saw_answer()
         if w.counts(stamp):
             w.record_answer(stamp, round_trip)
+            if self.sensors is not None and msg.effort[0] == (stamp % 1_000_000) * 1e-6:
+                self.sensors_same_sample += 1   # answered with the sensors of its own period
 
     def summary(self) -> dict:
         w = self.window
         out = w.answer_summary(self.period)
         out.update({'sent': w.sent, 'received': w.received})
+        if self.sensors is not None:    # answers that used the joint state and load cell of their period
+            out['sensors_same_sample_fraction'] = (self.sensors_same_sample / w.received
+                                                   if w.received else float('nan'))
         out['lost_fraction'] = 1.0 - w.received / w.sent if w.sent else float('nan')
         return out
 
@@ -204,6 +229,15 @@ class Echo(Node):
                                             callback_group=_callback_group(opts.callback_groups))
         self.msg = _command()
         self.latest = None
+        self.jaw_angle = self.grip_force = 0.0   # rad, N: the sensors' last values (--sensors)
+        self.sensor_subs = ()
+        if opts.sensors:
+            group = _callback_group(opts.callback_groups)
+            self.sensor_subs = (
+                self.create_subscription(JointState, topics.INSTRUMENT_JS, self.on_instrument,
+                                         state_qos(opts.depth), callback_group=group),
+                self.create_subscription(WrenchStamped, topics.MEASURED_FORCE, self.on_force,
+                                         state_qos(opts.depth), callback_group=group))
         self.answer_on_timer = opts.answer == 'timer'
         if self.answer_on_timer:
             self.timer = self.create_timer(opts.period, self.on_tick)
@@ -221,6 +255,12 @@ class Echo(Node):
         else:
             self.answer(msg)
 
+    def on_instrument(self, msg: JointState) -> None:
+        self.jaw_angle = msg.position[1]
+
+    def on_force(self, msg: WrenchStamped) -> None:
+        self.grip_force = msg.wrench.force.z
+
     def on_tick(self) -> None:
         if self.latest is not None:
             self.answer(self.latest)
@@ -228,7 +268,8 @@ class Echo(Node):
     def answer(self, msg: JointState) -> None:
         out = self.msg if self.prealloc else _command()
         out.header.stamp = msg.header.stamp
-        out.effort[0] = msg.position[0] * 0.5
+        out.effort[0] = (0.5 * (self.jaw_angle + self.grip_force) if self.sensor_subs
+                         else msg.position[0] * 0.5)
         self.pub.publish(out)
 
 
@@ -246,6 +287,14 @@ def _actuator_state() -> JointState:
     msg.position = [0.0]
     msg.velocity = [0.0]
     msg.effort = [0.0]
+    return msg
+
+
+def _instrument_state() -> JointState:
+    msg = JointState()
+    msg.name = [topics.WRIST_JOINT, topics.JAW_JOINT]
+    msg.position = [0.0, 0.0]
+    msg.velocity = [0.0, 0.0]
     return msg
 
 
@@ -268,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--prealloc', action='store_true', help='reuse one message per publisher')
     p.add_argument('--answer', choices=('callback', 'timer'), default='callback',
                    help='echo: answer in the subscription callback or on a 1 kHz timer')
+    p.add_argument('--sensors', action='store_true',
+                   help="the contract's joint state and load cell before each actuator state")
     p.add_argument('--callback-groups', choices=('default', 'separate', 'reentrant'),
                    default='default')
     return p

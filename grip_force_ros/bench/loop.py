@@ -3,6 +3,10 @@
 * :func:`run_floor`: bare rclpy ping-pong between two processes (:mod:`.child`
   ``ping`` and ``echo``), the product's message types, one variant of the
   settings (executor, QoS depth, gc.freeze, preallocated messages, callback groups).
+  The floor sends one state message a period; the *contract floor*
+  (``Variant.sensors``) sends the topic contract's three (joint state, load cell,
+  actuator state), so that what the contract costs and what this package's code
+  costs are told apart.
 * :func:`run_product`: the shipped ``master`` executable, the shipped sim node
   (measuring its own loop, :mod:`.product_sim`) and the shipped controller node
   (noting the input stamps of each step, :mod:`.product_controller`) with an
@@ -57,6 +61,11 @@ class Variant:
         'timer': on its own 1 kHz timer, the newest state (the controller's structure).
     rt_priority : int
         0: normal scheduling; 1..99: both processes under SCHED_FIFO at this priority.
+    sensors : bool
+        False: one state message a period (the floor). True: the topic contract's joint
+        state and load cell go out before each actuator state and the echo takes them
+        in before it answers (the contract floor: the shipped nodes' message pattern,
+        without their code).
     """
 
     executor: str = 'events'
@@ -66,6 +75,7 @@ class Variant:
     callback_groups: str = 'default'
     answer: str = 'callback'
     rt_priority: int = 0
+    sensors: bool = False
 
     def args(self) -> list[str]:
         out = ['--executor', self.executor, '--depth', str(self.depth),
@@ -74,22 +84,27 @@ class Variant:
             out.append('--gc-freeze')
         if self.prealloc:
             out.append('--prealloc')
+        if self.sensors:
+            out.append('--sensors')
         return out
 
     def label(self) -> str:
         return (f'{self.executor}, depth {self.depth}, gc.freeze {"on" if self.gc_freeze else "off"}, '
                 f'prealloc {"on" if self.prealloc else "off"}, groups {self.callback_groups}, '
                 f'answer on {self.answer}'
-                + (f', SCHED_FIFO {self.rt_priority}' if self.rt_priority else ''))
+                + (f', SCHED_FIFO {self.rt_priority}' if self.rt_priority else '')
+                + (', three state messages (the contract)' if self.sensors else ''))
 
 
 #: The settings the bench measures the floor with (the winners of the variant runs).
 BEST = Variant()
+#: The floor with the topic contract's three state messages a period.
+CONTRACT = replace(BEST, sensors=True)
 
 #: Variants measured by ``grip-force bench --variants``: plain rclpy defaults, the
 #: EventsExecutor with one change at a time, the multi-threaded executor, the
 #: chosen settings, the same answering on a timer (the controller's structure),
-#: and the chosen settings under SCHED_FIFO.
+#: the chosen settings under SCHED_FIFO, and the contract floor.
 VARIANTS = (
     Variant('single', 10, False, False),
     Variant('events', 10, False, False),
@@ -101,6 +116,7 @@ VARIANTS = (
     BEST,
     replace(BEST, answer='timer'),
     replace(BEST, rt_priority=50),
+    CONTRACT,
 )
 
 
@@ -247,12 +263,33 @@ P99_RATIO_GOAL = 1.5
 MISSED_OVER_FLOOR = 0.0005
 
 
-def compare(floor: dict, product: dict) -> dict:
-    """Build the ``loop`` section: product/floor ratios beside both runs' figures, the goals judged."""
+def compare(floor: dict, product: dict, contract_floor: dict | None = None) -> dict:
+    """Build the ``loop`` section: product/floor ratios beside both runs' figures, the goals judged.
+
+    ``contract_floor`` (a :func:`run_floor` result with ``Variant.sensors``), when given,
+    splits the full path's excess over the floor in two: ``contract_floor_p99_ratio``
+    (contract floor p99 / floor p99: the two extra messages of the topic contract, bare
+    rclpy) and ``full_path_over_contract_p99_ratio`` (full-path p99 / contract floor p99:
+    this package's code: message checks, model, control law, force outputs).
+    """
     fl, pl = floor['latency'], product['latency']
     fp = product['full_path']
     missed, floor_missed = product['periods']['missed_fraction'], floor['periods']['missed_fraction']
     full_path_ratio = ratio(fp['full_path']['p99_ms'], fl['p99_ms'])
+    split = {}
+    if contract_floor is not None:
+        cl = contract_floor['latency']
+        split = {
+            'contract_floor_p99_ratio': ratio(cl['p99_ms'], fl['p99_ms']),
+            'contract_floor_p50_ratio': ratio(cl['p50_ms'], fl['p50_ms']),
+            'full_path_over_contract_p99_ratio': ratio(fp['full_path']['p99_ms'], cl['p99_ms']),
+            'full_path_over_contract_p50_ratio': ratio(fp['full_path']['p50_ms'], cl['p50_ms']),
+            'contract_floor_missed_fraction': contract_floor['periods']['missed_fraction'],
+            # answers of the contract floor's echo that used the joint state and load cell
+            # of their own period (the product's figure: full_path.inputs.*.same_sample_fraction)
+            'contract_floor_same_sample_fraction': contract_floor.get('sensors_same_sample_fraction'),
+            'contract_floor': {k: cl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
+        }
     return {
         'p99_ratio': ratio(pl['p99_ms'], fl['p99_ms']),
         'p50_ratio': ratio(pl['p50_ms'], fl['p50_ms']),
@@ -274,7 +311,9 @@ def compare(floor: dict, product: dict) -> dict:
         'full_path': {**{k: fp['full_path'][k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
                       'matched_fraction': fp['matched_fraction'], 'inputs': fp['inputs']},
         'sensors_deferred': product.get('sensors_deferred'),
-        'cpu_percent': {'floor': floor['cpu_percent'], 'product': product['cpu_percent']},
+        **split,
+        'cpu_percent': {'floor': floor['cpu_percent'], 'product': product['cpu_percent'],
+                        **({'contract_floor': contract_floor['cpu_percent']} if contract_floor else {})},
         # the product's longest round trips: (s into the window, ms)
         'product_worst': product.get('worst', []),
         'goals': {'p99_ratio': P99_RATIO_GOAL, 'full_path_p99_ratio': P99_RATIO_GOAL,

@@ -54,15 +54,18 @@ def parse_domains(text: str | None) -> list[int] | None:
 
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
              product_executor: str | None = None, rt_priority: int = 0, say=None) -> dict:
-    """Measure the ``loop`` section: floor then product in one free domain, and their ratios."""
+    """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios."""
     say = say or (lambda msg: None)
     variant = replace(variant, rt_priority=rt_priority)
+    contract = replace(variant, sensors=True)
     with DomainLock(domains) as domain:
         say(f'loop: floor ping-pong, {seconds:g} s, ROS_DOMAIN_ID {domain} ({variant.label()})')
         floor = run_floor(seconds, domain, variant)
+        say(f'loop: contract floor, {seconds:g} s ({contract.label()})')
+        contract_floor = run_floor(seconds, domain, contract)
         say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
         product = run_product(seconds, domain, config, executor=product_executor, rt_priority=rt_priority)
-    out = compare(floor, product)
+    out = compare(floor, product, contract_floor)
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
                 'floor_lost_fraction': floor['lost_fraction'],
                 'product_fallback_commands': product['other_commands'],

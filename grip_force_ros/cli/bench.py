@@ -68,6 +68,11 @@ def render(result: dict) -> str:
         lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}{rt}):")
         lines.append(f"  floor   ping-pong       p50 {_f(fl['p50_ms'])} ms  p99 {_f(fl['p99_ms'])} ms  "
                      f"max {_f(fl['max_ms'])} ms  missed {_f(loop['floor_missed_fraction'] * 100)} %")
+        if 'contract_floor' in loop:
+            cf = loop['contract_floor']
+            lines.append(f"  contract floor (3 msgs) p50 {_f(cf['p50_ms'])} ms  p99 {_f(cf['p99_ms'])} ms  "
+                         f"max {_f(cf['max_ms'])} ms  missed "
+                         f"{_f(loop['contract_floor_missed_fraction'] * 100)} %")
         lines.append(f"  product sim->ctrl->sim  p50 {_f(pr['p50_ms'])} ms  p99 {_f(pr['p99_ms'])} ms  "
                      f"max {_f(pr['max_ms'])} ms  missed {_f(loop['missed_fraction'] * 100)} %")
         full, goals, met = loop['full_path'], loop['goals'], loop['goals_met']
@@ -85,6 +90,12 @@ def render(result: dict) -> str:
                      f"{goals['full_path_p99_ratio']:g}: {_met(met['full_path_p99_ratio'])}; missed "
                      f"{_f(loop['missed_fraction'] * 100)} % <= floor's + 0.05 % = "
                      f"{_f(goals['missed_fraction'] * 100)} %: {_met(met['missed_fraction'])}")
+        if 'contract_floor' in loop:
+            lines.append(f"  full-path p99 = floor x {_f(loop['full_path_p99_ratio'])}: the topic contract's "
+                         f"three messages x {_f(loop['contract_floor_p99_ratio'])} (bare rclpy), this "
+                         f"package's code x {_f(loop['full_path_over_contract_p99_ratio'])} "
+                         f"(p50: x {_f(loop['contract_floor_p50_ratio'])}, "
+                         f"x {_f(loop['full_path_over_contract_p50_ratio'])})")
         lines.append(f"  of which the state publisher's own timer skipped: floor "
                      f"{_f(loop['floor_timer_missed_fraction'] * 100)} %, product "
                      f"{_f(loop['timer_missed_fraction'] * 100)} %; controller timer-fallback commands "
