@@ -41,6 +41,9 @@ def test_the_fit_recovers_a_known_shape(levels, seed):
         offset, scale = fitted.terms(s, x)
         assert np.allclose(level * scale + offset, tau, rtol=0, atol=1e-9)
     assert fitted.residual_std < 1e-9
+    named = fitted.to_json()                                 # the transfer JSON's load_model
+    assert tuple(named['constant_Nm'].values()) == fitted.constant
+    assert tuple(named['proportional_per_level'].values()) == fitted.proportional
 
 
 def test_a_fit_that_would_invert_the_load_is_clipped():

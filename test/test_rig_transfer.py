@@ -295,6 +295,13 @@ def test_transfer_cli_json_contract(tmp_path, capsys):
     assert 0 < result['startup']['fraction_of_samples'] < 0.1          # the first slide: < 2 s
     assert 0 <= result['startup']['share_of_squared_error'] <= 1
     assert cal['session_consistency']['runs'] == 4          # every run's motor side
+    load = result['model']['load_model']                    # the shape the observer adds back
+    assert set(load['constant_Nm']) == {'direction', 'position_P1', 'position_P2',
+                                        'direction_x_position_P1', 'offset'}
+    assert set(load['proportional_per_level']) == {'direction', 'position_P1'}
+    assert all(math.isfinite(v) for v in [*load['constant_Nm'].values(),
+                                          *load['proportional_per_level'].values()])
+    assert 0 < load['residual_std_Nm'] < 0.02               # 4-9 mN*m within a run, before
     # zero-shot: every run scored, nothing calibrated
     assert cli_main(['realdata', '--train', str(train_dir), '--test', str(test_dir), '--json']) == 0
     zs = json.loads(capsys.readouterr().out)

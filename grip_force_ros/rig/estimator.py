@@ -528,6 +528,19 @@ class LoadModel:
         p2 = 0.5 * (3.0 * x * x - 1.0)
         return np.column_stack([s, x, p2, s * x, np.ones_like(s)]), np.column_stack([s, x])
 
+    #: Names of the columns of A and B (in :meth:`columns`' order), for :meth:`to_json`.
+    CONSTANT_TERMS = ('direction', 'position_P1', 'position_P2', 'direction_x_position_P1', 'offset')
+    PROPORTIONAL_TERMS = ('direction', 'position_P1')
+
+    def to_json(self) -> dict:
+        """Named coefficients with their units, and the training residual."""
+        return {'constant_Nm': dict(zip(self.CONSTANT_TERMS, self.constant)),
+                'proportional_per_level': dict(zip(self.PROPORTIONAL_TERMS, self.proportional)),
+                'residual_std_Nm': self.residual_std,
+                'form': 'tau = level * (1 + B(s, x) . proportional) + A(s, x) . constant; '
+                        's friction direction (+-1), x disk position scaled to [-1, 1], '
+                        'P1, P2 Legendre polynomials'}
+
     def terms(self, direction, position) -> tuple[np.ndarray, np.ndarray]:
         """Return the offset (N*m) and the factor on the level along (s, x)."""
         a, b = self.columns(direction, position)

@@ -1164,7 +1164,9 @@ def transfer(train_folders: Sequence, test_folder, *, calibrate_runs: Sequence[s
                   'noise': vars(model.noise), 'training_max_torque_Nm': model.max_torque_Nm,
                   'front_end_reference': model.front_end,
                   'front_end_steps': model.front_end_steps.to_json(),
-                  'prior_torque_Nm': est.prior_torque},
+                  'prior_torque_Nm': est.prior_torque,
+                  # the held load's shape along the stroke (None: off in these settings)
+                  'load_model': est.load_model.to_json() if est.load_model is not None else None},
         'session_consistency': {
             'used': session is not None,
             'zero_shot_update': ({'groups': self_calibrated.groups,
