@@ -73,6 +73,16 @@ def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
 CLI_CALL_TIMEOUT = 30.0
 
 
+def cli_once(env, *args: str) -> subprocess.CompletedProcess:
+    """``ros2 ARGS`` once; a call hung past :data:`CLI_CALL_TIMEOUT` returns with code -1.
+
+    For the verbs that are not idempotent (a transition, a service call): the caller decides
+    what a lost answer means.
+    """
+    return retry(lambda: run('ros2', *args, env=env, timeout=CLI_CALL_TIMEOUT), lambda r: True,
+                 timeout=0)
+
+
 def cli(env, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess:
     """``ros2 ARGS`` for a read-only verb, again while it hung or the node was not discovered yet.
 
@@ -101,9 +111,7 @@ def lifecycle_transition(env, node: str, transition: str, confirm,
     """
     deadline = time.monotonic() + timeout
     while True:
-        got = retry(lambda: run('ros2', 'lifecycle', 'set', node, transition, '--no-daemon',
-                                '--spin-time', '2', env=env, timeout=CLI_CALL_TIMEOUT),
-                    lambda r: True, timeout=0)
+        got = cli_once(env, 'lifecycle', 'set', node, transition, '--no-daemon', '--spin-time', '2')
         if got.returncode != -1 and 'Node not found' not in got.stdout + got.stderr:
             return got, False
         if got.returncode == -1 and confirm():

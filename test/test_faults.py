@@ -70,6 +70,25 @@ def test_select():
     assert [c.name for c in select(catalogue(), None)] == [c.name for c in catalogue()]
 
 
+def test_a_spoiled_trial_is_redone_at_most_twice():
+    """Two spoiled trials then a good one: the good one's detail; three spoiled: failed, with
+    every cause in order (the fourth trial is never run)."""
+    from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, redo_spoiled
+    trials = iter([{'spoiled': 'a', 'passed': False}, {'spoiled': 'b', 'passed': False},
+                   {'passed': True}])
+    detail = redo_spoiled(lambda: next(trials), 'a stalled machine')
+    assert detail['passed'] is True and detail['spoiled_trials'] == ['a', 'b']
+    calls = []
+
+    def always_spoiled():
+        calls.append(1)
+        return {'spoiled': f'stall {len(calls)}', 'passed': True}
+    detail = redo_spoiled(always_spoiled, 'a stalled machine')
+    assert len(calls) == CASE_ATTEMPTS == 3
+    assert detail['passed'] is False
+    assert detail['why'] == 'spoiled 3 times by a stalled machine: stall 1 | stall 2 | stall 3'
+
+
 def test_bad_params_text():
     import yaml
     base = {'max_current': 0.5, 'guide_pulley_radii': (0.003, 0.003)}

@@ -19,13 +19,13 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from _ros_tools import (CLI_CALL_TIMEOUT, ROOT, cli, lifecycle_transition, require_ros_tools,
-                        retry, ros_env, run, start, stop, stop_daemon)
+from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, require_ros_tools, retry,
+                        ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
 from grip_force_ros.faults.probe import LimitMonitor
 from grip_force_ros.nodes.common import RECORD_QOS
 from grip_force_ros.nodes.harness import RosRunner, wait_until
-from grip_force_ros.nodes.processes import DEFAULT_RT_PRIORITY, can_use_realtime
+from grip_force_ros.nodes.processes import DEFAULT_RT_PRIORITY, can_use_realtime, master_rt_priority
 from grip_force_ros.params import load_params_file, read_params_yaml
 
 pytestmark = pytest.mark.ros
@@ -36,7 +36,7 @@ OPEN, CLOSED = 0.8, 0.0            # rad, master gripper angle
 #: Whether the rig may run its nodes under SCHED_FIFO (else normal scheduling, said by the log).
 RT = can_use_realtime(DEFAULT_RT_PRIORITY)
 #: The test master's SCHED_FIFO priority: below the 1 kHz nodes (the loop first), above the rest.
-MASTER_RT_PRIORITY = DEFAULT_RT_PRIORITY - 10
+MASTER_RT_PRIORITY = master_rt_priority(DEFAULT_RT_PRIORITY)
 #: The sim's current noise (current_noise_std, A): the bound of "the sim sees 0 A".
 CURRENT_NOISE = PARAMS.current_noise_std
 
@@ -134,13 +134,8 @@ def rig(tmp_path):
         stop_daemon(env)
 
 
-def _cli(env, *args):
-    """``ros2 ARGS`` (read-only verbs), again while hung or the controller is not discovered."""
-    return cli(env, *args)
-
-
 def lifecycle(env, *args):
-    return _cli(env, 'lifecycle', *args, '--no-daemon', '--spin-time', '2')
+    return cli(env, 'lifecycle', *args, '--no-daemon', '--spin-time', '2')
 
 
 def transition(env, name, confirm, log=lambda: ''):
@@ -160,7 +155,7 @@ def transition(env, name, confirm, log=lambda: ''):
 
 
 def param(env, name):
-    got = _cli(env, 'param', 'get', '/controller', name, '--no-daemon', '--spin-time', '2')
+    got = cli(env, 'param', 'get', '/controller', name, '--no-daemon', '--spin-time', '2')
     assert got.returncode == 0, got
     return got.stdout.strip().split(': ', 1)[1]
 
@@ -183,9 +178,7 @@ def trigger(env, service, attempts=1):
     trigger.lost = 0
     for attempt in range(attempts):
         for _ in range(4):
-            got = retry(lambda: run('ros2', 'service', 'call', f'/controller/{service}',
-                                    'std_srvs/srv/Trigger', env=env, timeout=CLI_CALL_TIMEOUT),
-                        lambda r: True, timeout=0)
+            got = cli_once(env, 'service', 'call', f'/controller/{service}', 'std_srvs/srv/Trigger')
             if got.returncode != -1:
                 break
             trigger.lost += 1
@@ -292,7 +285,7 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
         transition(env, name, state, lambda: rig.log('controller'))
     assert lifecycle(env, 'get', '/controller').stdout.split() == ['unconfigured', '[1]']
     servo = f'/{topics.SERVO_CURRENT}'
-    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
                  lambda r: 'Publisher count: 0' in r.stdout, timeout=30)
     assert 'Publisher count: 0' in info.stdout, info
     assert ctl.poll() is None and 'Traceback' not in rig.log('controller'), rig.log('controller')
@@ -354,7 +347,7 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
     time.sleep(1.0)
     assert probe.commands == []
     servo = f'/{topics.SERVO_CURRENT}'
-    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
                  lambda r: 'Subscription count: 1' in r.stdout, timeout=30)   # the sim's
     assert 'Publisher count: 0' in info.stdout, info
     recent = [i for t, i in probe.currents[-200:]]
@@ -364,7 +357,7 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
 
     transition(env, 'configure', 'inactive', lambda: rig.log('controller'))
     assert lifecycle(env, 'get', '/controller').stdout.split() == ['inactive', '[2]']
-    info = retry(lambda: _cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
+    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
                  lambda r: 'Publisher count: 1' in r.stdout, timeout=30)
     assert 'Publisher count: 1' in info.stdout, info
     time.sleep(0.5)

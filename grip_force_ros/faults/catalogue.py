@@ -45,8 +45,39 @@ NAN = math.nan
 INF = math.inf
 
 #: Trials of a case that a loaded machine spoils: a spoiled trial is redone, at most twice
-#: (runner.run_case_redoing_spoiled, dvrk.run_process_case_redoing_spoiled).
+#: (:func:`redo_spoiled`).
 CASE_ATTEMPTS = 3
+
+
+def redo_spoiled(run_trial: Callable[[], dict], spoiled_by: str) -> dict:
+    """Run a case's trial; a trial the machine spoiled is redone, at most twice.
+
+    Parameters
+    ----------
+    run_trial : callable
+        Runs one trial and returns its detail dict; ``detail['spoiled']`` (a cause) marks
+        a trial the machine spoiled (what spoils one is the caller's to say).
+    spoiled_by : str
+        What spoils a trial, for the failure message ('a stalled machine', ...).
+
+    Returns
+    -------
+    dict
+        The last trial's detail, with ``spoiled_trials`` (the causes, in order); after
+        :data:`CASE_ATTEMPTS` spoiled trials ``passed`` is False and ``why`` lists them.
+    """
+    spoiled = []
+    for _ in range(CASE_ATTEMPTS):
+        detail = run_trial()
+        if not detail.get('spoiled'):
+            break
+        spoiled.append(detail['spoiled'])
+    else:
+        detail['passed'] = False
+        detail['why'] = f'spoiled {CASE_ATTEMPTS} times by {spoiled_by}: ' + ' | '.join(spoiled)
+    detail['spoiled_trials'] = spoiled
+    return detail
+
 
 OUTCOMES = {
     'reject_safe': 'rejected with the reason on /diagnostics, last good input kept, output safe '

@@ -34,9 +34,9 @@ import time
 from pathlib import Path
 
 from grip_force_ros import topics
-from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, FaultCase
+from grip_force_ros.faults.catalogue import FaultCase, redo_spoiled
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError, node_command,
-                                            pick_domain_ids, ros_environment,
+                                            master_rt_priority, pick_domain_ids, ros_environment,
                                             ros_tools_environment)
 from grip_force_ros.params import load_params_file
 
@@ -207,7 +207,8 @@ class _Loop:
                 self.procs[name] = NodeProcess(
                     name, command=node_command(name, config, extra), env=self.env,
                     log_path=log_dir / f'{name}.log',
-                    rt_priority=DEFAULT_RT_PRIORITY if name != 'master' else 0)
+                    rt_priority=(DEFAULT_RT_PRIORITY if name != 'master'
+                                 else master_rt_priority(DEFAULT_RT_PRIORITY)))
         except ProcessError:
             self.close()
             raise
@@ -445,17 +446,7 @@ def run_process_case_redoing_spoiled(case: FaultCase, config: Path, log_root: Pa
     says so in its cut line; seen once in CI: 2.6 s, with the master 3.7 s late as well).
     The third spoiled trial fails with its cause. The logs are the last trial's.
     """
-    spoiled = []
-    for _ in range(CASE_ATTEMPTS):
-        detail = run_process_case(case, config, log_root)
-        if not detail.get('spoiled'):
-            break
-        spoiled.append(detail['spoiled'])
-    else:
-        detail['why'] = (f'spoiled {CASE_ATTEMPTS} times by a stalled machine: '
-                         + ' | '.join(spoiled))
-    detail['spoiled_trials'] = spoiled
-    return detail
+    return redo_spoiled(lambda: run_process_case(case, config, log_root), 'a stalled machine')
 
 
 def run_process_cases(cases: list[FaultCase], config: Path, progress=None) -> list[dict]:

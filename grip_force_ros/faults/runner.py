@@ -32,8 +32,8 @@ from pathlib import Path
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
-from grip_force_ros.faults.catalogue import (CASE_ATTEMPTS, SOURCES, FaultCase, bad_params_text,
-                                             catalogue)
+from grip_force_ros.faults.catalogue import (SOURCES, FaultCase, bad_params_text, catalogue,
+                                             redo_spoiled)
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
@@ -432,18 +432,7 @@ def run_case_redoing_spoiled(session: Session, case: FaultCase) -> dict:
     loaded machine: found with 10 kHz bursts relayed from the sim process at load 11, and a
     33 ms stall of the in-process controller at load 5). The third spoiled trial fails with its cause.
     """
-    spoiled = []
-    for _ in range(CASE_ATTEMPTS):
-        detail = run_message_case(session, case)
-        if not detail.get('spoiled'):
-            break
-        spoiled.append(detail['spoiled'])
-    else:
-        detail['passed'] = False
-        detail['why'] = (f'spoiled {CASE_ATTEMPTS} times by another lost input or a stall: '
-                         + ' | '.join(spoiled))
-    detail['spoiled_trials'] = spoiled
-    return detail
+    return redo_spoiled(lambda: run_message_case(session, case), 'another lost input or a stall')
 
 
 def _implausible(held: dict, params) -> list:
