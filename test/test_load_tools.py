@@ -129,3 +129,42 @@ def test_load_command_refuses_values_beyond_its_bounds(capsys):
     assert main(['load', '--seconds', '0']) == 2
     assert 'seconds' in capsys.readouterr().err
     assert main(['loadcheck', '--runs', '0']) == 2
+
+
+def test_a_stopped_loadcheck_stops_its_run_and_what_the_run_started(tmp_path):
+    """SIGTERM to `grip-force loadcheck`: the pytest run in progress gets SIGINT (its
+    fixtures' teardown runs) and its session is killed after the grace; the load ends too."""
+    (tmp_path / 'test_slow.py').write_text(textwrap.dedent(f"""
+        import os, subprocess, time
+        import pytest
+
+        @pytest.fixture
+        def child():
+            proc = subprocess.Popen(['sleep', '300'])      # in the run's session
+            (open({str(tmp_path / 'pids')!r}, 'w')).write(f'{{os.getpid()}} {{proc.pid}}')
+            yield proc
+            open({str(tmp_path / 'teardown')!r}, 'w').write('ran')
+            proc.terminate()
+
+        def test_slow(child):
+            time.sleep(300)
+    """))
+    runner = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'loadcheck', '--runs',
+                               '1', '--workers', '1', '--duty', '0.2', '--select', 'not nothing',
+                               '--files', str(tmp_path / 'test_slow.py'),
+                               '--out', str(tmp_path / 'out')],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    pids_file = tmp_path / 'pids'
+    deadline = time.monotonic() + 60
+    while not pids_file.is_file() or len(pids_file.read_text().split()) < 2:
+        assert time.monotonic() < deadline and runner.poll() is None, runner.communicate()
+        time.sleep(0.2)
+    procs = [psutil.Process(int(p)) for p in pids_file.read_text().split()]
+    workers = [p for p in psutil.Process(runner.pid).children()
+               if 'grip_force_ros.bench.load' in ' '.join(p.cmdline())]
+    assert len(workers) == 1
+    runner.send_signal(signal.SIGTERM)
+    runner.wait(timeout=60)
+    gone, alive = psutil.wait_procs(procs + workers, timeout=30)
+    assert not alive, [p.cmdline() for p in alive]
+    assert (tmp_path / 'teardown').read_text() == 'ran'     # SIGINT first: fixtures torn down

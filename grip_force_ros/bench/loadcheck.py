@@ -68,6 +68,26 @@ def parse_junit(path: Path) -> dict:
     return out
 
 
+#: After SIGINT, how long a stopped run's pytest has to tear its fixtures down (the nodes
+#: it started, each in a session of its own) before its session is killed (s).
+STOP_GRACE = 15.0
+
+
+def stop_session(proc: subprocess.Popen) -> None:
+    """Stop a pytest run and its session: SIGINT (its fixtures stop their nodes), then SIGKILL."""
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=STOP_GRACE)
+    except subprocess.TimeoutExpired:
+        pass
+    except ProcessLookupError:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
 def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float = 1.0,
              select: str = ROS_MARKER, files: list[str] | None = None,
              pytest_args: list[str] | None = None, timeout: float = RUN_TIMEOUT) -> dict:
@@ -110,11 +130,13 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
             proc = subprocess.Popen(cmd, cwd=tests.parent, env=env, stdout=out,
                                     stderr=subprocess.STDOUT, start_new_session=True,
                                     preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-            while proc.poll() is None and time.monotonic() - start < timeout:
-                loads.append(os.getloadavg()[0])
-                time.sleep(2.0)
-            if proc.poll() is None:
-                os.killpg(proc.pid, 9)
+            try:
+                while proc.poll() is None and time.monotonic() - start < timeout:
+                    loads.append(os.getloadavg()[0])
+                    time.sleep(2.0)
+            finally:                    # timed out, or this runner was stopped: the whole run
+                if proc.poll() is None:
+                    stop_session(proc)
             code = proc.wait()
     finally:
         load_summary = load.stop() if load is not None else {'workers': 0}

@@ -21,6 +21,7 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     import json
+    import signal
     import sys
     import time
     from pathlib import Path
@@ -37,6 +38,10 @@ def run(args) -> int:
         print(f"run {r['run']}: {r['tests']} tests, {r['seconds']:.0f} s, load average "
               f"{r['load_average_mean']}, failed: {failed}", file=sys.stderr, flush=True)
 
+    def stopped(signum, frame):     # SIGTERM as Ctrl-C: the run in progress and the load stop
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stopped)
     report = loadcheck(args.runs, out, progress=progress, workers=args.workers, duty=args.duty,
                        select=args.select, files=args.files, timeout=args.timeout)
     if args.json:
