@@ -88,6 +88,12 @@ def test_plot_and_results_are_written(demo_run):
     assert set(result['phases']) == {'approach', 'close', 'hold', 'pull', 'release'}
     # every node stopped cleanly (master on its own, the others on SIGINT)
     assert result['exit_codes'] == {'sim_instrument': 0, 'controller': 0, 'master': 0}
+    # the 1 kHz nodes under SCHED_FIFO 50 where permitted, the master ten below them
+    sched = result['scheduling']
+    if sched['controller'] == 'SCHED_FIFO 50':
+        assert sched['sim_instrument'] == 'SCHED_FIFO 50' and sched['master'] == 'SCHED_FIFO 40'
+    else:                       # not permitted here: all three normal, and it says why
+        assert all('not permitted' in v for v in sched.values()), sched
 
 
 def test_hold_force_reaches_the_target(demo_run):

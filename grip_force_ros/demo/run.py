@@ -24,6 +24,7 @@ from grip_force_ros.control import Mode
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import RecordedTopics, recorded_topics
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, ProcessError, ProcessGroup,
+                                            master_rt_priority,
                                             node_command, python_module, ros_args,
                                             ros_environment, ros_tools_environment)
 from grip_force_ros.params import load_params_file, read_params_yaml
@@ -78,7 +79,9 @@ class RunSpec:
         SCHED_FIFO priority of the two 1 kHz processes (sim and controller) where the
         machine permits it (default :data:`~grip_force_ros.nodes.processes.DEFAULT_RT_PRIORITY`,
         as ros2_control's controller manager runs its loop); 0: normal scheduling. The
-        master (250 Hz, 0.1 s watchdog) and the recorder keep normal scheduling.
+        master (250 Hz, 0.1 s watchdog) runs ten below it
+        (:func:`~grip_force_ros.nodes.processes.master_rt_priority`); the recorder, in
+        this process, keeps normal scheduling.
     """
 
     config: Path
@@ -375,7 +378,8 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             for name in ('sim_instrument', 'controller'):
                 proc = group.start(name, _node_argv(name, spec), rt_priority=spec.rt_priority)
                 scheduling[name] = proc.scheduling
-            master = group.start('master', _node_argv('master', spec))
+            master = group.start('master', _node_argv('master', spec),
+                                 rt_priority=master_rt_priority(spec.rt_priority))
             scheduling['master'] = master.scheduling
             # (dvrk: the controller sends its first command once it has enabled the arm)
             needed = [names.actuator_js, names.instrument_js, names.command, names.master_js]

@@ -243,6 +243,17 @@ def node_command(name: str, params_file: str | os.PathLike | None = None,
 DEFAULT_RT_PRIORITY = 50
 
 
+def master_rt_priority(loop_priority: int) -> int:
+    """Return the SCHED_FIFO priority of the master beside a loop at ``loop_priority``.
+
+    Ten below the 1 kHz loop, so that the loop preempts it and other work does not: on a
+    busy 2-core machine a master at normal priority was starved past the controller's
+    0.1 s master watchdog by a second of Python start-up of a ros2 CLI call
+    (docs/reliability.md, fourth round). 0 (normal scheduling) when the loop is normal.
+    """
+    return max(1, loop_priority - 10) if loop_priority else 0
+
+
 def realtime(priority: int) -> Callable[[], None]:
     """Return a ``preexec_fn`` putting the child under SCHED_FIFO ``priority`` (1..99).
 
