@@ -70,6 +70,31 @@ def test_select():
     assert [c.name for c in select(catalogue(), None)] == [c.name for c in catalogue()]
 
 
+def test_steps_to_safe_reads_the_timeout_as_the_controller_does():
+    """A step the controller took 0.1-0.2 us after its master watchdog expired counts as the
+    first period after the timeout (fresh-clone CI read "period 0": the checker's float
+    seconds were one ulp off the controller's, and its test was last + timeout < stamp)."""
+    from types import SimpleNamespace
+
+    from grip_force_ros.faults.probe import FaultProbe
+    from grip_force_ros.faults.runner import _steps_to_safe
+    case = select(catalogue(), ['silence_master'])[0]
+    timeout = 0.1
+    last_ns = 1_795_661_078_065_190_246                  # a receive time of that CI run (ns)
+    last = last_ns * 1e-9                                 # the controller's clock: ns x 1e-9
+    # the controller's first step past the timeout whose stamp the old reading put before it
+    step_ns = next(n for n in range(last_ns + 100_000_000, last_ns + 100_010_000)
+                   if n * 1e-9 - last > timeout
+                   and n // 10 ** 9 + (n % 10 ** 9) * 1e-9 <= last + timeout)
+    msg = SimpleNamespace(header=SimpleNamespace(stamp=SimpleNamespace(
+        sec=step_ns // 10 ** 9, nanosec=step_ns % 10 ** 9)))
+    stamp = FaultProbe._stamp(msg)
+    assert stamp - last > timeout                         # the controller's own test
+    before = (stamp - 0.001, 0.2, 1.0)                    # a gripping step 1 ms earlier
+    rows = [(0.0, before[0], before[1], before[2]), (0.0, stamp, 0.0, 0.0)]
+    assert _steps_to_safe(case, None, {'master': last}, rows, timeout) == 1
+
+
 def test_a_spoiled_trial_is_redone_at_most_twice():
     """Two spoiled trials then a good one: the good one's detail; three spoiled: failed, with
     every cause in order (the fourth trial is never run)."""

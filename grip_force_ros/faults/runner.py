@@ -504,7 +504,7 @@ def _steps_to_safe(case, probe, last_good, rows, timeout):
         return None
     steps = 0
     for r in rows:
-        if r[1] > last + timeout:
+        if r[1] - last > timeout:       # the controller's own test (age > timeout), bit for bit
             steps += 1
             if r[3] == 0.0:
                 return steps
