@@ -268,6 +268,20 @@ class ControllerNode(LifecycleNode):
         if not self.finished.done():
             self.finished.set_result(True)
 
+    def destroy_node(self) -> None:
+        """Destroy the node and, with it, its lifecycle state machine.
+
+        rclpy's ``LifecycleNode.destroy_node`` (Jazzy) leaves the state machine to the garbage
+        collector, and the state machine holds the node, so the node's DDS participant lives
+        on (its threads still taking discovery traffic) until a collection, in whichever
+        thread it runs. Found in a loaded run: the collection ran in a test's spinning
+        thread, under the GIL, while that leaked participant was caught in a Fast DDS
+        deadlock (eProsima/Fast-DDS#6502: ``unregister_timer`` against
+        ``check_remote_participant_liveliness``): the whole test process hung.
+        """
+        super().destroy_node()
+        self._state_machine.destroy_when_not_in_use()
+
     def _reset_loop_state(self) -> None:
         """Forget the previous activation's timing and /diagnostics (not the inputs)."""
         params = self.params
