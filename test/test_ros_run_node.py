@@ -2,16 +2,20 @@
 
 Found by a fresh-clone CI run: on SIGINT, rclpy shuts the context down while the
 executor may still run a queued callback, whose publish then fails ("publisher's
-context is invalid"); the node process exited with 1 in 5 of 15 stops of a loop.
+context is invalid"); the node process exited with 1 in 5 of 15 stops of a loop. A loaded
+run (stop 22) found the other order: the callback's error just before the context is down.
 """
 from __future__ import annotations
+
+import threading
+import time
 
 import pytest
 import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from grip_force_ros.nodes.common import run_node
+from grip_force_ros.nodes.common import run_node, shutdown_follows
 
 pytestmark = pytest.mark.ros
 
@@ -48,3 +52,36 @@ def test_an_error_while_running_is_not_swallowed():
     with pytest.raises(RuntimeError, match='a real fault'):
         run_node(_Fails, 'fails', [])
     rclpy.try_shutdown()
+
+
+class _FailsThenShutsDown(Node):
+    """A callback error just before the context goes down (launch's Ctrl-C, a loaded run).
+
+    The SIGINT handler wakes the executor, then shuts the context down: a queued callback
+    may fail in between, with the context still up when ``run_node`` sees the error.
+    """
+
+    def __init__(self):
+        super().__init__('fails_then_shuts_down')
+        self.create_timer(0.01, self._tick)
+
+    def _tick(self):
+        threading.Timer(0.05, rclpy.try_shutdown).start()
+        raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+
+def test_an_error_just_before_a_shutdown_is_a_clean_exit():
+    assert run_node(_FailsThenShutsDown, 'fails_then_shuts_down', []) == 0
+
+
+def test_shutdown_follows_waits_for_the_context_to_go_down():
+    rclpy.init()
+    try:
+        assert not shutdown_follows(wait=0.1)          # up, and nobody shuts it down
+        threading.Timer(0.05, rclpy.try_shutdown).start()
+        started = time.monotonic()
+        assert shutdown_follows(wait=30.0)
+        assert time.monotonic() - started < 30.0
+        assert shutdown_follows(wait=0.0)              # already down
+    finally:
+        rclpy.try_shutdown()

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import time
 from typing import Callable, Iterable, Sequence
 
 import rclpy
@@ -169,6 +170,23 @@ def make_executor(context=None, kind: str | None = None):
     return EventsExecutor(context=context)
 
 
+#: How long after a callback error the context may still go down for the error to be read as
+#: a signal's shutdown racing the callback (s). The SIGINT handler shuts the context down
+#: moments after it wakes the executor: a loaded run saw the error first (launch's Ctrl-C, the
+#: EventsExecutor's "Unable to convert call argument '0' to Python object").
+SHUTDOWN_RACE_WAIT = 2.0
+
+
+def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bool:
+    """Whether the default context is, or within ``wait`` s goes, down (s; polled every ``poll`` s)."""
+    end = time.monotonic() + wait
+    while rclpy.ok():
+        if time.monotonic() >= end:
+            return False
+        time.sleep(poll)
+    return True
+
+
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
              args: list[str] | None = None) -> int:
     """Run the main loop of an executable node (ros2/demos Jazzy style).
@@ -202,9 +220,10 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     except (_RCLError, RuntimeError):
         # Ctrl-C / SIGINT shuts the context down under the executor: a callback already
         # queued may then fail to publish ("publisher's context is invalid"), or the
-        # EventsExecutor (rclpy 7.1.x) may fail to hand it its arguments. That is the
-        # shutdown racing the callback, not a fault; while the context is up, it is.
-        if rclpy.ok():
+        # EventsExecutor (rclpy 7.1.x) may fail to hand it its arguments, even just before
+        # the context is down. That is the shutdown racing the callback, not a fault; an
+        # error with the context still up SHUTDOWN_RACE_WAIT later is.
+        if not shutdown_follows():
             raise
     finally:
         if node is not None:
