@@ -43,6 +43,12 @@ HOLD_MASTER = {'trajectory': 'needle_grasp', 'trajectory_file': '', 'time_scale'
 READY_TIMEOUT = 4.0
 #: Controller modes (/diagnostics) that mean all its inputs, the master's included, arrive.
 READY_MODES = (Mode.FREE, Mode.GRIP)
+#: Longest wait (s) for the master's answer to a parameter request before asking it what it
+#: holds. An answer can be lost: Fast DDS drops a service reply when the server has not
+#: discovered the client's reader 100 ms after the request (rmw_fastrtps #390, #467); on a
+#: loaded machine the master took its task and ran it while no answer came
+#: (docs/reliability.md, seventh round). An answer normally takes milliseconds.
+ANSWER_WAIT = 2.0
 
 
 def default_duration() -> float:
@@ -146,6 +152,7 @@ class RunResult:
     late_inputs: dict = field(default_factory=dict)
     problems: list = field(default_factory=list)
     scheduling: dict = field(default_factory=dict)
+    master_answer: str = ''          # how the master's taking its task was known
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -163,6 +170,7 @@ class RunResult:
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
             'metrics': self.metrics, 'safe_state_entries': self.safe_events,
             'late_inputs': self.late_inputs, 'scheduling': self.scheduling,
+            'master_answer': self.master_answer,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
@@ -210,20 +218,91 @@ def _wait_until_ready(recorder, group: ProcessGroup, timeout: float) -> None:
         time.sleep(0.05)
 
 
-def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.0) -> None:
-    """Start the held master's task now: set its real trajectory parameters at once."""
-    from rclpy.parameter import Parameter
+def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.0) -> str:
+    """Start the held master's task now: set its real trajectory parameters at once.
+
+    Returns how the master's taking them was known (see :func:`set_parameters_confirmed`).
+    """
     from rclpy.parameter_client import AsyncParameterClient
 
     values = spec.master_values()
     client = AsyncParameterClient(node, 'master')
     _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
-    future = client.set_parameters_atomically(
-        [Parameter(name, value=values[name]) for name in HOLD_MASTER])
-    _wait_for(future.done, group, timeout, 'the master to take its trajectory')
-    result = future.result().result
-    if not result.successful:
-        raise ProcessError(f'the master refused its trajectory parameters: {result.reason}')
+    outcome = set_parameters_confirmed(client, {name: values[name] for name in HOLD_MASTER},
+                                       group.check_alive, timeout)
+    if outcome != 'answered':
+        node.get_logger().warning(f"the master's answer to its trajectory parameters was lost: "
+                                  f'{outcome}')
+    return outcome
+
+
+def _wait_done(future, seconds: float, check_alive: Callable[[], None]) -> bool:
+    """Wait up to ``seconds`` for ``future``; True if it is done."""
+    end = time.monotonic() + seconds
+    while not future.done():
+        check_alive()
+        if time.monotonic() > end:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Callable[[], None],
+                             timeout: float, answer_wait: float = ANSWER_WAIT) -> str:
+    """Set parameters atomically, and know they were taken even if the answer is lost.
+
+    A set that restarts something (the master's task) must not be sent twice
+    blindly: when no answer comes within ``answer_wait``, the node is asked what
+    it holds (a read, safe to repeat); if it holds ``values`` the set was taken and
+    only its answer lost, otherwise the request itself was lost and is sent again.
+
+    Parameters
+    ----------
+    client : rclpy.parameter_client.AsyncParameterClient
+        Client of the node (``set_parameters_atomically`` and ``get_parameters``).
+    values : mapping
+        Parameter name -> value to set.
+    check_alive : callable
+        Called while waiting; raises if the node's process has died.
+    timeout : float
+        Longest time for the whole exchange (s).
+    answer_wait : float
+        Wait for each answer before asking again (s).
+
+    Returns
+    -------
+    str
+        ``'answered'``; ``'confirmed by a read'`` (the set's answer lost);
+        ``'sent again'`` (a request lost, the set sent again and answered or confirmed).
+
+    Raises
+    ------
+    ProcessError
+        The node refused the values (with its reason), or ``timeout`` passed.
+    """
+    from rclpy.parameter import Parameter, parameter_value_to_python
+
+    names = list(values)
+    deadline = time.monotonic() + timeout
+    sent = 0
+    while time.monotonic() < deadline:
+        future = client.set_parameters_atomically(
+            [Parameter(name, value=values[name]) for name in names])
+        sent += 1
+        if _wait_done(future, answer_wait, check_alive):
+            result = future.result().result
+            if not result.successful:
+                raise ProcessError(f'the node refused the parameters {names}: {result.reason}')
+            return 'answered' if sent == 1 else 'sent again'
+        held = None
+        while held is None and time.monotonic() < deadline:
+            read = client.get_parameters(names)
+            if _wait_done(read, answer_wait, check_alive):
+                held = [parameter_value_to_python(v) for v in read.result().values]
+        if held == [values[name] for name in names]:
+            return 'confirmed by a read' if sent == 1 else 'sent again'
+    raise ProcessError(f'no answer to setting {names} within {timeout:.0f} s '
+                       f'({sent} requests sent)')
 
 
 class TaskClock:
@@ -361,6 +440,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     names = recorded.names
     timing: dict[str, float] = {}
     scheduling: dict[str, str] = {}
+    master_answer = ''
     t_begin = time.monotonic()
     # dvrk: the nodes need crtk_msgs, which the sourced ROS tools environment provides
     env = ros_environment(domain_id, base=ros_tools_environment() if spec.interface == 'dvrk'
@@ -388,7 +468,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
                       'controller')
             timing['master_up'] = time.monotonic() - t_begin
             _wait_until_ready(recorder, group, READY_TIMEOUT)
-            _start_master(recorder, spec, group)
+            master_answer = _start_master(recorder, spec, group)
             timing['task_start'] = time.monotonic() - t_begin
             clock = TaskClock(trajectory, time.monotonic())
             # the master exits (exit_when_done) shortly after its task: that ends the run
@@ -414,7 +494,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
             recorder.destroy_node()
         rclpy.shutdown(context=context)
     result = RunResult(spec, out_dir, bag_path, domain_id, counts, exit_codes, trajectory,
-                       timing=timing, scheduling=scheduling)
+                       timing=timing, scheduling=scheduling, master_answer=master_answer)
     if analyse:
         analyse_run(result, plot=plot)
     timing['total'] = time.monotonic() - t_begin
