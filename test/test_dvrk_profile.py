@@ -11,8 +11,10 @@ libraries are on its library path.
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -122,3 +124,83 @@ def test_dvrk_profile_without_crtk_msgs_refuses_to_start_and_says_why(executable
     line = [ln for ln in proc.stderr.splitlines() if 'refusing to start' in ln]
     assert line and 'crtk_msgs' in line[0] and 'ros_setup.bash' in line[0], proc.stderr
     assert 'Traceback' not in proc.stderr
+
+
+#: An arm's operating_state service that holds its first answer ``hold`` s (an answer lost
+#: for the client, as Fast DDS loses one under load) and answers later requests at once.
+#: Prints a JSON line per request: its number and when it came (monotonic s).
+SLOW_ARM = r'''
+import json, sys, threading, time
+import rclpy
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from crtk_msgs.srv import TriggerOperatingState
+hold = float(sys.argv[1])
+rclpy.init()
+node = rclpy.create_node('slow_arm')
+count = [0]
+lock = threading.Lock()
+def answer(request, response):
+    with lock:
+        count[0] += 1
+        n = count[0]
+    print(json.dumps({'request': n, 't': time.monotonic()}), flush=True)
+    if n == 1:
+        time.sleep(hold)
+    response.operating_state.state = 'ENABLED'
+    response.operating_state.is_homed = True
+    response.operating_state.header.frame_id = 'PSM1'
+    response.operating_state.header.stamp = node.get_clock().now().to_msg()
+    return response
+node.create_service(TriggerOperatingState, '/PSM1/operating_state', answer,
+                    callback_group=ReentrantCallbackGroup())
+executor = MultiThreadedExecutor(num_threads=3)
+executor.add_node(node)
+try:
+    executor.spin()
+except KeyboardInterrupt:
+    pass
+finally:
+    node.destroy_node()
+    rclpy.try_shutdown()
+'''
+
+
+def test_a_lost_operating_state_answer_is_asked_again(tmp_path):
+    """The controller learns an arm's state although the first answer of its service never comes.
+
+    The arm is enabled from elsewhere (no request_enable) and sends no state change, so
+    the service is the controller's only way to learn it. Before the re-ask
+    (controller_io.STATE_REPLY_WAIT) the controller waited for the first answer alone:
+    here 60 s, the test's limit 30 s.
+    """
+    require_ros_tools()
+    env = ros_env()
+    arm = start('python', '-c', SLOW_ARM, '60', log=tmp_path / 'arm.log', env=env)
+    controller = _node('controller', 'PSM1', 'MTML', tmp_path / 'controller.log', env,
+                       'request_enable:=false')
+    try:
+        deadline = time.monotonic() + 90.0      # both processes up and discovered (loaded)
+        while time.monotonic() < deadline and not _requests(tmp_path / 'arm.log'):
+            assert controller.poll() is None and arm.poll() is None
+            time.sleep(0.2)
+        first = _requests(tmp_path / 'arm.log')
+        assert first, 'the controller never asked the arm for its operating state'
+        known = None
+        while time.monotonic() < first[0]['t'] + 30.0:
+            if 'arm PSM1: ENABLED, homed' in (tmp_path / 'controller.log').read_text():
+                known = time.monotonic()
+                break
+            time.sleep(0.2)
+        requests = _requests(tmp_path / 'arm.log')
+        assert known is not None, (f'the controller did not learn the state within 30 s of its '
+                                   f'first request ({len(requests)} requests)')
+        assert len(requests) >= 2
+        assert requests[1]['t'] - requests[0]['t'] < 30.0
+    finally:
+        stop(controller)
+        stop(arm, sig=signal.SIGKILL)   # a thread of it sleeps on the held answer
+
+
+def _requests(log: Path) -> list[dict]:
+    return [json.loads(line) for line in log.read_text().splitlines() if line.startswith('{"request"')]

@@ -45,6 +45,11 @@ _JAW_JOINTS = (topics.JAW_JOINT,)
 #: How often the dvrk profile asks the arm's operating_state service while it knows no state,
 #: and resends a pending enable/home request (s).
 ARM_POLL_PERIOD = 0.5
+#: Longest wait for the answer of the operating_state service before it is asked again (s).
+#: A service answer can be lost (Fast DDS drops a reply whose client reader the server has
+#: not discovered 100 ms after the request; docs/reliability.md, seventh round); without a
+#: new request the profile would wait for a state change of the arm that may never come.
+STATE_REPLY_WAIT = 2.0
 
 
 class ControllerIO:
@@ -285,6 +290,7 @@ class DvrkControllerIO(ControllerIO):
         self.requested = False           # an enable/home request is pending (request_enable)
         self._last_request = -math.inf   # perf_counter s of the last state_command sent
         self._state_future = None
+        self._state_asked = -math.inf    # perf_counter s of the last operating_state request
         self.subscribe(JointState, names.instrument_js, self._on_arm, STATE_SUB_QOS)
         self.subscribe(JointState, names.actuator_js, self._on_jaw, STATE_SUB_QOS)
         self.subscribe(self.msgs.OperatingState, names.operating_state, self._on_operating_state,
@@ -369,11 +375,16 @@ class DvrkControllerIO(ControllerIO):
 
     def _poll(self) -> None:
         """Ask for the operating state while none is known; send a pending enable/home."""
-        if self.state is None and self._state_client.service_is_ready() and (
-                self._state_future is None or self._state_future.done()):
+        now = time.perf_counter()
+        pending = self._state_future is not None and not self._state_future.done()
+        if pending and now - self._state_asked > STATE_REPLY_WAIT:
+            self._state_client.remove_pending_request(self._state_future)   # its answer: lost
+            pending = False
+        if self.state is None and not pending and self._state_client.service_is_ready():
             self._state_future = self._state_client.call_async(
                 self.msgs.TriggerOperatingState.Request())
             self._state_future.add_done_callback(self._on_state_reply)
+            self._state_asked = now
         if not self.requested or self._command_pub.get_subscription_count() == 0:
             return                      # a state_command nobody hears is lost (sent once)
         if time.perf_counter() - self._last_request < ARM_POLL_PERIOD * 1.9:
