@@ -285,3 +285,34 @@ def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str
     if not metrics.get('target_force', 0.0) > 0:
         problems.append('no grip force target during the hold phase')
     return problems
+
+
+#: Name of the simulated instrument's /diagnostics status.
+SIM_STATUS = 'grip_force_ros: sim_instrument'
+
+
+def drive_cuts_under_current(diagnostics, until: float) -> int:
+    """Count the simulated drive's cuts of a non-zero current reported up to ``until``.
+
+    A cut means the drive got no command for its timeout (30 ms) while it held a
+    current: on a loaded machine, a starved node. A calibration staircase with one
+    no longer loads the pulley friction in one direction, and its fit is off
+    (loaded run 14/4: long-jaw mu 0.1149 against 0.1189-0.1194 in the other runs).
+
+    Parameters
+    ----------
+    diagnostics : list
+        (time [s], list of status dicts) per /diagnostics message
+        (:func:`grip_force_ros.demo.series.read_bag_series`).
+    until : float
+        Last time that counts (s, the recorder's clock), e.g. the master's last
+        sample: cuts while the nodes are stopped do not count.
+    """
+    count = 0
+    for t, statuses in diagnostics:
+        if t > until:
+            continue
+        for status in statuses:
+            if status['name'] == SIM_STATUS:
+                count = max(count, int(status['values'].get('drive_cuts_under_current', 0)))
+    return count

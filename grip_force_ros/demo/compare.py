@@ -106,13 +106,37 @@ def _run_worker(job: dict[str, Any]) -> dict[str, Any]:
         out_dir = Path(job['out_dir'] if attempt == 1 else f"{job['out_dir']}_retry{attempt - 1}")
         result = run_task(spec, out_dir, job['domain_id'], analyse=job['analyse'],
                           plot=job['plot'])
-        if not result.problems:
+        problems = result.problems or (calibration_problems(result) if job.get('calibration')
+                                       else [])
+        if not problems:
             break
-        spoiled.append({'out_dir': str(out_dir), 'problems': result.problems})
+        result.problems = problems
+        spoiled.append({'out_dir': str(out_dir), 'problems': problems})
     out = result.as_dict()
     out['spoiled_attempts'] = spoiled
     out['wall_time'] = time.monotonic() - t0
     return out
+
+
+def calibration_problems(result) -> list[str]:
+    """Why a calibration run cannot be fitted (empty if it can): a live drive cut.
+
+    A calibration run is not analysed as a task (no force loop, no hold phase);
+    what spoils it is the drive cutting a held current (a starved node), read from
+    the sim's /diagnostics in the run's bag up to the master's last sample.
+    """
+    from grip_force_ros.demo import analysis
+    from grip_force_ros.demo.series import read_bag_series
+
+    recorded = result.spec.recorded()
+    series, diagnostics = read_bag_series(result.bag, recorded)
+    master = series[recorded.names.master_js]['t']
+    until = float(master[-1]) if len(master) else float('inf')
+    cuts = analysis.drive_cuts_under_current(diagnostics, until)
+    if cuts:
+        return [f'the drive cut a held current {cuts} time(s) during the calibration staircase '
+                '(no command for 30 ms: a starved node)']
+    return []
 
 
 def _run_all(jobs: list[dict], parallel: bool, log: TextIO | None) -> list[dict]:
@@ -242,7 +266,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                                                     'trajectory_file': str(csv_path.resolve())},
                                   **scheduling),
                      'out_dir': str(out_dir / names[k] / 'calibration'),
-                     'domain_id': domains[k], 'analyse': False, 'plot': False})
+                     'domain_id': domains[k], 'analyse': False, 'plot': False,
+                     'calibration': True})
     calib_runs = _run_all(jobs, parallel, log)
     calibrated, calibrations = [], []
     for k, (config, run) in enumerate(zip(configs, calib_runs)):
@@ -251,7 +276,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         path = out_dir / names[k] / f'{names[k]}_calibrated.yaml'
         path.write_text(calibrated_yaml(config, fit, run['bag']))
         calibrated.append(path)
-        calibrations.append({**fit.as_dict(), 'yaml': str(path), 'bag': run['bag']})
+        calibrations.append({**fit.as_dict(), 'yaml': str(path), 'bag': run['bag'],
+                             'problems': run.get('problems', []),
+                             'spoiled_attempts': run['spoiled_attempts']})
         _log(log, f"  {names[k]}: mu {fit.before['pulley_friction_coefficient']:.4f} -> "
                   f"{fit.values['pulley_friction_coefficient']:.4f} +/- "
                   f"{fit.std_errors['pulley_friction_coefficient']:.4f} (plant "
@@ -302,9 +329,11 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         clean = [i['runs'][condition]['steady_ratio'] for i in instruments
                  if not i['runs'][condition]['problems']]
         report[f'spread_{condition}_unspoiled'] = spread(clean) if len(clean) >= 2 else None
-    report['runs_still_spoiled'] = [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
-                                    for i in instruments for c in conditions
-                                    if i['runs'][c]['problems']]
+    report['runs_still_spoiled'] = (
+        [f"{i['name']}/calibration: {i['calibration']['problems'][0]}"
+         for i in instruments if i['calibration']['problems']]
+        + [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
+           for i in instruments for c in conditions if i['runs'][c]['problems']])
     report['naive_current_closed'] = gain
     report['plant_error'] = plant_error
     report['task_duration'] = task_duration

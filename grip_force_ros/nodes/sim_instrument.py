@@ -82,6 +82,7 @@ class SimInstrumentNode(Node):
         self.last_rejection = ''
         self.commands = 0                # accepted commands
         self.capped_steps = 0            # periods whose elapsed time exceeded MAX_STEP
+        self.live_cuts = 0               # drive timeouts that cut a non-zero current
         self.drive = CommandTimeout(params.command_timeout)
         self._last_drive_check = time.monotonic()
         self._starved: tuple[float, float] | None = None   # (when, for how long) s, monotonic
@@ -199,7 +200,11 @@ class SimInstrumentNode(Node):
             f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
             f'{self.drive.timeout * 1e3:g} ms): drive current cut from {self.current_command:.4f} A '
             f'to 0 A{starved}')
+        live = self.current_command != 0.0
         self.current_command = 0.0
+        if live:
+            self.live_cuts += 1
+            self._publish_diagnostics()  # at once: a run with such a cut can be told apart
 
     def _publish_diagnostics(self) -> None:
         params = self._param.params
@@ -221,6 +226,7 @@ class SimInstrumentNode(Node):
                 'commands_rejected': str(self.rejected),
                 'last_rejection': self.last_rejection or 'none',
                 'drive_timeouts': str(self.drive.expiries),   # current cut: no command in time
+                'drive_cuts_under_current': str(self.live_cuts),  # of them, a non-zero current
                 'drive': 'holding command' if self.drive.armed else 'no command (0 A)',
                 'capped_steps': str(self.capped_steps),
                 # the last second: actuator state -> command answering it, this node's clock
