@@ -106,7 +106,12 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
         helped = run('ros2', 'lifecycle', '--help', env=env)
         assert helped.returncode == 0, helped.stderr
         assert {'get', 'list', 'nodes', 'set'} <= set(re.findall(r'^\s+(\w+)\s', helped.stdout, re.M))
-        lifecycle = run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time', '2', env=env)
+        # a new CLI process discovers the graph in its spin time: on a loaded machine 2 s can
+        # pass before it has the controller's services (loaded run 15/1: an empty list), as
+        # for node and topic list above
+        lifecycle = retry(lambda: run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time',
+                                      '2', env=env),
+                          lambda r: '/controller' in r.stdout.split(), timeout=30)
         assert lifecycle.returncode == 0, lifecycle.stderr
         assert '/controller' in lifecycle.stdout.split(), lifecycle.stdout
         assert proc.poll() is None
