@@ -193,14 +193,22 @@ def _node_argv(name: str, spec: RunSpec) -> list[str]:
     return node_command('controller', spec.config, {**profile, **own, **spec.controller_overrides})
 
 
+def _poll(predicate: Callable[[], bool], seconds: float, check_alive: Callable[[], None],
+          period: float = 0.05) -> bool:
+    """Wait up to ``seconds`` for ``predicate()``, calling ``check_alive`` meanwhile; its value."""
+    end = time.monotonic() + seconds
+    while not predicate():
+        check_alive()
+        if time.monotonic() > end:
+            return False
+        time.sleep(period)
+    return True
+
+
 def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float,
               what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        group.check_alive()
-        if time.monotonic() > deadline:
-            raise ProcessError(f'timed out after {timeout:.0f} s waiting for {what}')
-        time.sleep(0.05)
+    if not _poll(predicate, timeout, group.check_alive):
+        raise ProcessError(f'timed out after {timeout:.0f} s waiting for {what}')
 
 
 def controller_ready(recorder) -> bool:
@@ -212,10 +220,7 @@ def controller_ready(recorder) -> bool:
 
 
 def _wait_until_ready(recorder, group: ProcessGroup, timeout: float) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not controller_ready(recorder):
-        group.check_alive()
-        time.sleep(0.05)
+    _poll(lambda: controller_ready(recorder), timeout, group.check_alive)
 
 
 def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.0) -> str:
@@ -234,17 +239,6 @@ def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.
         node.get_logger().warning(f"the master's answer to its trajectory parameters was lost: "
                                   f'{outcome}')
     return outcome
-
-
-def _wait_done(future, seconds: float, check_alive: Callable[[], None]) -> bool:
-    """Wait up to ``seconds`` for ``future``; True if it is done."""
-    end = time.monotonic() + seconds
-    while not future.done():
-        check_alive()
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Callable[[], None],
@@ -289,7 +283,7 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
         future = client.set_parameters_atomically(
             [Parameter(name, value=values[name]) for name in names])
         sent += 1
-        if _wait_done(future, answer_wait, check_alive):
+        if _poll(future.done, answer_wait, check_alive, period=0.02):
             result = future.result().result
             if not result.successful:
                 raise ProcessError(f'the node refused the parameters {names}: {result.reason}')
@@ -297,7 +291,7 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
         held = None
         while held is None and time.monotonic() < deadline:
             read = client.get_parameters(names)
-            if _wait_done(read, answer_wait, check_alive):
+            if _poll(read.done, answer_wait, check_alive, period=0.02):
                 held = [parameter_value_to_python(v) for v in read.result().values]
         if held == [values[name] for name in names]:
             return 'confirmed by a read' if sent == 1 else 'sent again'
