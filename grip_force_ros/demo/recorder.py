@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -25,7 +24,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from grip_force_ros.demo.messages import TOPIC_TYPES, absolute
-from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, matching_qos
+from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, make_executor, matching_qos
+from grip_force_ros.nodes.harness import SPIN_SLICE
 
 _INFINITE = QosTime(2147483647, 4294967295)  # what rosbag2 writes for an infinite duration
 
@@ -150,6 +150,14 @@ class RecorderNode(Node):
             return None
         return item[0], deserialize_message(item[1], message_class(self.topic_types[topic]))
 
+    def latest_stamp(self, topic: str) -> float | None:
+        """Header stamp (s) of the newest message on ``topic``; None before the first one."""
+        item = self.latest(topic)
+        if item is None:
+            return None
+        stamp = item[1].header.stamp
+        return stamp.sec + stamp.nanosec * 1e-9
+
     def count(self, topic: str) -> int:
         with self._lock:
             return self.counts[absolute(topic)]
@@ -171,11 +179,21 @@ class RecorderNode(Node):
 
 
 class SpinThread:
-    """Spin one node on a background thread until :meth:`stop`."""
+    """Spin one node on a background thread until :meth:`stop`.
+
+    With the EventsExecutor (:func:`~grip_force_ros.nodes.common.make_executor`): it costs
+    this process about 45 us of CPU per message taken, rclpy's SingleThreadedExecutor about
+    130 us (it builds a wait set in Python for every wake-up;
+    ``test_recorder_works_off_a_backlog_while_the_streams_go_on`` prints the figure). A
+    demo records ~6200 messages/s: 0.8 of a core with the latter, beside two SCHED_FIFO
+    1 kHz nodes on a 2-core machine. The recorder then never worked off the backlog of its
+    start: it stayed 0.97 s (its 1000-message history) behind for a whole demo on a quiet
+    machine, 0.5 ms with the EventsExecutor.
+    """
 
     def __init__(self, node: Node):
         self.node = node
-        self.executor = SingleThreadedExecutor(context=node.context)
+        self.executor = make_executor(context=node.context)
         self.executor.add_node(node)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f'spin-{node.get_name()}',
@@ -183,7 +201,8 @@ class SpinThread:
 
     def _run(self) -> None:
         while not self._stop.is_set() and rclpy.ok(context=self.node.context):
-            self.executor.spin_once(timeout_sec=0.05)
+            # short slices: the EventsExecutor holds the GIL while it waits
+            self.executor.spin_once(timeout_sec=SPIN_SLICE)
 
     def start(self) -> 'SpinThread':
         self._thread.start()
