@@ -33,6 +33,7 @@ def test_maryland_facts(tools):
     facts = tool_facts(read_tool_file(MARYLAND), MARYLAND.name)
     values = {k: v for k, (v, _) in facts.items()}
     assert values == {'jaw_angle_min': -0.349066, 'jaw_angle_max': 1.39626,
+                      'jaw_open_stop': 1.29626,
                       'dvrk_jaw_effort_max': 0.19, 'dvrk_jaw_coupling': 0.915964,
                       'wrist_finger_coupling': pytest.approx(0.630273)}
     assert all(MARYLAND.name in source for _, source in facts.values())
@@ -78,8 +79,10 @@ def test_import_keeps_the_base_and_says_where_each_number_came_from(tools, tmp_p
     for key in KEPT:
         assert new[key] == old[key], key
     text = out.read_text()
-    for key in ('jaw_angle_min', 'jaw_angle_max', 'dvrk_jaw_effort_max', 'dvrk_jaw_coupling',
-                'wrist_finger_coupling'):
+    # the base has no jaw_open_stop: the line is added among the parameters
+    assert new.jaw_open_stop == pytest.approx(1.39626 - 0.1)
+    for key in ('jaw_angle_min', 'jaw_angle_max', 'jaw_open_stop', 'dvrk_jaw_effort_max',
+                'dvrk_jaw_coupling', 'wrist_finger_coupling'):
         line = next(ln for ln in text.splitlines() if ln.strip().startswith(f'{key}:'))
         assert f'dVRK tool file {MARYLAND.name}' in line, line
     # importing again into the result changes nothing but the base named in the header

@@ -139,6 +139,26 @@ def test_jaw_opens_with_negative_current_and_stops_at_the_hard_stops():
     assert sim.measure().grip_force == 0.0               # nothing between the jaws
 
 
+def test_the_open_stop_is_the_instruments_and_inside_its_plausible_range():
+    """Maryland forceps: the dVRK's jaw range ends at 80 deg (1.396 rad); the sim stopped at
+    pi/2 for every instrument, where the controller would reject the jaw angle. The
+    opening current of the stop test (-0.3 A, the forceps' max_current, for 1 s) now ends
+    at its jaw_open_stop, 1.296 rad, 0.1 rad inside the plausible range."""
+    from grip_force_ros.params import ParameterError, load_params_file
+    from grip_force_ros.params.files import instrument_path
+    p = load_params_file(instrument_path('maryland_forceps'))
+    sim = InstrumentSim(p.replace(**QUIET), 'free')
+    for _ in range(1000):
+        sim.step(-p.max_current, 1e-3)
+    assert sim.truth()['jaw_angle'] == pytest.approx(p.jaw_open_stop, abs=0.02)
+    assert p.jaw_open_stop == pytest.approx(1.29626)
+    assert sim.truth()['jaw_angle'] < p.jaw_angle_max
+    with pytest.raises(ParameterError, match='jaw_open_stop'):       # the old stop: refused
+        p.replace(jaw_open_stop=math.pi / 2)
+    with pytest.raises(ParameterError, match='initial_jaw_angle'):
+        make_params({'jaw_open_stop': 0.5, 'initial_jaw_angle': 0.6})
+
+
 def test_wrist_coupling_moves_the_jaw_for_a_held_drum():
     p = quiet_params()
     sim = InstrumentSim(p, 'free')

@@ -110,8 +110,9 @@ LIMITS = [
        'Smallest plausible measured jaw angle (0 = closed); below it the input is rejected.',
        min=-math.pi, max=math.pi, read_only=True, group='limits'),
     _P('jaw_angle_max', 'double', math.pi / 2 + 0.1, 'rad',
-       'Largest plausible measured jaw angle: the mechanical open stop (pi/2) plus a 0.1 rad margin '
-       'for encoder noise, as jaw_angle_min sits 0.1 rad below the closed stop.',
+       'Largest plausible measured jaw angle: the mechanical open stop (pi/2; the sim: '
+       'jaw_open_stop) plus a 0.1 rad margin for encoder noise, as jaw_angle_min sits 0.1 rad '
+       'below the closed stop.',
        min=-math.pi, max=math.pi, read_only=True, group='limits'),
     _P('wrist_angle_limit', 'double', math.pi / 2, 'rad',
        'Largest plausible |wrist pitch|; beyond it the input is rejected.', min=0.0, max=math.pi,

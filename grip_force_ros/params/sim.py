@@ -98,6 +98,11 @@ SIM = [
     _sim('rigid_contact_angle', 'double', 0.1, 'rad',
          'Jaw angle at which the jaw touches the rigid object (object position).',
          min=0.0, max=math.pi / 2),
+    _sim('jaw_open_stop', 'double', math.pi / 2, 'rad',
+         "Jaw angle of the simulated jaw's mechanical open stop (a hard stop, as the jaws "
+         "touching at 0). At least JAW_STOP_MARGIN (0.1 rad) below the instrument's "
+         'jaw_angle_max, the largest angle the controller takes as plausible.',
+         min=0.1, max=math.pi),
     _sim('initial_jaw_angle', 'double', 0.6, 'rad',
          'Jaw angle at reset (no cable tension, motor angle 0).', min=0.0, max=math.pi / 2),
     _sim('initial_wrist_angle', 'double', 0.0, 'rad',
@@ -142,15 +147,32 @@ def _effect_specs() -> list:
 EFFECTS = _effect_specs()
 
 
+#: Least distance (rad) from the simulated jaw's open stop to the instrument's jaw_angle_max:
+#: the schema's defaults keep 0.1 rad (stop pi/2, plausible up to pi/2 + 0.1) for the
+#: encoder noise and the stop's give under an opening current.
+JAW_STOP_MARGIN = 0.1
+
+
 def check_sim(values) -> None:
     """Cross-parameter checks of the 'sim' group (called by ``check_consistency``).
 
     Raises
     ------
     ParameterError
-        A command timeout shorter than two state periods (every command would time out).
+        A command timeout shorter than two state periods (every command would time out);
+        an open stop the controller would take as an implausible jaw angle (less than
+        :data:`JAW_STOP_MARGIN` below ``jaw_angle_max``), or a reset jaw beyond that stop.
     """
     from grip_force_ros.params.schema import ParameterError
+    stop, plausible = values['jaw_open_stop'], values['jaw_angle_max']
+    if stop + JAW_STOP_MARGIN > plausible + 1e-9:
+        raise ParameterError(
+            f"'jaw_open_stop' {stop} rad is less than {JAW_STOP_MARGIN} rad below "
+            f"'jaw_angle_max' {plausible} rad: the simulated jaw would open to angles the "
+            'controller rejects as implausible')
+    if values['initial_jaw_angle'] > stop:
+        raise ParameterError(f"'initial_jaw_angle' {values['initial_jaw_angle']} rad is beyond "
+                             f"'jaw_open_stop' {stop} rad")
     rate, timeout = values['publish_rate'], values['command_timeout']
     if timeout * rate < 2.0:
         raise ParameterError(

@@ -63,8 +63,6 @@ from grip_force_ros.sim.effects import SimError, effect_overrides
 
 __all__ = ['InstrumentSim', 'SimMeasurement', 'OBJECTS', 'chain_efficiency_scalar']
 
-#: Largest jaw opening (rad): a hard stop, as the jaws touching at 0.
-JAW_OPEN_STOP = math.pi / 2
 #: Initial slope of the Dahl hysteresis moment per unit change of the drive moment (-):
 #: the loop switches sides within about a quarter of its width of tension change.
 DAHL_SLOPE = 4.0
@@ -253,6 +251,7 @@ class InstrumentSim:
         else:
             self._contact_angle, self._contact_k, self._contact_arm = (-1.0, 0.0, self._tip)
         self._stop_k = p.rigid_stiffness * self._tip ** 2                  # N*m/rad, jaw hard stops
+        self._open_stop = p.jaw_open_stop                                   # rad
         self._zeta2 = 2.0 * p.contact_damping_ratio
         self._measurement = None
 
@@ -369,7 +368,7 @@ class InstrumentSim:
         stop_k, zeta2 = self._stop_k, self._zeta2
         spring_closed, spring_rate = self._spring_closed, self._spring_rate
         kj_cable += spring_rate                  # the position spring's stiffness, implicit too
-        open_stop = JAW_OPEN_STOP
+        open_stop = self._open_stop
         alpha = 1.0 - math.exp(-h / self._tau_current) if self._tau_current > 0.0 else 1.0
         theta0, w0, phi, wj, x = self._theta0, self._w0, self._phi, self._wj, self._x
         i_act, hyst, creep = self._i_act, self._hyst, self._creep_moment
