@@ -177,14 +177,19 @@ def make_executor(context=None, kind: str | None = None):
 SHUTDOWN_RACE_WAIT = 2.0
 
 
+def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
+    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return bool(predicate())
+
+
 def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bool:
     """Whether the default context is, or within ``wait`` s goes, down (s; polled every ``poll`` s)."""
-    end = time.monotonic() + wait
-    while rclpy.ok():
-        if time.monotonic() >= end:
-            return False
-        time.sleep(poll)
-    return True
+    return wait_until(lambda: not rclpy.ok(), wait, poll)
 
 
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,

@@ -13,7 +13,6 @@ next to a 1 kHz controller needs on a small machine):
 from __future__ import annotations
 
 import threading
-import time
 from typing import Any, Callable
 
 import rclpy
@@ -22,20 +21,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.nodes.common import make_executor
+from grip_force_ros.nodes.common import make_executor, wait_until
 
 #: Longest time the spinning thread stays inside the executor before yielding (s).
 SPIN_SLICE = 0.01
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(poll)
-    return bool(predicate())
 
 
 class RosRunner:
