@@ -33,7 +33,6 @@ def test_maryland_facts(tools):
     facts = tool_facts(read_tool_file(MARYLAND), MARYLAND.name)
     values = {k: v for k, (v, _) in facts.items()}
     assert values == {'jaw_angle_min': -0.349066, 'jaw_angle_max': 1.39626,
-                      'jaw_open_stop': 1.29626,
                       'dvrk_jaw_effort_max': 0.19, 'dvrk_jaw_coupling': 0.915964,
                       'wrist_finger_coupling': pytest.approx(0.630273)}
     assert all(MARYLAND.name in source for _, source in facts.values())
@@ -79,16 +78,27 @@ def test_import_keeps_the_base_and_says_where_each_number_came_from(tools, tmp_p
     for key in KEPT:
         assert new[key] == old[key], key
     text = out.read_text()
-    # the base has no jaw_open_stop: the line is added among the parameters
-    assert new.jaw_open_stop == pytest.approx(1.39626 - 0.1)
-    for key in ('jaw_angle_min', 'jaw_angle_max', 'jaw_open_stop', 'dvrk_jaw_effort_max',
-                'dvrk_jaw_coupling', 'wrist_finger_coupling'):
+    for key in ('jaw_angle_min', 'jaw_angle_max', 'dvrk_jaw_effort_max', 'dvrk_jaw_coupling',
+                'wrist_finger_coupling'):
         line = next(ln for ln in text.splitlines() if ln.strip().startswith(f'{key}:'))
         assert f'dVRK tool file {MARYLAND.name}' in line, line
     # importing again into the result changes nothing but the base named in the header
     again = tmp_path / 'again.yaml'
     import_tool(MARYLAND, out, again)
     assert again.read_text().splitlines()[1:] == text.splitlines()[1:]
+
+
+def test_a_fact_the_base_lacks_is_added_among_the_parameters(tools, tmp_path):
+    """It went beside ``ros__parameters`` before (the first indent found), where ROS ignores it."""
+    base = tmp_path / 'base.yaml'
+    base.write_text('\n'.join(ln for ln in (ROOT / 'config' / 'paper_needle_driver.yaml')
+                              .read_text().splitlines()
+                              if not ln.strip().startswith('dvrk_jaw_effort_max:')) + '\n')
+    out = tmp_path / 'out.yaml'
+    import_tool(MARYLAND, base, out)
+    line = next(ln for ln in out.read_text().splitlines() if 'dvrk_jaw_effort_max:' in ln)
+    assert line.startswith('    dvrk_jaw_effort_max: 0.19'), line
+    assert load_params_file(out).dvrk_jaw_effort_max == 0.19
 
 
 def test_a_bad_tool_file_writes_nothing(tools, tmp_path):

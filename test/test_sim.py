@@ -143,18 +143,21 @@ def test_the_open_stop_is_the_instruments_and_inside_its_plausible_range():
     """Maryland forceps: the dVRK's jaw range ends at 80 deg (1.396 rad); the sim stopped at
     pi/2 for every instrument, where the controller would reject the jaw angle. The
     opening current of the stop test (-0.3 A, the forceps' max_current, for 1 s) now ends
-    at its jaw_open_stop, 1.296 rad, 0.1 rad inside the plausible range."""
+    0.1 rad inside the plausible range (jaw_open_stop 0: from jaw_angle_max)."""
     from grip_force_ros.params import ParameterError, load_params_file
     from grip_force_ros.params.files import instrument_path
     p = load_params_file(instrument_path('maryland_forceps'))
     sim = InstrumentSim(p.replace(**QUIET), 'free')
     for _ in range(1000):
         sim.step(-p.max_current, 1e-3)
-    assert sim.truth()['jaw_angle'] == pytest.approx(p.jaw_open_stop, abs=0.02)
-    assert p.jaw_open_stop == pytest.approx(1.29626)
+    assert sim.truth()['jaw_angle'] == pytest.approx(1.39626 - 0.1, abs=0.02)
     assert sim.truth()['jaw_angle'] < p.jaw_angle_max
     with pytest.raises(ParameterError, match='jaw_open_stop'):       # the old stop: refused
         p.replace(jaw_open_stop=math.pi / 2)
+    sim = InstrumentSim(p.replace(jaw_open_stop=1.0, **QUIET), 'free')    # one given
+    for _ in range(1000):
+        sim.step(-p.max_current, 1e-3)
+    assert sim.truth()['jaw_angle'] == pytest.approx(1.0, abs=0.02)
     with pytest.raises(ParameterError, match='initial_jaw_angle'):
         make_params({'jaw_open_stop': 0.5, 'initial_jaw_angle': 0.6})
 

@@ -66,7 +66,11 @@ def _hold_then_go_silent(ros, node, probe, pub, current: float) -> None:
         if ros.wait_for(lambda: node.drive.armed and node.current_command == current, 0.02):
             break
     assert node.current_command == pytest.approx(current), 'the sim never took the command'
-    assert ros.wait_for(lambda: not node.drive.armed, 10.0), 'the drive did not time out'
+    # the drive disarms a moment before the node cuts and counts (another thread): wait for
+    # the cut itself (a fresh CI run read the current between the two)
+    assert ros.wait_for(lambda: not node.drive.armed and node.current_command == 0.0
+                        and node.live_cuts == (node.drive.expiries if current else 0), 10.0), \
+        'the drive did not time out'
 
 
 @pytest.mark.ros

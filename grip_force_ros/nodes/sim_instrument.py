@@ -196,14 +196,15 @@ class SimInstrumentNode(Node):
         if self._starved and time.monotonic() - self._starved[0] <= self.drive.last_silence:
             starved = (f'; this process was not scheduled for {self._starved[1] * 1e3:.1f} ms '
                        'before the check')
-        self.get_logger().warning(
-            f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
-            f'{self.drive.timeout * 1e3:g} ms): drive current cut from {self.current_command:.4f} A '
-            f'to 0 A{starved}')
-        live = self.current_command != 0.0
-        self.current_command = 0.0
+        held, live = self.current_command, self.current_command != 0.0
+        self.current_command = 0.0       # the cut first, then the words
         if live:
             self.live_cuts += 1
+        self.get_logger().warning(
+            f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
+            f'{self.drive.timeout * 1e3:g} ms): drive current cut from {held:.4f} A '
+            f'to 0 A{starved}')
+        if live:
             self._publish_diagnostics()  # at once: a run with such a cut can be told apart
 
     def _publish_diagnostics(self) -> None:

@@ -7,7 +7,6 @@ model, the motor, the other limits, the gains) from the base instrument file:
 | tool file | parameter | what it is |
 |---|---|---|
 | ``jaw.qmin``, ``jaw.qmax`` | ``jaw_angle_min``, ``jaw_angle_max`` | the jaw's range (rad); qmin below 0 lets the jaw squeeze |
-| ``jaw.qmax`` less 0.1 rad | ``jaw_open_stop`` | the simulated jaw's open stop, the margin every instrument keeps below ``jaw_angle_max`` |
 | ``jaw.ftmax`` | ``dvrk_jaw_effort_max`` | the jaw effort limit (N*m) |
 | ``coupling.ActuatorToJointPosition`` jaw row ``(0, 0, -c, c)`` | ``dvrk_jaw_coupling`` | c, the dVRK's jaw effort -> actuator torque factor |
 | same matrix, yaw row's pitch entry over the pitch row's | ``wrist_finger_coupling`` | blade rotation per rad of wrist pitch with the jaw disks held (the paper's wrist-finger coupling); the sign stays the base file's: the model has one blade, the dVRK two of opposite sign |
@@ -24,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 from grip_force_ros.params.schema import ParameterError
-from grip_force_ros.params.sim import JAW_STOP_MARGIN
 
 #: Rows of ``coupling.ActuatorToJointPosition`` (tool joints) and its columns (actuators 4..7).
 ROLL, PITCH, YAW, JAW = range(4)
@@ -128,10 +126,6 @@ def tool_facts(doc: dict, name: str, base_wrist_finger_coupling: float = 1.0) ->
     return {
         'jaw_angle_min': (qmin, f'{src}: jaw.qmin ({math.degrees(qmin):.0f} deg)'),
         'jaw_angle_max': (qmax, f'{src}: jaw.qmax ({math.degrees(qmax):.0f} deg)'),
-        'jaw_open_stop': (round(qmax - JAW_STOP_MARGIN, 6),
-                          f'{src}: jaw.qmax less {JAW_STOP_MARGIN} rad, the margin every instrument '
-                          "keeps below jaw_angle_max (the simulated jaw's open stop; the "
-                          "instrument's own mechanical stop is not in the tool file)"),
         'dvrk_jaw_effort_max': (ftmax, f'{src}: jaw.ftmax'),
         'dvrk_jaw_coupling': (c, f'{src}: coupling.ActuatorToJointPosition jaw row (0, 0, -c, c)'),
         'wrist_finger_coupling': (

@@ -98,11 +98,13 @@ SIM = [
     _sim('rigid_contact_angle', 'double', 0.1, 'rad',
          'Jaw angle at which the jaw touches the rigid object (object position).',
          min=0.0, max=math.pi / 2),
-    _sim('jaw_open_stop', 'double', math.pi / 2, 'rad',
+    _sim('jaw_open_stop', 'double', 0.0, 'rad',
          "Jaw angle of the simulated jaw's mechanical open stop (a hard stop, as the jaws "
-         "touching at 0). At least JAW_STOP_MARGIN (0.1 rad) below the instrument's "
-         'jaw_angle_max, the largest angle the controller takes as plausible.',
-         min=0.1, max=math.pi),
+         "touching at 0). 0: the instrument's jaw_angle_max less JAW_STOP_MARGIN (0.1 rad): "
+         'pi/2 for the default instrument, 1.296 rad for the Maryland forceps (dVRK range '
+         '80 deg). A value given must lie at least that margin below jaw_angle_max, the '
+         'largest angle the controller takes as plausible.',
+         min=0.0, max=math.pi),
     _sim('initial_jaw_angle', 'double', 0.6, 'rad',
          'Jaw angle at reset (no cable tension, motor angle 0).', min=0.0, max=math.pi / 2),
     _sim('initial_wrist_angle', 'double', 0.0, 'rad',
@@ -153,6 +155,12 @@ EFFECTS = _effect_specs()
 JAW_STOP_MARGIN = 0.1
 
 
+def jaw_open_stop(values) -> float:
+    """Return the simulated jaw's open stop (rad): ``jaw_open_stop``, or from ``jaw_angle_max`` if 0."""
+    stop = values['jaw_open_stop']
+    return stop if stop > 0.0 else values['jaw_angle_max'] - JAW_STOP_MARGIN
+
+
 def check_sim(values) -> None:
     """Cross-parameter checks of the 'sim' group (called by ``check_consistency``).
 
@@ -164,7 +172,7 @@ def check_sim(values) -> None:
         :data:`JAW_STOP_MARGIN` below ``jaw_angle_max``), or a reset jaw beyond that stop.
     """
     from grip_force_ros.params.schema import ParameterError
-    stop, plausible = values['jaw_open_stop'], values['jaw_angle_max']
+    stop, plausible = jaw_open_stop(values), values['jaw_angle_max']
     if stop + JAW_STOP_MARGIN > plausible + 1e-9:
         raise ParameterError(
             f"'jaw_open_stop' {stop} rad is less than {JAW_STOP_MARGIN} rad below "
@@ -172,7 +180,7 @@ def check_sim(values) -> None:
             'controller rejects as implausible')
     if values['initial_jaw_angle'] > stop:
         raise ParameterError(f"'initial_jaw_angle' {values['initial_jaw_angle']} rad is beyond "
-                             f"'jaw_open_stop' {stop} rad")
+                             f"the open stop {stop} rad ('jaw_open_stop')")
     rate, timeout = values['publish_rate'], values['command_timeout']
     if timeout * rate < 2.0:
         raise ParameterError(

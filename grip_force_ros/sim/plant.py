@@ -59,6 +59,7 @@ from typing import Any, Mapping
 from grip_force_ros.model import contact as _contact
 from grip_force_ros.model import friction as _friction
 from grip_force_ros.model.contact import OBJECTS
+from grip_force_ros.params.sim import jaw_open_stop
 from grip_force_ros.sim.effects import SimError, effect_overrides
 
 __all__ = ['InstrumentSim', 'SimMeasurement', 'OBJECTS', 'chain_efficiency_scalar']
@@ -251,7 +252,7 @@ class InstrumentSim:
         else:
             self._contact_angle, self._contact_k, self._contact_arm = (-1.0, 0.0, self._tip)
         self._stop_k = p.rigid_stiffness * self._tip ** 2                  # N*m/rad, jaw hard stops
-        self._open_stop = p.jaw_open_stop                                   # rad
+        self._open_stop = jaw_open_stop(p)                                  # rad
         self._zeta2 = 2.0 * p.contact_damping_ratio
         self._measurement = None
 
