@@ -64,6 +64,26 @@ def _param(env, *args, timeout=60.0):
                  lambda r: 'Node not found' not in r.stderr, timeout=timeout)
 
 
+def _node_topics(node, env, needed, timeout=30.0):
+    """Topics ``node`` publishes or subscribes to (``ros2 node info``), once ``needed`` shows.
+
+    What a node's own entities are named, immune to other processes in the domain: the
+    domain-wide topic list of a fresh CI run twice held the crtk names of an earlier test's
+    stopped nodes beside a launch's namespaced ones (docs/reliability.md, eighth round).
+    """
+    info = retry(lambda: run('ros2', 'node', 'info', '--no-daemon', '--spin-time', '2', node,
+                             env=env),
+                 lambda r: needed in r.stdout, timeout=timeout)
+    assert needed in info.stdout, (info.stdout, info.stderr)
+    topics, section = set(), ''
+    for line in info.stdout.splitlines():
+        if line.strip().endswith(':') and not line.startswith('    '):
+            section = line.strip()
+        elif section in ('Subscribers:', 'Publishers:') and line.strip().startswith('/'):
+            topics.add(line.split(':')[0].strip())
+    return topics
+
+
 def _wait_for_param(node, name, env, timeout=90.0):
     return retry(lambda: _param(env, 'get', node, name, timeout=5.0),
                  lambda r: r.returncode == 0, timeout=timeout)
@@ -122,9 +142,12 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
                 '/psm1/master/gripper/measured_js', '/diagnostics'}
         topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
                        lambda r: want <= set(r.stdout.split()), timeout=30)
-        listed = set(topics.stdout.split())
-        assert want <= listed, topics.stdout
-        assert '/grip/estimated_force' not in listed and '/psm1/diagnostics' not in listed
+        assert want <= set(topics.stdout.split()), topics.stdout
+        # every topic of the controller under the namespace, but the root's /diagnostics
+        own = _node_topics('/psm1/controller', env, '/psm1/grip/estimated_force')
+        assert '/diagnostics' in own, own
+        assert all(t.startswith('/psm1/') for t in own
+                   - {'/diagnostics', '/rosout', '/parameter_events'}), own
         named = {f'/psm1/{n}' for n in NODES}
         nodes = retry(lambda: run('ros2', 'node', 'list', '--no-daemon', '--spin-time', '2', env=env),
                       lambda r: named <= set(r.stdout.split()), timeout=30)
@@ -171,18 +194,9 @@ def test_grasp_launch_dvrk_profile_as_psm2_and_mtmr(tmp_path):
                        lambda r: want <= set(r.stdout.split()), timeout=60)
         assert want <= set(topics.stdout.split()), (topics.stdout, log.read_text())
 
-        def others(listing):
-            return [t for t in listing.stdout.split() if t.startswith(('/PSM1', '/MTML',
-                                                                      '/instrument'))]
-        # none of the crtk or default dVRK names; an entity of a process an earlier test
-        # stopped stays in the graph until its participant's lease runs out (Fast DDS: 20 s),
-        # so such names are given 30 s to go; one that stays is shown with its nodes
-        topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2',
-                                   env=env),
-                       lambda r: not others(r), timeout=30)
-        stray = others(topics)
-        assert not stray, [run('ros2', 'topic', 'info', '-v', '--no-daemon', t, env=env).stdout
-                           for t in stray]
+        # the controller's own topics: none of the crtk or default dVRK names
+        own = _node_topics('/controller', env, '/PSM2/jaw/servo_jf')
+        assert not [t for t in own if t.startswith(('/PSM1', '/MTML', '/instrument'))], own
         state = retry(lambda: run('ros2', 'service', 'call', '/PSM2/operating_state',
                                   'crtk_msgs/srv/TriggerOperatingState', env=env, timeout=60),
                       lambda r: "is_homed=True" in r.stdout, timeout=60)
