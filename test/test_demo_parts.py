@@ -296,7 +296,7 @@ sys.stdin.readline()
 """)
     ctx = Context()
     rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
-    spin = None
+    spin = recorder = None
     proc = subprocess.Popen([sys.executable, str(script)], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, env=dict(os.environ))
     try:
@@ -324,6 +324,12 @@ sys.stdin.readline()
             proc.kill()
         if spin is not None:
             spin.stop()
+        if recorder is not None:
+            # destroyed, not only its context shut down: a node left alive keeps its
+            # participant and its subscriptions on every recorded topic in this process's
+            # domain (it made later tests see a subscriber to the master and crtk topics)
+            recorder.close()
+            recorder.destroy_node()
         rclpy.shutdown(context=ctx)
     print(f'messages still waiting at the end of the streams: {backlog}; '
           f'CPU of this process per message: {cpu * 1e6:.0f} us')
