@@ -23,7 +23,7 @@ from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness,
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from grip_force_ros.demo.messages import TOPIC_TYPES, absolute
+from grip_force_ros.demo.messages import TOPIC_TYPES, absolute, stamp_seconds
 from grip_force_ros.nodes.common import RECORD_QOS, STATE_PUB_QOS, make_executor, matching_qos
 from grip_force_ros.nodes.harness import SPIN_SLICE
 
@@ -153,10 +153,7 @@ class RecorderNode(Node):
     def latest_stamp(self, topic: str) -> float | None:
         """Header stamp (s) of the newest message on ``topic``; None before the first one."""
         item = self.latest(topic)
-        if item is None:
-            return None
-        stamp = item[1].header.stamp
-        return stamp.sec + stamp.nanosec * 1e-9
+        return None if item is None else stamp_seconds(item[1])
 
     def count(self, topic: str) -> int:
         with self._lock:
