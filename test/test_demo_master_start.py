@@ -131,3 +131,26 @@ def test_a_dead_master_is_reported_while_waiting():
 
     with pytest.raises(ProcessError, match='exited with code 1'):
         set_parameters_confirmed(master, TASK, dead, timeout=5.0, answer_wait=WAIT)
+
+
+def test_a_master_that_finished_its_task_before_any_answer_came_took_the_set():
+    # loaded run 17/3: the set's answer and the confirming read were both lost while the
+    # master ran its 4 s task and exited with code 0 (the runner raised "master exited")
+    master = LossyMaster(lose=['answer'], lose_reads=1000)
+    exited = []
+
+    def finished():
+        # the master exits once its task has run (here: after two reads went unanswered)
+        if master.reads >= 2:
+            exited.append(True)
+        return bool(exited)
+
+    assert set_parameters_confirmed(master, TASK, alive, timeout=5.0, answer_wait=WAIT,
+                                    finished=finished) == 'finished before its answer'
+    assert (master.sets, master.task_starts) == (1, 1)
+
+
+def test_an_answer_that_came_wins_over_a_finished_master():
+    master = LossyMaster()
+    assert set_parameters_confirmed(master, TASK, alive, timeout=5.0, answer_wait=WAIT,
+                                    finished=lambda: True) == 'answered'

@@ -23,8 +23,8 @@ from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import RecordedTopics, recorded_topics
-from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, ProcessError, ProcessGroup,
-                                            master_rt_priority,
+from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError,
+                                            ProcessGroup, master_rt_priority,
                                             node_command, python_module, ros_args,
                                             ros_environment, ros_tools_environment)
 from grip_force_ros.params import load_params_file, read_params_yaml
@@ -244,18 +244,24 @@ def _wait_until_ready(recorder, group: ProcessGroup, timeout: float) -> None:
     _poll(lambda: controller_ready(recorder), timeout, group.check_alive)
 
 
-def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.0) -> str:
+def _start_master(node, spec: RunSpec, group: ProcessGroup, master: NodeProcess,
+                  timeout: float = 15.0) -> str:
     """Start the held master's task now: set its real trajectory parameters at once.
 
     Returns how the master's taking them was known (see :func:`set_parameters_confirmed`).
+    The held master runs its task 100 times slowed (``HOLD_MASTER``), so a clean exit of
+    it within ``timeout`` can only follow the task these parameters start: that exit
+    counts as the set taken.
     """
     from rclpy.parameter_client import AsyncParameterClient
 
     values = spec.master_values()
     client = AsyncParameterClient(node, 'master')
     _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
-    outcome = set_parameters_confirmed(client, {name: values[name] for name in HOLD_MASTER},
-                                       group.check_alive, timeout)
+    outcome = set_parameters_confirmed(
+        client, {name: values[name] for name in HOLD_MASTER},
+        lambda: group.check_alive(may_finish=('master',)), timeout,
+        finished=lambda: master.popen.poll() == 0)
     if outcome != 'answered':
         node.get_logger().warning(f"the master's answer to its trajectory parameters was lost: "
                                   f'{outcome}')
@@ -263,7 +269,8 @@ def _start_master(node, spec: RunSpec, group: ProcessGroup, timeout: float = 15.
 
 
 def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Callable[[], None],
-                             timeout: float, answer_wait: float = ANSWER_WAIT) -> str:
+                             timeout: float, answer_wait: float = ANSWER_WAIT,
+                             finished: Callable[[], bool] | None = None) -> str:
     """Set parameters atomically, and know they were taken even if the answer is lost.
 
     A set that restarts something (the master's task) must not be sent twice
@@ -283,12 +290,16 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
         Longest time for the whole exchange (s).
     answer_wait : float
         Wait for each answer before asking again (s).
+    finished : callable, optional
+        True once the node has done what the set starts and exited cleanly (the
+        master's task): the set was taken, whatever answer is still missing.
 
     Returns
     -------
     str
         ``'answered'``; ``'confirmed by a read'`` (the set's answer lost);
-        ``'sent again'`` (a request lost, the set sent again and answered or confirmed).
+        ``'sent again'`` (a request lost, the set sent again and answered or confirmed);
+        ``'finished before its answer'`` (``finished`` came true first).
 
     Raises
     ------
@@ -298,13 +309,17 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
     from rclpy.parameter import Parameter, parameter_value_to_python
 
     names = list(values)
+    done_already = finished or (lambda: False)
     deadline = time.monotonic() + timeout
     sent = 0
     while time.monotonic() < deadline:
         future = client.set_parameters_atomically(
             [Parameter(name, value=values[name]) for name in names])
         sent += 1
-        if _poll(future.done, answer_wait, check_alive, period=0.02):
+        if _poll(lambda: future.done() or done_already(), answer_wait, check_alive,
+                 period=0.02):
+            if not future.done():
+                return 'finished before its answer'
             result = future.result().result
             if not result.successful:
                 raise ProcessError(f'the node refused the parameters {names}: {result.reason}')
@@ -312,7 +327,10 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
         held = None
         while held is None and time.monotonic() < deadline:
             read = client.get_parameters(names)
-            if _poll(read.done, answer_wait, check_alive, period=0.02):
+            if _poll(lambda: read.done() or done_already(), answer_wait, check_alive,
+                     period=0.02):
+                if not read.done():
+                    return 'finished before its answer'
                 held = [parameter_value_to_python(v) for v in read.result().values]
         if held == [values[name] for name in names]:
             return 'confirmed by a read' if sent == 1 else 'sent again'
@@ -483,7 +501,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
                       'controller')
             timing['master_up'] = time.monotonic() - t_begin
             _wait_until_ready(recorder, group, READY_TIMEOUT)
-            master_answer = _start_master(recorder, spec, group)
+            master_answer = _start_master(recorder, spec, group, master)
             timing['task_start'] = time.monotonic() - t_begin
             clock = TaskClock(trajectory, time.monotonic())
             # the master exits (exit_when_done) shortly after its task: that ends the run
