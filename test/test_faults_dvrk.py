@@ -4,12 +4,16 @@ Each case starts sim_instrument, controller and master as processes (the dvrk pr
 sourced ROS tools environment) and injects its fault mid-grasp; ``grip-force faultcheck`` runs
 the same cases after the in-process ones.
 """
+import threading
+import time
+from types import SimpleNamespace
+
 import pytest
 
 from _ros_tools import require_ros_tools
 from grip_force_ros.faults.catalogue import OUTCOMES, catalogue
-from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, dvrk_cases, lines_since,
-                                        run_process_cases)
+from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, dvrk_cases,
+                                        lines_since, run_process_cases)
 from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros
@@ -54,10 +58,54 @@ def test_the_sims_cut_line_says_when_its_own_process_was_not_scheduled():
     plain = ('[WARN] [1795635733.669077292] [sim_instrument]: no command for 30.6 ms (command '
              'timeout 30 ms): drive current cut from 0.2172 A to 0 A')
     found = SIM_CUT.search(starved)
-    assert (found.group(1), found.group(2)) == ('2658.2', '2630.4')
+    assert (found['silence'], found['held'], found['starved']) == ('2658.2', '0.1906', '2630.4')
     found = SIM_CUT.search(plain)
-    assert (found.group(1), found.group(2)) == ('30.6', None)
+    assert (found['silence'], found['held'], found['starved']) == ('30.6', '0.2172', None)
     assert SIM_CUT.search('drive command timeout 30 ms') is None
+
+
+class _KilledLoop:
+    """A stand-in for the kill case's processes and probe, with the probe's states of the
+    first ``lost_ms`` after the kill lost (a probe more than its reader's depth behind)."""
+
+    def __init__(self, held: float, lost_ms: float, gripping: float = 0.24):
+        self.held, self.lost_ms = held, lost_ms
+        self.params = SimpleNamespace(current_noise_std=0.002)
+        now = time.time()
+        self.probe = SimpleNamespace(
+            lock=threading.Lock(), states=[(now - 0.005 + k * 1e-3, gripping) for k in range(5)],
+            latest=lambda name: {'values': {'mode': 'grip', 'current_command_A': str(gripping)}},
+            wait=lambda predicate, timeout: predicate())
+        self.text = ''
+        self.procs = {'controller': SimpleNamespace(signal=self.killed)}
+
+    def killed(self, _signal):
+        kill = time.time()
+        cut = kill + 0.0302                    # the drive's 30 ms timeout, checked each ms
+        self.text = (f'[WARN] [{cut:.9f}] [sim_instrument]: no command for 30.2 ms (command '
+                     f'timeout 30 ms): drive current cut from {self.held:.4f} A to 0 A\n')
+        first = kill + self.lost_ms * 1e-3
+        self.probe.states += [(first + k * 1e-3, self.held if first + k * 1e-3 < cut else 0.0)
+                              for k in range(100)]
+
+    def log(self, name, since):
+        return lines_since(self.text, since)
+
+
+def test_the_kill_case_takes_the_held_current_from_the_sims_cut_line():
+    """Fresh-clone CI of 5a4330b: 'the sim carried no grip current at the kill' while the sim
+    said it cut from 0.2437 A after the kill; the probe's first state after the kill read
+    ~0 A (its states of the kill lost). The sim's own word decides; a cut from nothing (the
+    grip let go between the check and the kill) fails."""
+    detail = {}
+    assert _kill_case(_KilledLoop(held=0.2437, lost_ms=40.0), detail) == []
+    assert detail['current_held_until_cut_A'] == 0.2437
+    assert detail['current_at_kill_A'] == 0.0 and detail['probe_first_state_after_kill_ms'] >= 40
+    detail = {}
+    assert _kill_case(_KilledLoop(held=0.2437, lost_ms=0.0), detail) == []
+    assert detail['current_at_kill_A'] == 0.2437
+    problems = _kill_case(_KilledLoop(held=0.0, lost_ms=0.0), {})
+    assert problems == ['the sim carried no grip current at the kill']
 
 
 def test_dvrk_and_drive_faults_on_real_processes():

@@ -54,9 +54,11 @@ COMMAND_CHECK_DUE = 0.031
 MAX_CHECK_LATE = 0.1
 #: How much of a late check (s) the sim's own starvation may leave unexplained.
 STARVED_SLACK = 0.02
-#: The sim's cut line: its silence, and the starvation it reports before the check (ms).
-SIM_CUT = re.compile(r'no command for ([0-9.]+) ms .*drive current cut'
-                     r'(?:.*not scheduled for ([0-9.]+) ms)?')
+#: The sim's cut line: its silence (ms), the current it held until the cut (A), and the
+#: starvation it reports before the check (ms).
+SIM_CUT = re.compile(r'no command for (?P<silence>[0-9.]+) ms .*drive current cut'
+                     r'(?: from (?P<held>-?[0-9.]+) A)?'
+                     r'(?:.*not scheduled for (?P<starved>[0-9.]+) ms)?')
 #: Longest wait (s) for a sim state past KILL_TO_ZERO after the kill (a starved machine).
 KILL_STATE_WAIT = 5.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
@@ -94,10 +96,11 @@ class _Probe:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.context import Context
-        from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
 
-        from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
+        from grip_force_ros.nodes.common import RECORD_QOS, make_executor, stamp_seconds
+        from grip_force_ros.nodes.harness import SPIN_SLICE
+        self._slice = SPIN_SLICE
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node('fault_probe', context=self.context)
@@ -130,7 +133,10 @@ class _Probe:
         self.node.create_subscription(JointState, names.command, on_command, RECORD_QOS)
         self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, RECORD_QOS)
         self.publisher = self.node.create_publisher(JointState, names.command, RECORD_QOS)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        # the EventsExecutor: ~45 us of CPU per message against ~130 us for rclpy's
+        # SingleThreadedExecutor (demo/recorder.py SpinThread). A probe that falls more than
+        # its reader's depth (1000 states, 1 s) behind loses the oldest states: the kill's
+        self.executor = make_executor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = False
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -138,7 +144,8 @@ class _Probe:
 
     def _spin(self):
         while not self._stop and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
+            # short slices: the EventsExecutor holds the GIL while it waits
+            self.executor.spin_once(timeout_sec=self._slice)
 
     def latest(self, name_part: str) -> dict | None:
         """Return the newest diagnostic status whose name contains ``name_part``."""
@@ -160,7 +167,9 @@ class _Probe:
         import rclpy
         self._stop = True
         self._thread.join(timeout=2.0)
+        self.executor.remove_node(self.node)
         self.node.destroy_node()
+        self.executor.shutdown()
         rclpy.try_shutdown(context=self.context)
 
 
@@ -281,12 +290,12 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         # the cut after the kill (the sim may also have cut at start-up, before the
         # controller's commands flowed: 'no command for 334.5 ms ... from 0.0000 A')
         silence = SIM_CUT.search(loop.log('sim_instrument', kill))
-        arrival = first_zero - float(silence.group(1)) * 1e-3 if silence else kill
+        arrival = first_zero - float(silence['silence']) * 1e-3 if silence else kill
         start = max(kill, arrival)
         # the sim's own check of the timeout can run late when its process is not scheduled
         # (a firmware drive's would not): that lateness, which the sim measures, is the
         # machine's and is reported; the cut itself must then hold within the bound
-        check_late = (max(0.0, float(silence.group(1)) * 1e-3 - COMMAND_CHECK_DUE)
+        check_late = (max(0.0, float(silence['silence']) * 1e-3 - COMMAND_CHECK_DUE)
                       if silence else 0.0)
         late = [(t, i) for t, i in after if t >= start + KILL_TO_ZERO + check_late]
         if late or time.monotonic() > deadline:
@@ -294,7 +303,7 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         time.sleep(0.05)
     detail['last_command_after_kill_ms'] = round(max(0.0, arrival - kill) * 1e3, 1)
     detail['sim_check_late_ms'] = round(check_late * 1e3, 1)
-    starved = float(silence.group(2)) * 1e-3 if silence and silence.group(2) else 0.0
+    starved = float(silence['starved']) * 1e-3 if silence and silence['starved'] else 0.0
     detail['sim_not_scheduled_ms'] = round(starved * 1e3, 1)
     if check_late > MAX_CHECK_LATE and starved >= check_late - STARVED_SLACK:
         detail['spoiled'] = (f"the sim's timeout check came {check_late * 1e3:.0f} ms late: its "
@@ -304,8 +313,18 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
         problems.append(f"the sim's timeout check came {check_late * 1e3:.0f} ms late")
     if not late:
         return [f'no sim state after the kill (waited {KILL_STATE_WAIT:g} s)']
+    # what the drive carried when the commands stopped: the sim's own word in its cut line.
+    # The probe's first state after the kill is only a second witness: a probe process
+    # lagging more than its reader's depth (RECORD_QOS, 1000 states = 1 s) loses the
+    # oldest states, which are those of the kill (fresh-clone CI of 5a4330b: the sim cut
+    # from 0.2437 A after the kill, the probe's first state after it read ~0 A)
     detail['current_at_kill_A'] = round(after[0][1], 4) if after else None
-    if not after or after[0][1] < GRIP_CURRENT:
+    detail['probe_first_state_after_kill_ms'] = round((after[0][0] - kill) * 1e3, 1) \
+        if after else None
+    held = float(silence['held']) if silence and silence['held'] else None
+    detail['current_held_until_cut_A'] = held
+    carried = held if held is not None else (after[0][1] if after else 0.0)
+    if carried < GRIP_CURRENT:
         problems.append('the sim carried no grip current at the kill')
     detail['current_zero_after_ms'] = round((first_zero - kill) * 1e3, 1)
     detail['current_zero_after_last_command_ms'] = round((first_zero - start) * 1e3, 1)
