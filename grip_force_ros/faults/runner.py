@@ -98,7 +98,9 @@ class Session:
         from rclpy.parameter import Parameter
 
         from grip_force_ros.faults.probe import FaultProbe
+        from grip_force_ros.nodes.common import make_executor
         from grip_force_ros.nodes.controller import ControllerNode
+        from grip_force_ros.nodes.harness import SPIN_SLICE
 
         values = read_params_yaml(config)
         if sensor:
@@ -122,7 +124,8 @@ class Session:
                                 relay=RELAY_PREFIX if plant == 'sim_instrument' else None)
         if plant == 'sim_instrument':
             self.sim = self._start_sim()
-        self.executor = self._executor()
+        self.executor = make_executor(self.context)
+        self._slice = SPIN_SLICE
         self.executor.add_node(self.controller)
         self.executor.add_node(self.probe)
         self.crash: str | None = None
@@ -130,20 +133,11 @@ class Session:
         self._thread = threading.Thread(target=self._spin, name='faultcheck-spin', daemon=True)
         self._thread.start()
 
-    def _executor(self):
-        from rclpy.executors import SingleThreadedExecutor
-        if os.environ.get('GRIP_FORCE_EXECUTOR', 'events') != 'single':
-            try:
-                from rclpy.experimental import EventsExecutor
-                return EventsExecutor(context=self.context)
-            except ImportError:  # pragma: no cover
-                pass
-        return SingleThreadedExecutor(context=self.context)
-
     def _spin(self) -> None:
         try:
             while not self._stop and self.context.ok():
-                self.executor.spin_once(timeout_sec=0.05)
+                # short slices: the EventsExecutor holds the GIL while it waits
+                self.executor.spin_once(timeout_sec=self._slice)
         except Exception:  # noqa: BLE001 - a crash of a node callback is what we count
             self.crash = traceback.format_exc()
 
