@@ -57,6 +57,11 @@ def test_interface_profiles():
 
 # --- ros2 launch ------------------------------------------------------------------------------
 
+#: Longest one graph query of the ros2 CLI may take (s) before it counts as a failed try: a
+#: normal one takes 3-10 s on a loaded 2-core machine (Python start-up, the 2 s spin).
+GRAPH_TRY = 20.0
+
+
 def _param(env, *args, timeout=60.0):
     """``ros2 param ARGS --no-daemon``, again while the short-lived CLI node has not yet
     discovered the target ('Node not found': discovery takes a moment on a loaded machine)."""
@@ -64,16 +69,26 @@ def _param(env, *args, timeout=60.0):
                  lambda r: 'Node not found' not in r.stderr, timeout=timeout)
 
 
-def _node_topics(node, env, needed, timeout=30.0):
+def _graph(env, *args, ok, window=60.0):
+    """``ros2 ARGS --no-daemon --spin-time 2`` (a graph query), again until ``ok(result)``.
+
+    Each try has its own limit (:data:`GRAPH_TRY`), well inside ``window``: a CLI call that
+    hangs is one failed try, not the whole window (fresh-clone CI of 6f6d653: ``ros2 node
+    list`` gave nothing for the whole 30 s of its retry, while the launch's nodes answered
+    ``ros2 node info`` just before; a call under the old 60 s limit could eat the window).
+    """
+    return retry(lambda: run('ros2', *args, '--no-daemon', '--spin-time', '2', env=env,
+                             timeout=GRAPH_TRY), ok, timeout=window)
+
+
+def _node_topics(node, env, needed, timeout=60.0):
     """Topics ``node`` publishes or subscribes to (``ros2 node info``), once ``needed`` shows.
 
     What a node's own entities are named, immune to other processes in the domain: the
     domain-wide topic list of a fresh CI run twice held the crtk names of an earlier test's
     stopped nodes beside a launch's namespaced ones (docs/reliability.md, eighth round).
     """
-    info = retry(lambda: run('ros2', 'node', 'info', '--no-daemon', '--spin-time', '2', node,
-                             env=env),
-                 lambda r: needed in r.stdout, timeout=timeout)
+    info = _graph(env, 'node', 'info', node, ok=lambda r: needed in r.stdout, window=timeout)
     assert needed in info.stdout, (info.stdout, info.stderr)
     topics, section = set(), ''
     for line in info.stdout.splitlines():
@@ -140,8 +155,7 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
         assert got.stdout.strip() == 'String value is: long_jaw_grasper', (got, log.read_text())
         want = {'/psm1/grip/estimated_force', '/psm1/instrument/actuator/servo_jf',
                 '/psm1/master/gripper/measured_js', '/diagnostics'}
-        topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
-                       lambda r: want <= set(r.stdout.split()), timeout=30)
+        topics = _graph(env, 'topic', 'list', ok=lambda r: want <= set(r.stdout.split()))
         assert want <= set(topics.stdout.split()), topics.stdout
         # every topic of the controller under the namespace, but the root's /diagnostics
         own = _node_topics('/psm1/controller', env, '/psm1/grip/estimated_force')
@@ -149,9 +163,8 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
         assert all(t.startswith('/psm1/') for t in own
                    - {'/diagnostics', '/rosout', '/parameter_events'}), own
         named = {f'/psm1/{n}' for n in NODES}
-        nodes = retry(lambda: run('ros2', 'node', 'list', '--no-daemon', '--spin-time', '2', env=env),
-                      lambda r: named <= set(r.stdout.split()), timeout=30)
-        assert named <= set(nodes.stdout.split()), nodes.stdout
+        nodes = _graph(env, 'node', 'list', ok=lambda r: named <= set(r.stdout.split()))
+        assert named <= set(nodes.stdout.split()), (nodes.returncode, nodes.stdout, nodes.stderr)
         # ros2 topic hz on the namespaced force (the controller publishes it every step)
         # (15 s: the CLI's start-up and discovery alone can take seconds on a loaded machine)
         hz = run('bash', '-c', 'timeout -s INT 15 ros2 topic hz /psm1/grip/estimated_force; true',
@@ -190,8 +203,7 @@ def test_grasp_launch_dvrk_profile_as_psm2_and_mtmr(tmp_path):
         want = {'/PSM2/jaw/measured_js', '/PSM2/measured_js', '/PSM2/jaw/servo_jf',
                 '/PSM2/operating_state', '/PSM2/state_command', '/MTMR/gripper/measured_js',
                 '/PSM2/grip/estimated_force'}
-        topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
-                       lambda r: want <= set(r.stdout.split()), timeout=60)
+        topics = _graph(env, 'topic', 'list', ok=lambda r: want <= set(r.stdout.split()))
         assert want <= set(topics.stdout.split()), (topics.stdout, log.read_text())
 
         # the controller's own topics: none of the crtk or default dVRK names
@@ -222,9 +234,8 @@ def test_controller_launch_alone(tmp_path):
     try:
         got = _wait_for_param('/controller', 'instrument_name', env)
         assert got.stdout.strip() == 'String value is: maryland_forceps', (got, log.read_text())
-        nodes = retry(lambda: run('ros2', 'node', 'list', '--no-daemon', '--spin-time', '2', env=env),
-                      lambda r: '/controller' in r.stdout.split(), timeout=30)
-        assert '/controller' in nodes.stdout.split()
+        nodes = _graph(env, 'node', 'list', ok=lambda r: '/controller' in r.stdout.split())
+        assert '/controller' in nodes.stdout.split(), (nodes.returncode, nodes.stdout, nodes.stderr)
         assert '/sim_instrument' not in nodes.stdout.split()
     finally:
         code, text = _stop_launch(proc, log, env)
@@ -249,9 +260,8 @@ def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
     try:
         got = lifecycle('get', '/controller')
         assert got.stdout.split() == ['unconfigured', '[1]'], (got, log.read_text())
-        info = retry(lambda: run('ros2', 'topic', 'info', servo, '--no-daemon', '--spin-time', '2',
-                                 env=env, timeout=60),
-                     lambda r: 'Subscription count: 1' in r.stdout, timeout=60)   # the sim's
+        info = _graph(env, 'topic', 'info', servo,
+                      ok=lambda r: 'Subscription count: 1' in r.stdout)   # the sim's
         assert 'Publisher count: 0' in info.stdout, info
         for transition, state in (('configure', 'inactive'), ('activate', 'active')):
             # a call whose answer was lost (_ros_tools.CLI_CALL_TIMEOUT) is confirmed with get
