@@ -14,8 +14,8 @@ import signal
 
 import pytest
 
-from _ros_tools import (ROOT, cli, launch_exit_codes, lifecycle_transition, require_ros_tools,
-                        retry, ros_env, run, start, stop, stop_daemon)
+from _ros_tools import (CLI_CALL_TIMEOUT, ROOT, cli, launch_exit_codes, lifecycle_transition,
+                        require_ros_tools, retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 
@@ -57,10 +57,6 @@ def test_interface_profiles():
 
 # --- ros2 launch ------------------------------------------------------------------------------
 
-#: Longest one graph query of the ros2 CLI may take (s) before it counts as a failed try: a
-#: normal one takes 3-10 s on a loaded 2-core machine (Python start-up, the 2 s spin).
-GRAPH_TRY = 20.0
-
 
 def _param(env, *args, timeout=60.0):
     """``ros2 param ARGS --no-daemon``, again while the short-lived CLI node has not yet
@@ -69,19 +65,19 @@ def _param(env, *args, timeout=60.0):
                  lambda r: 'Node not found' not in r.stderr, timeout=timeout)
 
 
-def _graph(env, *args, ok, window=60.0):
+def _graph(env, *args, ok, window=90.0):
     """``ros2 ARGS --no-daemon --spin-time 2`` (a graph query), again until ``ok(result)``.
 
-    Each try has its own limit (:data:`GRAPH_TRY`), well inside ``window``: a CLI call that
+    Each try has the limit of a CLI call (``CLI_CALL_TIMEOUT``), inside ``window``: a call that
     hangs is one failed try, not the whole window (fresh-clone CI of 6f6d653: ``ros2 node
     list`` gave nothing for the whole 30 s of its retry, while the launch's nodes answered
     ``ros2 node info`` just before; a call under the old 60 s limit could eat the window).
     """
     return retry(lambda: run('ros2', *args, '--no-daemon', '--spin-time', '2', env=env,
-                             timeout=GRAPH_TRY), ok, timeout=window)
+                             timeout=CLI_CALL_TIMEOUT), ok, timeout=window)
 
 
-def _node_topics(node, env, needed, timeout=60.0):
+def _node_topics(node, env, needed, timeout=90.0):
     """Topics ``node`` publishes or subscribes to (``ros2 node info``), once ``needed`` shows.
 
     What a node's own entities are named, immune to other processes in the domain: the
