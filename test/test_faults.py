@@ -114,6 +114,25 @@ def test_a_spoiled_trial_is_redone_at_most_twice():
     assert detail['why'] == 'spoiled 3 times by a stalled machine: stall 1 | stall 2 | stall 3'
 
 
+def test_a_safe_state_before_the_timeout_is_blamed_on_the_machine_only_for_a_stall_or_another_input():
+    """Fresh-clone CI (stop 26): ``silence_master`` went safe 87 ms after the last master
+    sample (timeout 100 ms) and the trial passed with "period 0": the only other cause checked
+    was another stale input. Reproduced by holding the test process's GIL for 32-38 ms during
+    the silence: the controller's reason was ``step interval 36.2 ms > 30.0 ms (the controller
+    was stalled)`` alone. A stall or another stale input spoils the trial (redone); the
+    silenced input's own staleness, or a fault of the product, does not."""
+    from grip_force_ros.faults.runner import _machine_cause
+    stall = 'controller | safe: step interval 36.2 ms > 30.0 ms (the controller was stalled)'
+    other = 'controller | safe: stale instrument input: 32.7 ms old > 30.0 ms'
+    own = 'controller | safe: stale master input: 100.5 ms old > 100.0 ms'
+    limit = 'controller | safe: rejected actuator: measured current 1.107 A beyond +-1.100'
+    assert _machine_cause([(1.0, stall, {})], ('master',), 1.1) == stall
+    assert _machine_cause([(1.0, own, {}), (1.05, other, {})], ('master',), 1.1) == other
+    assert _machine_cause([(1.0, own, {}), (1.0, limit, {})], ('master',), 1.1) is None
+    assert _machine_cause([(1.0, other, {})], ('instrument', 'actuator'), 1.1) is None
+    assert _machine_cause([(1.2, stall, {})], ('master',), 1.1) is None   # after the window
+
+
 def test_bad_params_text():
     import yaml
     base = {'max_current': 0.5, 'guide_pulley_radii': (0.003, 0.003)}

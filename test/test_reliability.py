@@ -59,7 +59,10 @@ def test_watchdog_safe_within_two_periods_and_bumpless_resume(session):
                   f"period {d['controller_steps_after_timeout']} after the timeout, "
                   f"resume jump {d['max_resume_jump'] * 1e3:.3f} mA")
             assert d['passed'], d
-            assert 1 <= d['controller_steps_after_timeout'] <= 2, d
+            assert 1 <= d['controller_steps_after_timeout'] <= 2, (
+                f"{source} #{trial}: safe at period {d['controller_steps_after_timeout']} after the "
+                f"timeout, {d['safe_after_last_receive_ms']} ms after the last receipt; "
+                f"safe-state reason: {d.get('safe_before_timeout')}")
             # the receive-time latency is bounded by the controller's own steps: it trips on
             # age > timeout at a step, so the latency exceeds the timeout by up to a period and
             # by as little as a few us (the phase of the steps); the detail is rounded to 1 us

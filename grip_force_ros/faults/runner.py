@@ -361,12 +361,13 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             problems.append('no safe output after the last input')
         elif steps > 2:
             problems.append(f'safe only at the {steps}th control period after the timeout')
-        elif steps == 0:   # safe before this input's timeout: another input was lost first?
-            silenced = _case_sources(case)
-            others = [d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005 and any(
-                f'stale {s} input' in d[1] for s in SOURCES if s not in silenced)]
-            if others:     # the machine starved another input: this trial measured nothing
-                detail['spoiled'] = others[0][:300]
+        elif steps == 0:   # safe before this input's timeout: another input lost first, a stall?
+            cause = _machine_cause(probe.diagnostics, _case_sources(case), t1 + 0.005)
+            if cause is not None:   # this trial measured nothing
+                detail['spoiled'] = cause[:300]
+            first_safe = next((d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005
+                               and _diag_mode(d[2]) is Mode.SAFE), None)
+            detail['safe_before_timeout'] = (first_safe or 'no safe-state diagnostic')[:300]
     if case.outcome in ('clamp', 'ignore'):
         modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
         modes = [m for m in modes if m is not None]
@@ -406,6 +407,19 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     if problems:
         detail['why'] = '; '.join(problems)
     return detail
+
+
+def _machine_cause(diagnostics: list, silenced: tuple, until: float) -> str | None:
+    """Return the first /diagnostics text up to ``until`` (s) that blames the machine, or None.
+
+    Another input than the ``silenced`` ones gone stale, or the controller's own step
+    interval beyond its watchdog (a stall of its process: a gen-2 garbage collection of a
+    large test process, a starved core). A watchdog case whose output went safe before its
+    own input's timeout for such a cause measured nothing.
+    """
+    return next((d[1] for d in diagnostics if d[0] <= until and (
+        'the controller was stalled' in d[1]
+        or any(f'stale {s} input' in d[1] for s in SOURCES if s not in silenced))), None)
 
 
 def _scheduling_stall(reason: str) -> bool:
