@@ -83,14 +83,16 @@ def cli_once(env, *args: str) -> subprocess.CompletedProcess:
                  timeout=0)
 
 
-def cli(env, *args: str, timeout: float = 240.0) -> subprocess.CompletedProcess:
+def cli(env, *args: str, timeout: float = 240.0, until=None) -> subprocess.CompletedProcess:
     """``ros2 ARGS`` for a read-only verb, again while it hung or the node was not discovered yet.
 
     A hung call (past :data:`CLI_CALL_TIMEOUT`, return code -1) is a lost answer, tried
-    again; ``timeout`` leaves room for several.
+    again; ``timeout`` leaves room for several. ``until(result)``, when given, must hold too
+    (a graph query tried until the entities it waits for show).
     """
     return retry(lambda: run('ros2', *args, env=env, timeout=CLI_CALL_TIMEOUT),
-                 lambda r: r.returncode != -1 and 'Node not found' not in r.stdout + r.stderr,
+                 lambda r: (r.returncode != -1 and 'Node not found' not in r.stdout + r.stderr
+                            and (until is None or until(r))),
                  timeout=timeout)
 
 

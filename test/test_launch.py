@@ -14,8 +14,8 @@ import signal
 
 import pytest
 
-from _ros_tools import (CLI_CALL_TIMEOUT, ROOT, cli, launch_exit_codes, lifecycle_transition,
-                        require_ros_tools, retry, ros_env, run, start, stop, stop_daemon)
+from _ros_tools import (ROOT, cli, launch_exit_codes, lifecycle_transition, require_ros_tools,
+                        retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 
@@ -61,20 +61,19 @@ def test_interface_profiles():
 def _param(env, *args, timeout=60.0):
     """``ros2 param ARGS --no-daemon``, again while the short-lived CLI node has not yet
     discovered the target ('Node not found': discovery takes a moment on a loaded machine)."""
-    return retry(lambda: run('ros2', 'param', *args, '--no-daemon', '--spin-time', '2', env=env),
-                 lambda r: 'Node not found' not in r.stderr, timeout=timeout)
+    return cli(env, 'param', *args, '--no-daemon', '--spin-time', '2', timeout=timeout)
 
 
 def _graph(env, *args, ok, window=90.0):
     """``ros2 ARGS --no-daemon --spin-time 2`` (a graph query), again until ``ok(result)``.
 
-    Each try has the limit of a CLI call (``CLI_CALL_TIMEOUT``), inside ``window``: a call that
-    hangs is one failed try, not the whole window (fresh-clone CI of 6f6d653: ``ros2 node
-    list`` gave nothing for the whole 30 s of its retry, while the launch's nodes answered
-    ``ros2 node info`` just before; a call under the old 60 s limit could eat the window).
+    Through ``cli``: each try has the limit of a CLI call (``_ros_tools.CLI_CALL_TIMEOUT``),
+    inside ``window``: a call that hangs is one failed try, not the whole window (fresh-clone
+    CI of 6f6d653: ``ros2 node list`` gave nothing for the whole 30 s of its retry, while the
+    launch's nodes answered ``ros2 node info`` just before; a call under the old 60 s limit
+    could eat the window).
     """
-    return retry(lambda: run('ros2', *args, '--no-daemon', '--spin-time', '2', env=env,
-                             timeout=CLI_CALL_TIMEOUT), ok, timeout=window)
+    return cli(env, *args, '--no-daemon', '--spin-time', '2', until=ok, timeout=window)
 
 
 def _node_topics(node, env, needed, timeout=90.0):
