@@ -285,6 +285,62 @@ def test_time_message_conversion():
     assert to_time_msg(1e12).sec == 2 ** 31 - 1
 
 
+class _RecordingPublisher:
+    """Stands in for a probe publisher: keeps the stamp of every message as it was published."""
+
+    def __init__(self):
+        self.stamps = []
+
+    def publish(self, msg):
+        self.stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+
+
+@pytest.mark.ros
+def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late():
+    """The probe builds a burst's message once (10 publishes, 10 stamps), and a relayed state
+    runs the probe's tick when the timer is a period late: loaded runs saw the master go
+    100 ms stale behind the probe's own relayed 10 kHz burst (burst_10x_all@sim_instrument;
+    A/B at load 3.8-5.9: 11 of 48 trials spoiled before, 0 of 48 after)."""
+    import os
+
+    import rclpy
+    from rclpy.context import Context
+    from sensor_msgs.msg import JointState
+
+    from grip_force_ros.faults.probe import FaultProbe, to_time_msg
+    from grip_force_ros.params import load_params_file
+    from grip_force_ros.params.files import instrument_path
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
+    try:
+        probe = FaultProbe(load_params_file(instrument_path(None)), context=ctx,
+                           relay='/test_relay')
+        probe.timer.cancel()                       # the test drives the probe by hand
+        out = probe._pubs['instrument'] = _RecordingPublisher()
+        master = probe._pubs['master'] = _RecordingPublisher()
+        built = []
+        message = FaultProbe._message
+        probe._message = lambda source, s: built.append(source) or message(source, s)
+        probe.inject(('instrument', 'master'), burst(10), ticks=5)
+        state = JointState(name=['wrist_pitch', 'jaw'], position=[0.1, 0.2], velocity=[0.0, 0.3])
+        state.header.stamp = to_time_msg(100.0)
+        probe.last_tick = probe.now()              # the timer has just ticked: relay only
+        probe._on_relayed('instrument', state)
+        assert built == ['instrument']             # one message for the ten samples
+        assert out.stamps == pytest.approx([99.9991 + 0.0001 * i for i in range(10)], abs=1e-8)
+        assert probe.ticks == 0 and master.stamps == []
+        probe.last_tick -= 2 * probe.period        # the timer is late: the relay ticks
+        probe._on_relayed('instrument', state)
+        assert probe.ticks == 1 and len(master.stamps) == 10   # the master burst went out
+        assert len(set(out.stamps)) == 10          # the same ten stamps again: restamped
+        probe._on_relayed('instrument', state)     # not a period later: no second tick
+        assert probe.ticks == 1
+        probe.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 @pytest.mark.ros
 def test_faultcheck_cli_json():
     """``grip-force faultcheck --only ... --json`` prints the report; exit 0 when all pass."""
