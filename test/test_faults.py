@@ -133,6 +133,19 @@ def test_a_safe_state_before_the_timeout_is_blamed_on_the_machine_only_for_a_sta
     assert _machine_cause([(1.2, stall, {})], ('master',), 1.1) is None   # after the window
 
 
+def test_the_first_safe_step_is_found_by_the_controllers_stamp_up_to_the_recovery():
+    """A loaded run: a 60 ms window held 12 steps, all gripping as received; the safe ones
+    reached the probe after the window. What counts is what the controller did, by its own
+    stamp, until it gripped again; a safe step after the recovery is another event."""
+    from grip_force_ros.faults.runner import _first_safe_step
+    # (probe receive time, controller stamp, command, target)
+    rows = [(10.001, 10.000, 0.3, 4.0), (10.070, 10.030, 0.2, 0.0), (10.071, 10.031, 0.2, 0.0),
+            (10.080, 10.079, 0.3, 4.0), (10.500, 10.499, 0.0, 0.0)]
+    assert _first_safe_step(rows, until=10.2) == 10.030
+    assert _first_safe_step(rows[:1] + rows[3:], until=10.2) is None   # safe only after it
+    assert _first_safe_step([], until=10.2) is None
+
+
 def test_bad_params_text():
     import yaml
     base = {'max_current': 0.5, 'guide_pulley_radii': (0.003, 0.003)}
@@ -336,6 +349,11 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
         assert len(set(out.stamps)) == 10          # the same ten stamps again: restamped
         probe._on_relayed('instrument', state)     # not a period later: no second tick
         assert probe.ticks == 1
+        probe._on_timer()                          # the late timer event itself: no tick
+        assert probe.ticks == 1
+        probe.last_tick -= probe.period
+        probe._on_timer()                          # a period on: the timer ticks
+        assert probe.ticks == 2
         probe.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)

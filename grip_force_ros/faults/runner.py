@@ -267,6 +267,16 @@ def _modes(probe, t0: float) -> list[tuple]:
     return [row for row in probe.steps if row[0] >= t0]
 
 
+def _first_safe_step(rows: list[tuple], until: float) -> float | None:
+    """Return the controller stamp (s) of its first safe step up to ``until``, or None.
+
+    By the controller's own stamp, not by when the probe received the step: on a loaded
+    machine the safe steps of a short fault window can reach the probe after the window
+    (a loaded run: 12 steps in a 60 ms window, the safe ones received later).
+    """
+    return next((r[1] for r in rows if r[3] == 0.0 and r[1] <= until), None)
+
+
 def _resume_jumps(rows: list[tuple]) -> list[float]:
     """|first command after the safe state - last safe command| at each resume (A)."""
     jumps = []
@@ -318,6 +328,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         detail['attempts'] = attempts
     t1 = probe.now()
     recovered = wait_until(lambda: session.gripping(t1), session.recovery_timeout)
+    t2 = probe.now()                 # gripping again (or the recovery timed out)
     if case.kind == 'restart' and session.sim is not None:   # the real process, killed and new
         detail['sim_process'] = {'killed_pid': session.killed['pid'],
                                  'exit_code': session.killed['exit_code'], 'new_pid': session.sim.pid}
@@ -344,8 +355,14 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         problems.append(f'current jump {max(jumps):.4f} A at resume (> {RESUME_JUMP_SHARE} slew step)')
     if case.outcome in ('reject_safe', 'reject_once', 'stale_safe', 'clamp') and reason_text is None:
         problems.append(f'no /diagnostics text matching {case.reason!r}')
-    if case.outcome in ('reject_safe', 'stale_safe') and not safe_rows:
-        problems.append('output never went to the safe state')
+    if case.outcome in ('reject_safe', 'stale_safe'):
+        first_safe = _first_safe_step(rows, t2)
+        detail['first_safe_step_ms'] = None if first_safe is None else round((first_safe - t0) * 1e3, 1)
+        if first_safe is None:
+            problems.append('output never went to the safe state')
+        elif case.outcome == 'reject_safe' and pattern is not None and not any(
+                _diag_mode(d[2]) is Mode.SAFE and pattern.search(d[1]) for d in probe.diagnostics):
+            problems.append(f'no safe state for the reason {case.reason!r}')
     if case.outcome == 'stale_safe':
         timeout = _case_timeout(case, params)
         detail['watchdog_timeout_ms'] = round(timeout * 1e3, 3)
