@@ -4,6 +4,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -14,8 +15,9 @@ from grip_force_ros.demo import analysis
 from grip_force_ros.demo.compare import calibration_csv, plant_scales
 from grip_force_ros.demo.naive_node import closing_share
 from grip_force_ros.nodes.processes import (NodeProcess, ProcessGroup, can_use_realtime,
-                                            domain_in_use, pick_domain_ids, ros_args,
-                                            ros_environment, scheduling_of)
+                                            domain_in_use, pick_domain_ids, realtime_threads,
+                                            recorder_rt_priority, ros_args, ros_environment,
+                                            scheduling_of)
 from grip_force_ros.demo.run import TaskClock
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
@@ -104,6 +106,31 @@ def test_rt_priority_puts_every_thread_of_the_child_under_sched_fifo(tmp_path):
     finally:
         proc.signal(signal.SIGKILL)
         proc.popen.wait()
+
+
+def test_threads_started_under_realtime_threads_inherit_it_and_this_thread_does_not_keep_it():
+    """The demo's recorder: its DDS and executor threads start inside the block (SCHED_FIFO 30
+    beside a loop at 50 and the master at 40); the runner's own thread is back to normal after."""
+    assert recorder_rt_priority(50) == 30 and recorder_rt_priority(0) == 0
+    with pytest.raises(ValueError, match='1..99'):
+        with realtime_threads(120):
+            pass
+    seen = []
+
+    def child():
+        seen.append((os.sched_getscheduler(0), os.sched_getparam(0).sched_priority))
+    before = os.sched_getscheduler(0)
+    with realtime_threads(30) as scheduling:
+        thread = threading.Thread(target=child)
+        thread.start()
+        thread.join()
+    assert os.sched_getscheduler(0) == before
+    if can_use_realtime(30):
+        assert scheduling == 'SCHED_FIFO 30' and seen == [(os.SCHED_FIFO, 30)]
+    else:   # a machine without CAP_SYS_NICE: nothing changes, and it says so
+        assert scheduling == 'normal' and seen == [(before, 0)]
+    with realtime_threads(0) as scheduling:      # normal scheduling asked for
+        assert scheduling == 'normal' and os.sched_getscheduler(0) == before
 
 
 # ---------------------------------------------------------------- trajectories of the demo

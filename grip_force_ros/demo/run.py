@@ -25,7 +25,8 @@ from grip_force_ros.demo import analysis
 from grip_force_ros.demo.messages import RecordedTopics, recorded_topics
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError,
                                             ProcessGroup, master_rt_priority,
-                                            node_command, python_module, ros_args,
+                                            node_command, python_module, realtime_threads,
+                                            recorder_rt_priority, ros_args,
                                             ros_environment, ros_tools_environment)
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
@@ -93,8 +94,9 @@ class RunSpec:
         machine permits it (default :data:`~grip_force_ros.nodes.processes.DEFAULT_RT_PRIORITY`,
         as ros2_control's controller manager runs its loop); 0: normal scheduling. The
         master (250 Hz, 0.1 s watchdog) runs ten below it
-        (:func:`~grip_force_ros.nodes.processes.master_rt_priority`); the recorder, in
-        this process, keeps normal scheduling.
+        (:func:`~grip_force_ros.nodes.processes.master_rt_priority`), and the recorder's
+        threads, in this process, ten below the master
+        (:func:`~grip_force_ros.nodes.processes.recorder_rt_priority`).
     """
 
     config: Path
@@ -483,9 +485,13 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     recorder = spinner = None
     group = ProcessGroup(env, log_dir=out_dir / 'logs')
     try:
-        recorder = RecorderNode(bag_path, topic_types=recorded.types, context=context)
-        recorder.subscribe_all()
-        spinner = SpinThread(recorder).start()
+        # the recorder's threads (DDS receive and events, its executor) under SCHED_FIFO
+        # below the master: at normal priority a busy machine starved them past the
+        # publishers' KEEP_LAST 10, and the bag lost 100-400 ms of every topic
+        with realtime_threads(recorder_rt_priority(spec.rt_priority)) as scheduling['recorder']:
+            recorder = RecorderNode(bag_path, topic_types=recorded.types, context=context)
+            recorder.subscribe_all()
+            spinner = SpinThread(recorder).start()
         with group:
             # all three at once: the master starts held, so nothing happens before it is told
             for name in ('sim_instrument', 'controller'):

@@ -32,6 +32,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, MutableMapping, Sequence
@@ -252,6 +253,43 @@ def master_rt_priority(loop_priority: int) -> int:
     (docs/reliability.md, fourth round). 0 (normal scheduling) when the loop is normal.
     """
     return max(1, loop_priority - 10) if loop_priority else 0
+
+
+def recorder_rt_priority(loop_priority: int) -> int:
+    """Return the SCHED_FIFO priority of an in-process recorder beside a loop at ``loop_priority``.
+
+    Ten below the master: the loop and the master preempt it, a busy worker does not. At
+    normal priority, under two busy workers, its DDS threads were starved past the
+    publishers' KEEP_LAST 10 and the bag lost 100-400 ms of every topic in the middle of a
+    task (docs/reliability.md, eleventh round). 0 (normal scheduling) when the loop is normal.
+    """
+    return max(1, loop_priority - 20) if loop_priority else 0
+
+
+@contextmanager
+def realtime_threads(priority: int):
+    """Run the block with this thread under SCHED_FIFO ``priority``; yield the policy as text.
+
+    The threads started inside the block inherit it (a node's DDS receive and event threads,
+    an executor's thread), as a child does :func:`realtime`'s; this thread goes back to its
+    own scheduling afterwards. ``priority`` 0, or a machine that refuses (no CAP_SYS_NICE):
+    nothing changes, and it yields 'normal'.
+    """
+    if not priority:
+        yield 'normal'
+        return
+    if not 1 <= priority <= 99:
+        raise ValueError(f'SCHED_FIFO priority must be 1..99, got {priority}')
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError:
+        yield 'normal'
+        return
+    try:
+        yield f'SCHED_FIFO {priority}'
+    finally:
+        os.sched_setscheduler(0, before[0], before[1])
 
 
 def realtime(priority: int) -> Callable[[], None]:
