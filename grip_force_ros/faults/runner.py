@@ -382,9 +382,9 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             cause = _machine_cause(probe.diagnostics, _case_sources(case), t1 + 0.005)
             if cause is not None:   # this trial measured nothing
                 detail['spoiled'] = cause[:300]
-            first_safe = next((d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005
-                               and _diag_mode(d[2]) is Mode.SAFE), None)
-            detail['safe_before_timeout'] = (first_safe or 'no safe-state diagnostic')[:300]
+            safe_reason = next((d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005
+                                and _diag_mode(d[2]) is Mode.SAFE), None)
+            detail['safe_before_timeout'] = (safe_reason or 'no safe-state diagnostic')[:300]
     if case.outcome in ('clamp', 'ignore'):
         modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
         modes = [m for m in modes if m is not None]

@@ -284,6 +284,8 @@ def realtime_threads(priority: int):
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except OSError:
+        before = None              # refused: the block runs as it is (yielded below)
+    if before is None:
         yield 'normal'
         return
     try:
