@@ -335,6 +335,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
     pattern = re.compile(case.reason, re.I) if case.reason else None
     if pattern is not None:   # /diagnostics may come at a lower rate: give it time
         wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
+    judged = probe.now()             # the diagnostics of the fault's episode are in by now
     rows = _modes(probe, t0)
     window = [r for r in rows if r[0] <= t1 + 0.005]
     safe_rows = [r for r in window if r[3] == 0.0]
@@ -379,12 +380,15 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
         elif steps > 2:
             problems.append(f'safe only at the {steps}th control period after the timeout')
         elif steps == 0:   # safe before this input's timeout: another input lost first, a stall?
-            cause = _machine_cause(probe.diagnostics, _case_sources(case), t1 + 0.005)
-            if cause is not None:   # this trial measured nothing
-                detail['spoiled'] = cause[:300]
             safe_reason = next((d[1] for d in probe.diagnostics if d[0] <= t1 + 0.005
                                 and _diag_mode(d[2]) is Mode.SAFE), None)
             detail['safe_before_timeout'] = (safe_reason or 'no safe-state diagnostic')[:300]
+        cause = _watchdog_trial_spoiled(steps, reason_text is not None, probe.diagnostics,
+                                        _case_sources(case), judged)
+        if cause is not None:   # this trial measured nothing
+            detail['spoiled'] = cause[:300]
+        elif steps == 0:
+            problems.append(f"safe before its own input's timeout: {detail['safe_before_timeout']}")
     if case.outcome in ('clamp', 'ignore'):
         modes = [_diag_mode(d[2]) for d in probe.diagnostics if d[0] <= t1 + 0.005]
         modes = [m for m in modes if m is not None]
@@ -437,6 +441,24 @@ def _machine_cause(diagnostics: list, silenced: tuple, until: float) -> str | No
     return next((d[1] for d in diagnostics if d[0] <= until and (
         'the controller was stalled' in d[1]
         or any(f'stale {s} input' in d[1] for s in SOURCES if s not in silenced))), None)
+
+
+def _watchdog_trial_spoiled(steps: int | None, own_reason_seen: bool, diagnostics: list,
+                            silenced: tuple, until: float) -> str | None:
+    """Return the machine cause that spoiled a watchdog trial, or None if it measured the watchdog.
+
+    A trial measured nothing when the output went safe before the silenced input's own
+    timeout (``steps == 0``), or when the silenced input's staleness never showed in
+    /diagnostics, and a stall of the controller's process or another lost input did (received
+    by ``until``, probe clock s). Found in a loaded run
+    (``silence_actuator@sim_instrument``: no text 'stale actuator'); reproduced by stalling
+    the test process, whose one executor thread runs the probe and the controller, 150 ms
+    into the 120 ms window: the first step after the stall found a fresh actuator state and
+    went safe for 'the controller was stalled' alone (5 of 5 trials).
+    """
+    if steps != 0 and own_reason_seen:
+        return None
+    return _machine_cause(diagnostics, silenced, until)
 
 
 def _scheduling_stall(reason: str) -> bool:
