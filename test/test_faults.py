@@ -397,6 +397,8 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
         probe = FaultProbe(load_params_file(instrument_path(None)), context=ctx,
                            relay='/test_relay')
         probe.timer.cancel()                       # the test drives the probe by hand
+        clock = [1000.0]                           # and its clock (s): a loaded run took
+        probe.now = lambda: clock[0]               # over a period between two lines
         out = probe._pubs['instrument'] = _RecordingPublisher()
         master = probe._pubs['master'] = _RecordingPublisher()
         built = []
@@ -405,12 +407,12 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
         probe.inject(('instrument', 'master'), burst(10), ticks=5)
         state = JointState(name=['wrist_pitch', 'jaw'], position=[0.1, 0.2], velocity=[0.0, 0.3])
         state.header.stamp = to_time_msg(100.0)
-        probe.last_tick = probe.now()              # the timer has just ticked: relay only
+        probe.last_tick = clock[0]                 # the timer has just ticked: relay only
         probe._on_relayed('instrument', state)
         assert built == ['instrument']             # one message for the ten samples
         assert out.stamps == pytest.approx([99.9991 + 0.0001 * i for i in range(10)], abs=1e-8)
         assert probe.ticks == 0 and master.stamps == []
-        probe.last_tick -= 2 * probe.period        # the timer is late: the relay ticks
+        clock[0] += 2 * probe.period               # the timer is late: the relay ticks
         probe._on_relayed('instrument', state)
         assert probe.ticks == 1 and len(master.stamps) == 10   # the master burst went out
         assert len(set(out.stamps)) == 10          # the same ten stamps again: restamped
@@ -418,7 +420,7 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
         assert probe.ticks == 1
         probe._on_timer()                          # the late timer event itself: no tick
         assert probe.ticks == 1
-        probe.last_tick -= probe.period
+        clock[0] += probe.period
         probe._on_timer()                          # a period on: the timer ticks
         assert probe.ticks == 2
         probe.destroy_node()
