@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 from grip_force_ros import topics
+from grip_force_ros.control.inputs import source_timeouts
 from grip_force_ros.faults.catalogue import FaultCase, redo_spoiled
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, ProcessError, node_command,
                                             master_rt_priority, pick_domain_ids, ros_environment,
@@ -70,6 +71,8 @@ STATE_COMMAND_KEEP_ALIVE = 1.0
 READY_TIMEOUT = 40.0
 #: Slack on a controller's reaction for DDS delivery and scheduling on a loaded machine (s).
 REACTION_SLACK = 0.05
+#: Longest wait (s) for the sim's /diagnostics (1 Hz) to count what it refused.
+SIM_DIAGNOSTICS_WAIT = 5.0
 
 
 def dvrk_cases() -> list[FaultCase]:
@@ -377,11 +380,15 @@ def _units_case(loop: _Loop, detail: dict) -> list[str]:
         msg.header.stamp = loop.probe.node.get_clock().now().to_msg()
         loop.probe.publisher.publish(msg)
         time.sleep(0.01)
-    time.sleep(1.2)                          # the sim's diagnostics (1 Hz)
+
+    def refused_count() -> int:              # the sim's diagnostics come at 1 Hz
+        sim = loop.probe.latest('sim_instrument')
+        return int(sim['values'].get('servo_jf_refused_effort_limit', 0)) if sim else 0
+
+    loop.probe.wait(lambda: refused_count() >= 50, SIM_DIAGNOSTICS_WAIT)
     with loop.probe.lock:
         currents = [i for t, i in loop.probe.states[before:] if t > start]
-    sim = loop.probe.latest('sim_instrument')
-    refused = int(sim['values'].get('servo_jf_refused_effort_limit', 0)) if sim else 0
+    refused = refused_count()
     detail['refused_by_effort_limit'] = refused
     detail['largest_current_A'] = round(max(map(abs, currents)), 4) if currents else None
     if refused < 40:
@@ -405,8 +412,11 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     status = loop.probe.latest('controller')
     detail['safe_after_s'] = round(reacted, 3)
     detail['reason'] = status['values'].get('reasons') if status else None
-    bound = loop.params.watchdog_timeout + 2.0 / loop.params.expected_state_rate + \
-        1.0 / 10.0 + REACTION_SLACK                      # + a /diagnostics period (10 Hz)
+    # the master's own watchdog (issue 13.2: 100 ms; this bound used the instrument's 30 ms
+    # and left ~50 ms of slack for a stale master), two steps, a /diagnostics period (10 Hz)
+    bound = source_timeouts(loop.params)['master'] + 2.0 / loop.params.expected_state_rate + \
+        1.0 / 10.0 + REACTION_SLACK
+    detail['bound_s'] = round(bound, 3)
     if not safe or reacted > bound:
         problems.append(f'safe after {reacted:.3f} s, bound {bound:.3f} s')
     if not status or 'stale master' not in status['values'].get('reasons', ''):

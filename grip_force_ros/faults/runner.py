@@ -590,7 +590,10 @@ def run_param_set_case(session: Session, case: FaultCase) -> dict:
         probe.master_angle = case.master_angle if case.master_angle is not None else GRIP_MASTER_ANGLE
         probe.clear_records()
         t0 = probe.now()
-        time.sleep(0.6)
+        # the first grip target after the change (a fixed 0.6 s window could pass with none on
+        # a starved process), then the peak of the next 0.3 s
+        wait_until(lambda: any(f > 0 for recv, _, f in probe.targets if recv >= t0), RECOVERY_TIMEOUT)
+        time.sleep(0.3)
         targets = [f for recv, _, f in probe.targets if recv >= t0]
         peak = max(targets) if targets else math.nan
         detail['peak_target_force'] = peak
