@@ -301,6 +301,7 @@ def demo_bag(tmp_path_factory):
     from sensor_msgs.msg import JointState
 
     from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.nodes.common import wait_until
 
     path = tmp_path_factory.mktemp('demo') / 'bag'
     ctx = Context()
@@ -328,7 +329,9 @@ def demo_bag(tmp_path_factory):
             w.wrench.force.z = 0.02 * k
             force.publish(w)
             time.sleep(0.002)
-        time.sleep(0.3)
+            if k % 8 == 7:   # at most 8 in flight: the publishers keep 10 (a starved recorder)
+                wait_until(lambda: recorder.count(topics.ESTIMATED_FORCE) > k, 20.0)
+        wait_until(lambda: recorder.count(topics.ESTIMATED_FORCE) >= 50, 20.0)
         spin.stop()
         recorder.close()
         node.destroy_node()

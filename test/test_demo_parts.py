@@ -19,6 +19,7 @@ from grip_force_ros.nodes.processes import (NodeProcess, ProcessGroup, can_use_r
                                             recorder_rt_priority, ros_args, ros_environment,
                                             scheduling_of)
 from grip_force_ros.demo.run import TaskClock
+from grip_force_ros.nodes.common import wait_until
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
 
@@ -56,12 +57,14 @@ def test_a_domain_whose_port_is_bound_is_not_picked():
 def test_group_stops_a_process_that_ignores_sigint(tmp_path):
     stubborn = ('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
                 'print("up", flush=True); time.sleep(60)')
-    polite = 'import time\ntry:\n    time.sleep(60)\nexcept KeyboardInterrupt:\n    print("bye")'
+    polite = ('import time\ntry:\n    print("ready", flush=True)\n    time.sleep(60)\n'
+              'except KeyboardInterrupt:\n    print("bye")')
     group = ProcessGroup(dict(os.environ), log_dir=tmp_path, grace=0.5)
     with group:
         a = group.start('stubborn', [sys.executable, '-c', stubborn])
         b = group.start('polite', [sys.executable, '-c', polite])
-        time.sleep(1.0)
+        # both set up their SIGINT handling (a loaded machine can take over 1 s to start Python)
+        assert wait_until(lambda: 'up' in a.log_tail() and 'ready' in b.log_tail(), 30.0)
         group.check_alive()
     assert not a.alive() and not b.alive()
     assert a.popen.returncode == -signal.SIGTERM           # escalated past SIGINT
@@ -72,8 +75,8 @@ def test_group_stops_a_process_that_ignores_sigint(tmp_path):
 def test_group_reports_a_dead_process_with_its_output(tmp_path):
     group = ProcessGroup(dict(os.environ), log_dir=tmp_path)
     with group:
-        group.start('broken', [sys.executable, '-c', 'raise SystemExit("bad parameter file")'])
-        time.sleep(0.8)
+        broken = group.start('broken', [sys.executable, '-c', 'raise SystemExit("bad parameter file")'])
+        assert wait_until(lambda: broken.popen.poll() is not None, 30.0)
         with pytest.raises(Exception, match='(?s)broken exited with code 1.*bad parameter file'):
             group.check_alive()
 
@@ -253,7 +256,9 @@ def test_recorder_writes_an_mcap_bag_that_rosbags_reads(tmp_path):
             w.wrench.force.z = 0.01 * k
             force.publish(w)
             time.sleep(0.002)
-        time.sleep(0.3)
+            if k % 8 == 7:   # at most 8 in flight: the publishers keep 10 (a starved recorder)
+                wait_until(lambda: recorder.count(topics.MEASURED_FORCE) > k, 20.0)
+        wait_until(lambda: recorder.count(topics.MEASURED_FORCE) >= 200, 20.0)
         spin.stop()
         recorder.close()
         node.destroy_node()

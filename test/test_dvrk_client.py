@@ -105,7 +105,9 @@ def test_dvrk_client_enables_homes_reads_and_closes_the_jaw(tmp_path):
     require_ros_tools()
     env = ros_env()
     params = load_params_file(CONFIG).replace(interface='dvrk')
-    sim = _node('sim_instrument', tmp_path / 'sim.log', env)
+    # the drive's 30 ms command timeout is not under test here: a client process starved for
+    # 30 ms between two servo_jf would read the cut (0 A) back
+    sim = _node('sim_instrument', tmp_path / 'sim.log', env, 'command_timeout:=1.0')
     effort = -0.05                                    # N*m, closing: 0.15 A through 2.374 A/(N*m)
     try:
         got = _result(run('python', '-c', CLIENT, '', '0', str(effort), timeout=120, env=env))
