@@ -56,11 +56,28 @@ def sourced(*args: str) -> list[str]:
     return ['bash', '-c', 'source "$0" && exec "$@"', str(SETUP_FILE), *args]
 
 
+#: A Fast DDS log line, which Fast DDS writes to stdout, in colour: a loaded run's
+#: ``ros2 lifecycle get`` printed ``<ESC>[37;1m2026-11-27 ... [RTPS_TRANSPORT_SHM Error]
+#: ... open_and_lock_file failed -> Function open_port_internal<ESC>[m`` before its answer
+#: (the shared-memory transport falls back to UDP; the answer was right).
+FASTDDS_LOG_LINE = re.compile(r'^\x1b\[[0-9;]*m\d{4}-\d\d-\d\d .*\b(Error|Warning|Info)\b')
+
+
 def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """Run a command in the sourced environment; output captured as text."""
-    return subprocess.run(sourced(*args), capture_output=True, text=True, timeout=timeout,
+    """Run a command in the sourced environment; output captured as text.
+
+    Fast DDS's own log lines are moved from stdout to the end of stderr: stdout is the
+    command's answer, as the tests parse it.
+    """
+    done = subprocess.run(sourced(*args), capture_output=True, text=True, timeout=timeout,
                           cwd=cwd or ROOT, env=env or ros_env())
+    lines = done.stdout.splitlines(keepends=True)
+    logged = [line for line in lines if FASTDDS_LOG_LINE.match(line)]
+    if logged:
+        done.stdout = ''.join(line for line in lines if not FASTDDS_LOG_LINE.match(line))
+        done.stderr = (done.stderr or '') + ''.join(logged)
+    return done
 
 
 #: Longest a ros2 CLI call that talks to a node's service may take (s) before it counts as

@@ -15,7 +15,7 @@ import sysconfig
 from pathlib import Path
 
 
-from _ros_tools import (ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
+from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
                         stop_daemon, vendor_dir)
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
@@ -135,3 +135,15 @@ def test_dev_ros2_runs_the_cli_from_the_callers_directory(tmp_path):
     where = subprocess.run([str(ROOT / 'dev'), 'ros2', 'pkg', 'xml', 'grip_force_ros', '--tag', 'name'],
                            capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
     assert where.returncode == 0 and where.stdout.strip() == 'grip_force_ros', where
+
+
+def test_fast_dds_log_lines_are_told_from_a_commands_answer():
+    """A loaded run: ``ros2 lifecycle get`` printed a Fast DDS shared-memory error on stdout
+    before ``unconfigured [1]``, and the test read the error as the answer. ``run`` moves
+    such lines to stderr; the answer, and a command's own error text, stay."""
+    logged = ('\x1b[37;1m2026-11-27 00:48:12.123 \x1b[31;1m[\x1b[37;1mRTPS_TRANSPORT_SHM\x1b[31;1m '
+              'Error\x1b[37;1m] Failed init_port fastrtps_port7413: open_and_lock_file failed'
+              '\x1b[34;1m -> Function \x1b[36mopen_port_internal\x1b[m')
+    assert FASTDDS_LOG_LINE.match(logged)
+    for answer in ('unconfigured [1]', 'Error: node not found', '2026-11-27 plain text Error'):
+        assert not FASTDDS_LOG_LINE.match(answer)
