@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+from grip_force_ros.nodes.processes import end_with_parent
+
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
 SETUP_FILE = VENV / 'ros_setup.bash'
@@ -140,10 +142,14 @@ def lifecycle_transition(env, node: str, transition: str, confirm,
         time.sleep(0.5)
 
 
-def _default_sigint():
+def _child_setup():
     # A process started in the background by a non-interactive shell inherits SIGINT
     # ignored, and Python then keeps ignoring it: give the child the default disposition.
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+    # And end it with the test process (SIGINT, as stop() starts: a node shuts down, and
+    # `ros2 run` / `ros2 launch` pass it on to theirs): a stopped loaded series once left a
+    # test's nodes running through the next CI run.
+    end_with_parent(signal.SIGINT)
 
 
 def start(*args: str, log: Path, cwd: Path | str | None = None,
@@ -153,7 +159,7 @@ def start(*args: str, log: Path, cwd: Path | str | None = None,
     try:
         return subprocess.Popen(sourced(*args), stdout=out, stderr=subprocess.STDOUT,
                                 cwd=cwd or ROOT, env=env or ros_env(), start_new_session=True,
-                                preexec_fn=_default_sigint)
+                                preexec_fn=_child_setup)
     finally:
         out.close()
 

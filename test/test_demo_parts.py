@@ -8,6 +8,7 @@ import threading
 import time
 
 import numpy as np
+import psutil
 import pytest
 
 from grip_force_ros import topics
@@ -79,6 +80,39 @@ def test_group_reports_a_dead_process_with_its_output(tmp_path):
         assert wait_until(lambda: broken.popen.poll() is not None, 30.0)
         with pytest.raises(Exception, match='(?s)broken exited with code 1.*bad parameter file'):
             group.check_alive()
+
+
+def test_a_child_started_from_the_main_thread_ends_with_its_parent(tmp_path):
+    """The parent is SIGKILLed (no clean-up runs): its child gets SIGINT from the kernel.
+
+    A child started from another thread does not: the kernel signals when the *forking
+    thread* ends, and the fault check's sim restart starts the sim from a short-lived thread.
+    """
+    code = (
+        'import sys, threading, time\n'
+        'from grip_force_ros.nodes.processes import NodeProcess\n'
+        'sleeper = [sys.executable, "-c", "import time; time.sleep(120)"]\n'
+        'main = NodeProcess("main", command=sleeper)\n'
+        'other = []\n'
+        't = threading.Thread(target=lambda: other.append(NodeProcess("other", command=sleeper)))\n'
+        't.start(); t.join()\n'
+        'print(main.pid, other[0].pid, flush=True)\n'
+        'time.sleep(120)\n')
+    parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
+    main_pid, other_pid = (int(p) for p in parent.stdout.readline().split())
+    main_child, other_child = psutil.Process(main_pid), psutil.Process(other_pid)
+    try:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(timeout=30)
+        gone, alive = psutil.wait_procs([main_child], timeout=30)
+        assert not alive, 'the child of the main thread outlived its parent'
+        assert other_child.is_running()
+    finally:
+        for proc in (main_child, other_child):
+            try:
+                proc.kill()
+            except psutil.NoSuchProcess:
+                pass
 
 
 def test_rt_priority_puts_every_thread_of_the_child_under_sched_fifo(tmp_path):

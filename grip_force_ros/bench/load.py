@@ -27,6 +27,8 @@ import subprocess
 import sys
 import time
 
+from grip_force_ros.nodes.processes import end_with_parent
+
 #: Longest a full-duty worker runs on without checking its deadline and its parent (s).
 CHECK_PERIOD = 0.05
 #: Period of the busy/sleep cycle of a worker below full duty (s; also its longest
@@ -36,21 +38,9 @@ DUTY_PERIOD = 0.1
 MAX_WORKERS = 64
 MAX_SECONDS = 24 * 3600.0
 
-_PR_SET_PDEATHSIG = 1
-
 
 class LoadError(ValueError):
     """A load generator asked for more than its bounds, or with nonsense values."""
-
-
-def _die_with_parent() -> None:
-    """Ask the kernel to SIGKILL this process when its parent thread ends (Linux only)."""
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the getppid check below remains
-        pass
 
 
 def worker(seconds: float, parent: int, duty: float = 1.0) -> int:
@@ -70,7 +60,7 @@ def worker(seconds: float, parent: int, duty: float = 1.0) -> int:
     int
         Number of busy-loop iterations (a measure of the work done).
     """
-    _die_with_parent()
+    end_with_parent(signal.SIGKILL)
     deadline = time.monotonic() + seconds
     busy = CHECK_PERIOD if duty >= 1.0 else duty * DUTY_PERIOD
     rest = 0.0 if duty >= 1.0 else (1.0 - duty) * DUTY_PERIOD

@@ -31,6 +31,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -335,15 +336,53 @@ def scheduling_of(pid: int) -> str:
 
 
 # ---------------------------------------------------------------- processes
+_PR_SET_PDEATHSIG = 1  # prctl option, <linux/prctl.h>
+
+
+def end_with_parent(sig: int = signal.SIGINT) -> bool:
+    """Ask the kernel to send ``sig`` to this process when the thread that forked it ends.
+
+    Call in a child (a ``preexec_fn``, or first thing in a worker). Linux's
+    ``PR_SET_PDEATHSIG`` outlives ``exec``, so a node started by a test, the demo or a
+    benchmark does not run on after its parent was killed (seen: a stopped loaded series left
+    a test's nodes running through the next CI run). The signal comes when the *forking
+    thread* ends, so a parent starts such a child only from a thread that lives as long as
+    the child should (:func:`_child_setup` does it for the main thread only).
+
+    Parameters
+    ----------
+    sig : int
+        Signal to receive (SIGINT: a node shuts down as on Ctrl-C, and ``ros2 run`` /
+        ``ros2 launch`` pass it on; SIGKILL for a worker with nothing to clean up).
+
+    Returns
+    -------
+    bool
+        Whether the kernel took the request (False where ``prctl`` is not available).
+    """
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    except (OSError, AttributeError):  # not Linux
+        return False
+
+
 def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
 
     A parent started as a background job (``&``, nohup, a CI runner) has SIGINT ignored, and
     its children would inherit that: they could not be stopped with SIGINT, the first step of
-    :meth:`NodeProcess.stop` (found by the suite run as a background job).
+    :meth:`NodeProcess.stop` (found by the suite run as a background job). A child started
+    from the main thread also ends with its parent (:func:`end_with_parent`); one started from
+    another thread (the fault check restarts the sim from a short-lived thread) does not.
     """
+    from_main_thread = threading.current_thread() is threading.main_thread()
+
     def setup() -> None:
         signal.signal(signal.SIGINT, signal.SIG_DFL)
+        if from_main_thread:
+            end_with_parent(signal.SIGINT)  # as stop() starts; a node shuts down on it
         if preexec_fn is not None:
             preexec_fn()
     return setup
