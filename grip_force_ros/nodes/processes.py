@@ -339,6 +339,20 @@ def scheduling_of(pid: int) -> str:
 _PR_SET_PDEATHSIG = 1  # prctl option, <linux/prctl.h>
 
 
+def _load_prctl() -> Callable[..., int] | None:
+    try:
+        import ctypes
+        return ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):  # not Linux
+        return None
+
+
+#: libc's ``prctl``, looked up here, in the parent: a child between ``fork`` and ``exec`` of
+#: a parent with threads (DDS has several) must not ``dlopen``, whose lock another thread
+#: may have held at the fork.
+_PRCTL = _load_prctl()
+
+
 def end_with_parent(sig: int = signal.SIGINT) -> bool:
     """Ask the kernel to send ``sig`` to this process when the thread that forked it ends.
 
@@ -360,12 +374,7 @@ def end_with_parent(sig: int = signal.SIGINT) -> bool:
     bool
         Whether the kernel took the request (False where ``prctl`` is not available).
     """
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        return libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
-    except (OSError, AttributeError):  # not Linux
-        return False
+    return _PRCTL is not None and _PRCTL(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
 
 
 def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
