@@ -73,6 +73,36 @@ def test_group_stops_a_process_that_ignores_sigint(tmp_path):
     assert 'up' in (tmp_path / 'stubborn.log').read_text()
 
 
+def test_a_process_that_hangs_past_sigterm_writes_its_stacks_before_it_is_killed(tmp_path):
+    """A node (faulthandler on STACK_DUMP_SIGNAL, as run_node) stuck past SIGINT and SIGTERM.
+
+    Its log then says where it hung; a process without that handler is killed without the
+    signal (its default action would end it with another code).
+    """
+    hung = ('import faulthandler, signal, time\n'
+            'faulthandler.register(signal.SIGUSR1, all_threads=True)\n'
+            'signal.signal(signal.SIGINT, signal.SIG_IGN)\n'
+            'signal.signal(signal.SIGTERM, signal.SIG_IGN)\n'
+            'def stuck_in_teardown():\n'
+            '    time.sleep(60)\n'
+            'print("up", flush=True)\n'
+            'stuck_in_teardown()\n')
+    plain = ('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+             'signal.signal(signal.SIGTERM, signal.SIG_IGN); print("up", flush=True); time.sleep(60)')
+    group = ProcessGroup(dict(os.environ), log_dir=tmp_path, grace=0.5)
+    with group:
+        a = group.start('hung', [sys.executable, '-c', hung])
+        b = group.start('plain', [sys.executable, '-c', plain])
+        assert wait_until(lambda: 'up' in a.log_tail() and 'up' in b.log_tail(), 30.0)
+    assert a.popen.returncode == -signal.SIGKILL and b.popen.returncode == -signal.SIGKILL
+    log = (tmp_path / 'hung.log').read_text()
+    assert 'in stuck_in_teardown' in log, log
+    alone = NodeProcess('hung', command=[sys.executable, '-c', hung], log_path=tmp_path / 'alone.log')
+    assert wait_until(lambda: 'up' in alone.log_tail(), 30.0)
+    assert alone.stop(grace=0.5) == -signal.SIGKILL
+    assert 'in stuck_in_teardown' in (tmp_path / 'alone.log').read_text()
+
+
 def test_group_reports_a_dead_process_with_its_output(tmp_path):
     group = ProcessGroup(dict(os.environ), log_dir=tmp_path)
     with group:

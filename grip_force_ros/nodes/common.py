@@ -18,6 +18,7 @@ here; nothing else constructs a ``QoSProfile``:
 """
 from __future__ import annotations
 
+import faulthandler
 import math
 import os
 import sys
@@ -30,6 +31,8 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_i
 from rclpy.task import Future
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+
+from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL
 
 
 def state_qos(depth: int) -> QoSProfile:
@@ -199,6 +202,9 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
     parameters are refused (the reason goes to stderr).
     """
+    # Every thread's stack to stderr (the node's log) on STACK_DUMP_SIGNAL: what a process
+    # that has to be killed because it did not stop was doing (NodeProcess.stop asks).
+    faulthandler.register(STACK_DUMP_SIGNAL, all_threads=True)
     try:
         rclpy.init(args=args)
     except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback

@@ -377,6 +377,29 @@ def end_with_parent(sig: int = signal.SIGINT) -> bool:
     return _PRCTL is not None and _PRCTL(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
 
 
+#: A node started by :func:`grip_force_ros.nodes.common.run_node` writes every thread's
+#: Python stack to its log on this signal (``faulthandler``). A process about to be killed
+#: because it did not end on SIGINT and SIGTERM gets it first, so the log says where it hung.
+STACK_DUMP_SIGNAL = signal.SIGUSR1
+#: Time given to a process to write its stacks before it is killed (s).
+STACK_DUMP_WAIT = 0.3
+
+
+def catches_signal(pid: int, sig: int) -> bool:
+    """Whether process ``pid`` has a handler for ``sig`` (Linux ``/proc/<pid>/status``, SigCgt).
+
+    False where that cannot be read (not Linux, the process gone).
+    """
+    try:
+        with open(f'/proc/{pid}/status') as status:
+            for line in status:
+                if line.startswith('SigCgt:'):
+                    return bool(int(line.split()[1], 16) >> (int(sig) - 1) & 1)
+    except (OSError, ValueError, IndexError):
+        pass
+    return False
+
+
 def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
 
@@ -493,6 +516,20 @@ class NodeProcess:
             return ''
         return '\n'.join(self.log_path.read_text(errors='replace').splitlines()[-lines:])
 
+    def dump_stacks(self) -> bool:
+        """Ask the process for its threads' stacks in its log (:data:`STACK_DUMP_SIGNAL`).
+
+        Only a process that handles that signal gets it (for any other its default action
+        would end the process): True when it was sent.
+        """
+        if not self.alive() or not catches_signal(self.pid, STACK_DUMP_SIGNAL):
+            return False
+        try:
+            os.kill(self.pid, STACK_DUMP_SIGNAL)
+        except ProcessLookupError:
+            return False
+        return True
+
     def signal(self, sig: int) -> None:
         """Send ``sig`` to the process (to its process group when it has its own session)."""
         try:
@@ -525,6 +562,8 @@ class NodeProcess:
         for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
             if not self.alive():
                 break
+            if sig == signal.SIGKILL and self.dump_stacks():
+                time.sleep(STACK_DUMP_WAIT)          # where it hung, in its log
             self.signal(sig)
             try:
                 self.popen.wait(wait)
@@ -583,6 +622,9 @@ class ProcessGroup:
     def stop(self) -> dict[str, int | None]:
         """Stop all processes (reverse start order): SIGINT, wait, SIGTERM, SIGKILL.
 
+        A process still running at the SIGKILL step is first asked for its stacks
+        (:meth:`NodeProcess.dump_stacks`, in its log).
+
         Returns
         -------
         dict
@@ -591,6 +633,8 @@ class ProcessGroup:
         running = [p for p in reversed(self.processes) if p.alive()]
         for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
                           (signal.SIGKILL, 2.0)):
+            if sig == signal.SIGKILL and [p.dump_stacks() for p in running].count(True):
+                time.sleep(STACK_DUMP_WAIT)          # where they hung, in their logs
             for p in running:
                 p.signal(sig)
             deadline = time.monotonic() + wait
