@@ -12,9 +12,11 @@ import time
 
 import pytest
 import rclpy
+import rclpy.task
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from grip_force_ros.nodes import common
 from grip_force_ros.nodes.common import run_node, shutdown_follows
 
 pytestmark = pytest.mark.ros
@@ -72,6 +74,41 @@ class _FailsThenShutsDown(Node):
 
 def test_an_error_just_before_a_shutdown_is_a_clean_exit():
     assert run_node(_FailsThenShutsDown, 'fails_then_shuts_down', []) == 0
+
+
+class _Finishes(Node):
+    """A node that ends itself at once (its ``finished`` future done)."""
+
+    def __init__(self):
+        super().__init__('finishes')
+        self.finished = rclpy.task.Future()
+        self.finished.set_result(True)
+
+
+def test_a_signal_shutting_the_context_down_inside_try_shutdown_is_a_clean_exit(monkeypatch):
+    """rclpy's signal handler shuts the context down between try_shutdown's check and call.
+
+    Seen in a fresh-clone CI run (``ros2 launch``'s Ctrl-C): the sim exited 1 with
+    "rcl_shutdown already called on the given context". Replayed: the context goes down
+    after the check, then the call fails as rcl's does.
+    """
+    real = rclpy.try_shutdown
+
+    def raced():
+        real()    # the signal handler's shutdown, after the check passed
+        raise common._RCLError('failed to shutdown: rcl_shutdown already called on the given context')
+    monkeypatch.setattr(rclpy, 'try_shutdown', raced)
+    assert run_node(_Finishes, 'finishes', []) == 0
+
+
+def test_a_shutdown_error_with_the_context_still_up_is_raised(monkeypatch):
+    def fails():
+        raise common._RCLError('failed to shutdown: something else')
+    monkeypatch.setattr(rclpy, 'try_shutdown', fails)
+    with pytest.raises(common._RCLError, match='something else'):
+        run_node(_Finishes, 'finishes', [])
+    monkeypatch.undo()
+    rclpy.try_shutdown()
 
 
 def test_shutdown_follows_waits_for_the_context_to_go_down():

@@ -41,7 +41,7 @@ from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import stamp_nanoseconds, state_qos
+from grip_force_ros.nodes.common import shutdown_once, stamp_nanoseconds, state_qos
 from grip_force_ros.bench.stats import latency_summary, missed_periods
 
 #: Longest wait for the first answer before giving up (s).
@@ -342,7 +342,7 @@ def main(argv=None) -> int:
     finally:
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown_once()    # a SIGINT may shut the context down under try_shutdown
     return 0
 
 
