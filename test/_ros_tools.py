@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.nodes.processes import end_with_parent
+from grip_force_ros.nodes.processes import child_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -142,24 +142,19 @@ def lifecycle_transition(env, node: str, transition: str, confirm,
         time.sleep(0.5)
 
 
-def _child_setup():
-    # A process started in the background by a non-interactive shell inherits SIGINT
-    # ignored, and Python then keeps ignoring it: give the child the default disposition.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    # And end it with the test process (SIGINT, as stop() starts: a node shuts down, and
-    # `ros2 run` / `ros2 launch` pass it on to theirs): a stopped loaded series once left a
-    # test's nodes running through the next CI run.
-    end_with_parent(signal.SIGINT)
-
-
 def start(*args: str, log: Path, cwd: Path | str | None = None,
           env: dict[str, str] | None = None) -> subprocess.Popen:
-    """Start a long-running command (``exec``-ed: the pid is the command's) in its own session."""
+    """Start a long-running command (``exec``-ed: the pid is the command's) in its own session.
+
+    As the package's nodes (``nodes.processes.child_setup``): SIGINT at its default (a
+    background suite inherits it ignored), and SIGINT when pytest ends (a stopped loaded
+    series once left a test's nodes running through the next CI run).
+    """
     out = open(log, 'w')
     try:
         return subprocess.Popen(sourced(*args), stdout=out, stderr=subprocess.STDOUT,
                                 cwd=cwd or ROOT, env=env or ros_env(), start_new_session=True,
-                                preexec_fn=_child_setup)
+                                preexec_fn=child_setup())
     finally:
         out.close()
 

@@ -361,7 +361,7 @@ def end_with_parent(sig: int = signal.SIGINT) -> bool:
     benchmark does not run on after its parent was killed (seen: a stopped loaded series left
     a test's nodes running through the next CI run). The signal comes when the *forking
     thread* ends, so a parent starts such a child only from a thread that lives as long as
-    the child should (:func:`_child_setup` does it for the main thread only).
+    the child should (:func:`child_setup` does it for the main thread only).
 
     Parameters
     ----------
@@ -400,7 +400,7 @@ def catches_signal(pid: int, sig: int) -> bool:
     return False
 
 
-def _child_setup(preexec_fn: Callable[[], None] | None) -> Callable[[], None]:
+def child_setup(preexec_fn: Callable[[], None] | None = None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
 
     A parent started as a background job (``&``, nohup, a CI runner) has SIGINT ignored, and
@@ -496,7 +496,7 @@ class NodeProcess:
             self.popen = subprocess.Popen(self.command, env=child_env,
                                           stdout=stdout, stderr=subprocess.STDOUT,
                                           stdin=subprocess.DEVNULL, start_new_session=own_session,
-                                          preexec_fn=_child_setup(preexec_fn), **text)
+                                          preexec_fn=child_setup(preexec_fn), **text)
         except OSError as exc:
             raise ProcessError(f'cannot start {name}: {exc}') from exc
         finally:
@@ -633,7 +633,7 @@ class ProcessGroup:
         running = [p for p in reversed(self.processes) if p.alive()]
         for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
                           (signal.SIGKILL, 2.0)):
-            if sig == signal.SIGKILL and [p.dump_stacks() for p in running].count(True):
+            if sig == signal.SIGKILL and any([p.dump_stacks() for p in running]):  # ask every one
                 time.sleep(STACK_DUMP_WAIT)          # where they hung, in their logs
             for p in running:
                 p.signal(sig)
