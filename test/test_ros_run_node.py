@@ -13,6 +13,7 @@ import time
 import pytest
 import rclpy
 import rclpy.task
+from rclpy.context import Context
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -94,15 +95,15 @@ def test_a_signal_shutting_the_context_down_inside_try_shutdown_is_a_clean_exit(
     """
     real = rclpy.try_shutdown
 
-    def raced():
-        real()    # the signal handler's shutdown, after the check passed
+    def raced(context=None):
+        real(context=context)    # the signal handler's shutdown, after the check passed
         raise common._RCLError('failed to shutdown: rcl_shutdown already called on the given context')
     monkeypatch.setattr(rclpy, 'try_shutdown', raced)
     assert run_node(_Finishes, 'finishes', []) == 0
 
 
 def test_a_shutdown_error_with_the_context_still_up_is_raised(monkeypatch):
-    def fails():
+    def fails(context=None):
         raise common._RCLError('failed to shutdown: something else')
     monkeypatch.setattr(rclpy, 'try_shutdown', fails)
     with pytest.raises(common._RCLError, match='something else'):
@@ -122,3 +123,46 @@ def test_shutdown_follows_waits_for_the_context_to_go_down():
         assert shutdown_follows(wait=0.0)              # already down
     finally:
         rclpy.try_shutdown()
+
+
+class _RecordingExecutor:
+    """The real executor, with its shutdown written to ``events``."""
+
+    def __init__(self, executor, events):
+        self._executor = executor
+        self._events = events
+
+    def __getattr__(self, name):
+        return getattr(self._executor, name)
+
+    def shutdown(self, *args, **kwargs):
+        self._events.append('executor shutdown')
+        return self._executor.shutdown(*args, **kwargs)
+
+
+@pytest.mark.parametrize('kind', ['events', 'single'])
+def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
+    """Stops 29-30: a node destroyed first left its handles to the EventsExecutor's destructor,
+    where the sim hung at a demo's stop (2 of 14 loaded runs). The order is the mend."""
+    events = []
+    real_make = common.make_executor
+    monkeypatch.setattr(common, 'make_executor',
+                        lambda: _RecordingExecutor(real_make(kind=kind), events))
+
+    class _FinishesAndRecords(_Finishes):
+        def destroy_node(self):
+            events.append('node destroyed')
+            super().destroy_node()
+
+    assert run_node(_FinishesAndRecords, 'finishes', []) == 0
+    assert events == ['executor shutdown', 'node destroyed']
+    assert not rclpy.ok()
+
+
+def test_shutdown_once_shuts_a_given_context_down_once():
+    """The in-process orchestrators (faults, harness) own contexts of their own."""
+    context = Context()
+    rclpy.init(context=context)
+    common.shutdown_once(context)
+    assert not rclpy.ok(context=context)
+    common.shutdown_once(context)          # already down: nothing to do, no error

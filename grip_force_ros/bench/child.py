@@ -41,7 +41,7 @@ from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import shutdown_once, stamp_nanoseconds, state_qos
+from grip_force_ros.nodes.common import close_node, shutdown_once, stamp_nanoseconds, state_qos
 from grip_force_ros.bench.stats import latency_summary, missed_periods
 
 #: Longest wait for the first answer before giving up (s).
@@ -327,7 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     opts = build_parser().parse_args(argv)
     rclpy.init()
-    node = None
+    node = executor = None
     try:
         node = {'ping': Ping, 'echo': Echo}[opts.role](opts)
         executor = make_executor(opts.executor)
@@ -340,8 +340,7 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        if node is not None:
-            node.destroy_node()
+        close_node(executor, node)   # the executor first: see close_node
         shutdown_once()    # a SIGINT may shut the context down under try_shutdown
     return 0
 

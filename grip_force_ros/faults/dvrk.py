@@ -167,13 +167,11 @@ class _Probe:
         return False
 
     def close(self):
-        import rclpy
+        from grip_force_ros.nodes.common import close_node, shutdown_once
         self._stop = True
         self._thread.join(timeout=2.0)
-        self.executor.remove_node(self.node)
-        self.node.destroy_node()
-        self.executor.shutdown()
-        rclpy.try_shutdown(context=self.context)
+        close_node(self.executor, self.node)   # the executor first: see close_node
+        shutdown_once(self.context)
 
 
 #: The sim's measured current (A) that counts as holding a grip (the hold needs ~0.12-0.3 A).

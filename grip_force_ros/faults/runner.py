@@ -180,7 +180,7 @@ class Session:
         return done
 
     def close(self) -> None:
-        import rclpy
+        from grip_force_ros.nodes.common import shutdown_once
         self._stop = True
         restarting = getattr(self, '_restarting', None)
         if restarting is not None:      # let a pending restart finish (or see _stop) first
@@ -197,7 +197,7 @@ class Session:
                 node.destroy_node()
             except Exception:  # noqa: BLE001
                 pass
-        rclpy.try_shutdown(context=self.context)
+        shutdown_once(self.context)    # a Ctrl-C may shut the context down under try_shutdown
 
     # ------------------------------------------------------------------ state
     def gripping(self, since: float, samples: int = 20) -> bool:

@@ -210,7 +210,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback
         print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
         return 2
-    node = None
+    node = executor = None
     try:
         try:
             node = make_node()
@@ -237,14 +237,30 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         if not shutdown_follows():
             raise
     finally:
-        if node is not None:
-            node.destroy_node()
+        close_node(executor, node)
         shutdown_once()
     return 0
 
 
-def shutdown_once() -> None:
-    """Shut the default context down unless it is, or is just being, shut down.
+def close_node(executor, *nodes) -> None:
+    """End ``executor`` first, then destroy each of ``nodes`` (None entries are skipped).
+
+    The other order left a node's handles to be finalised inside the EventsExecutor's C++
+    destructor, when the executor is dropped after the node was destroyed: a loaded run caught
+    the sim's main thread there (``rclpy/event_handler.py`` ``__exit__``, the releasing of a
+    QoS event handle), never returning and deaf to signals (2 of 14 loaded runs, stops 29-30).
+    Shut down, the executor has released every handle while the node still owns them, and the
+    node's own ``destroy_node`` finalises them in Python, as in any executor-less teardown.
+    """
+    if executor is not None:
+        executor.shutdown()
+    for node in nodes:
+        if node is not None:
+            node.destroy_node()
+
+
+def shutdown_once(context=None) -> None:
+    """Shut ``context`` (default: the default context) down unless it is, or is just being.
 
     ``rclpy.try_shutdown`` checks ``ok()`` and then shuts down; rclpy's signal handler shuts
     the context down from its own thread without that check's lock, so a SIGINT between the
@@ -253,7 +269,7 @@ def shutdown_once() -> None:
     down, which is what was asked; an error with the context still up is raised.
     """
     try:
-        rclpy.try_shutdown()
+        rclpy.try_shutdown(context=context)
     except _RCLError:
-        if rclpy.ok():
+        if rclpy.ok(context=context):
             raise

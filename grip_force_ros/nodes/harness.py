@@ -21,7 +21,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.nodes.common import make_executor, wait_until
+from grip_force_ros.nodes.common import close_node, make_executor, shutdown_once, wait_until
 
 #: Longest time the spinning thread stays inside the executor before yielding (s).
 SPIN_SLICE = 0.01
@@ -82,12 +82,9 @@ class RosRunner:
             self._stop.set_result(True)
         if self._thread is not None:
             self._thread.join(5.0)
-        for node in self.nodes:
-            self.executor.remove_node(node)
-            node.destroy_node()
+        close_node(self.executor, *self.nodes)   # the executor first: see close_node
         self.nodes = []
-        self.executor.shutdown()
-        rclpy.try_shutdown(context=self.context)
+        shutdown_once(self.context)
 
     def __enter__(self):
         return self
