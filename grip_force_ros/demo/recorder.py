@@ -206,6 +206,11 @@ class SpinThread:
         return self
 
     def stop(self) -> None:
+        """Stop spinning and end the executor; the caller then destroys the node.
+
+        The executor ends here, with the node still alive (see
+        :func:`~grip_force_ros.nodes.common.close_node`).
+        """
         self._stop.set()
         self._thread.join(timeout=5.0)
-        self.executor.remove_node(self.node)
+        self.executor.shutdown(timeout_sec=5.0)
