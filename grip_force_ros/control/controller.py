@@ -15,6 +15,10 @@ from grip_force_ros.model.dvrk_jaw import command_current_limit
 #: F_L / (mu' F_J) for the needle held in three points, F_L = (sqrt2 + 1) mu' F_J (paper)
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
 
+#: The words that end a safe-state reason when the controller's own step interval exceeded
+#: the watchdog (its process was stalled, not an input lost); faults/runner.py reads them.
+CONTROLLER_STALLED = 'the controller was stalled'
+
 #: Default time (s) in which the force target climbs from the estimate to the force map's
 #: target when grip resumes after the safe state (the map's target is then a step).
 RESUME_RAMP_TIME = 0.1
@@ -281,7 +285,7 @@ class GripController:
             return self.period, f'controller clock went backwards by {-dt * 1e3:.3f} ms', False
         if dt > self.watchdog_timeout:
             return self.period, (f'step interval {dt * 1e3:.1f} ms > {self.watchdog_timeout * 1e3:.1f} '
-                                 'ms (the controller was stalled)'), True
+                                 f'ms ({CONTROLLER_STALLED})'), True
         return dt, None, False
 
     def _after_stall(self, now: float, inputs: ControlInputs) -> None:

@@ -27,7 +27,7 @@ from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, NodeProcess, Pr
                                             ProcessGroup, master_rt_priority,
                                             node_command, python_module, realtime_threads,
                                             recorder_rt_priority, ros_args,
-                                            ros_environment, ros_tools_environment)
+                                            ros_environment, ros_tools_environment, wait_until)
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory, needle_grasp
 
@@ -205,13 +205,10 @@ def _node_argv(name: str, spec: RunSpec) -> list[str]:
 def _poll(predicate: Callable[[], bool], seconds: float, check_alive: Callable[[], None],
           period: float = 0.05) -> bool:
     """Wait up to ``seconds`` for ``predicate()``, calling ``check_alive`` meanwhile; its value."""
-    end = time.monotonic() + seconds
-    while not predicate():
+    def alive_and_true() -> bool:
         check_alive()
-        if time.monotonic() > end:
-            return False
-        time.sleep(period)
-    return True
+        return predicate()
+    return wait_until(alive_and_true, seconds, period)
 
 
 def _wait_for(predicate: Callable[[], bool], group: ProcessGroup, timeout: float,

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
+from grip_force_ros.control.controller import CONTROLLER_STALLED
 from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
 from grip_force_ros.faults.catalogue import (SOURCES, FaultCase, bad_params_text, catalogue,
                                              redo_spoiled)
@@ -440,7 +441,7 @@ def _machine_cause(diagnostics: list, silenced: tuple, until: float) -> str | No
     own input's timeout for such a cause measured nothing.
     """
     return next((d[1] for d in diagnostics if d[0] <= until and (
-        'the controller was stalled' in d[1]
+        CONTROLLER_STALLED in d[1]
         or any(f'stale {s} input' in d[1] for s in SOURCES if s not in silenced))), None)
 
 
@@ -467,9 +468,9 @@ def _scheduling_stall(reason: str) -> bool:
     """Whether a safe-state reason is a stall of the machine.
 
     An input gone stale, or the controller's own step interval beyond its watchdog
-    (control/controller.py: 'the controller was stalled').
+    (control/controller.py: ``CONTROLLER_STALLED``).
     """
-    return 'stale' in reason or 'the controller was stalled' in reason
+    return 'stale' in reason or CONTROLLER_STALLED in reason
 
 
 def run_case_redoing_spoiled(session: Session, case: FaultCase) -> dict:

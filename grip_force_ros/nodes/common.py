@@ -22,7 +22,6 @@ import faulthandler
 import math
 import os
 import sys
-import time
 from typing import Callable, Iterable, Sequence
 
 import rclpy
@@ -32,7 +31,7 @@ from rclpy.task import Future
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL
+from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
 
 
 def state_qos(depth: int) -> QoSProfile:
@@ -178,16 +177,6 @@ def make_executor(context=None, kind: str | None = None):
 #: moments after it wakes the executor: a loaded run saw the error first (launch's Ctrl-C, the
 #: EventsExecutor's "Unable to convert call argument '0' to Python object").
 SHUTDOWN_RACE_WAIT = 2.0
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(poll)
-    return bool(predicate())
 
 
 def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bool:

@@ -55,6 +55,16 @@ class ProcessError(RuntimeError):
     """A node process could not be started or died early."""
 
 
+def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
+    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return bool(predicate())
+
+
 # ---------------------------------------------------------------- environment
 def ensure_local_discovery(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
     """Keep DDS discovery on this machine unless a range was chosen.
