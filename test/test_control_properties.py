@@ -62,6 +62,7 @@ class Checker:
         self.clock = StepClock()
         self.force_max = min(params.grip_force_max, params.max_grip_force)
         self.previous = 0.0
+        self.previous_mode = 'free'
         self.steps = 0
         self.modes = {'free': 0, 'grip': 0, 'safe': 0}
         self.limits = 0
@@ -78,7 +79,10 @@ class Checker:
         assert out.mode in ('free', 'grip', 'safe')
         assert set(out.limits_hit) <= {'current_limit', 'slew_limit'}
         assert all(isinstance(r, str) for r in out.reasons)
+        if out.mode == 'safe' and self.previous_mode == 'safe':   # the ramp only goes to 0 A
+            assert abs(c) <= abs(self.previous), (self.previous, out)
         self.previous = c
+        self.previous_mode = out.mode
         self.steps += 1
         self.modes[out.mode] += 1
         self.limits += bool(out.limits_hit)

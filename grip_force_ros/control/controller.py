@@ -294,13 +294,18 @@ class GripController:
         During a stall longer than the watchdog nobody knows what the drive did with the last
         command: a drive with a command timeout has cut it to 0 A (the sim, issue 11), a dVRK
         holds it. The measured current says which; with no fresh, valid one the command is
-        kept.
+        kept. The step after a stall is safe, and the safe ramp only goes toward 0 A: the
+        measured current is taken only between 0 A and the last command (the property test's
+        random sequences found a stall in the safe state taking the command back up to a
+        measured current above it).
         """
         age = now - inputs.actuator_time
         if inputs.actuator_fault is None and 0.0 <= age <= self.watchdog_timeout:
-            limit = self.current_limit
-            measured = inputs.measured_current
-            self.command = limit if measured > limit else (-limit if measured < -limit else measured)
+            measured, last = inputs.measured_current, self.command   # A
+            if last >= 0.0:
+                self.command = min(max(measured, 0.0), last)
+            else:
+                self.command = max(min(measured, 0.0), last)
             self.filtered_current = self.command
 
     def step(self, now: float, inputs: ControlInputs, interlock: str | None = None) -> ControlOutput:
