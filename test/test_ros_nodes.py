@@ -259,11 +259,15 @@ def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path)
     assert safe_since <= first_stale
     print(f'watchdog: safe {1e3 * (now[safe_since] - inst[safe_since] - timeout):.2f} ms after '
           f'the input became stale (period {1e3 * period:.1f} ms)')
-    # while safe the command ramps to 0 A at the slew limit, never away from 0
+    # while safe the command ramps to 0 A at the slew limit, never away from 0, in each
+    # stretch of safe rows: a stall of this process between the freeze mark and the pause
+    # lets control resume in between (one reading of loaded run 30/1: safe rows 0 -> 0.085 A
+    # -> 0, 706 ms late; the other, a stall inside the safe state, is mended in the controller)
     command = rec.column('command')
     safe_rows = np.arange(safe_since, thaw)
     safe_rows = safe_rows[mode[safe_rows] == 'safe']
-    assert np.all(np.diff(np.abs(command[safe_rows])) <= 1e-12)
+    for stretch in np.split(safe_rows, np.flatnonzero(np.diff(safe_rows) > 1) + 1):
+        assert np.all(np.diff(np.abs(command[stretch])) <= 1e-12), command[stretch]
     # the watchdog says what went stale, in the output and on /diagnostics (ERROR)
     assert any('stale instrument input' in r for r in rec.column('reasons')[first_stale])
     tripped = [s for s in rec.diagnostics
