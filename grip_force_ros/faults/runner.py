@@ -99,10 +99,11 @@ class Session:
         from rclpy.parameter import Parameter
 
         from grip_force_ros.faults.probe import FaultProbe
-        from grip_force_ros.nodes.common import make_executor
+        from grip_force_ros.nodes.common import freeze_heap, make_executor
         from grip_force_ros.nodes.controller import ControllerNode
         from grip_force_ros.nodes.harness import SPIN_SLICE
 
+        freeze_heap()     # a full collection of a large process's heap stalls the nodes here
         values = read_params_yaml(config)
         if sensor:
             values['force_sensor_enabled'] = True
@@ -181,7 +182,7 @@ class Session:
         return done
 
     def close(self) -> None:
-        from grip_force_ros.nodes.common import shutdown_once
+        from grip_force_ros.nodes.common import shutdown_once, unfreeze_heap
         self._stop = True
         restarting = getattr(self, '_restarting', None)
         if restarting is not None:      # let a pending restart finish (or see _stop) first
@@ -199,6 +200,7 @@ class Session:
             except Exception:  # noqa: BLE001
                 pass
         shutdown_once(self.context)    # a Ctrl-C may shut the context down under try_shutdown
+        unfreeze_heap()
 
     # ------------------------------------------------------------------ state
     def gripping(self, since: float, samples: int = 20) -> bool:

@@ -21,7 +21,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.nodes.common import close_node, make_executor, shutdown_once, wait_until
+from grip_force_ros.nodes.common import (close_node, freeze_heap, make_executor, shutdown_once,
+                                         unfreeze_heap, wait_until)
 
 #: Longest time the spinning thread stays inside the executor before yielding (s).
 SPIN_SLICE = 0.01
@@ -37,6 +38,7 @@ class RosRunner:
     """
 
     def __init__(self, executor_kind: str = 'events'):
+        freeze_heap()     # a full collection of a test process's heap stalls the nodes here
         self.context = Context()
         rclpy.init(context=self.context)
         self.executor = make_executor(self.context, executor_kind)
@@ -85,6 +87,7 @@ class RosRunner:
         close_node(self.executor, *self.nodes)   # the executor first: see close_node
         self.nodes = []
         shutdown_once(self.context)
+        unfreeze_heap()
 
     def __enter__(self):
         return self
