@@ -8,6 +8,8 @@ run (stop 22) found the other order: the callback's error just before the contex
 from __future__ import annotations
 
 import gc
+import subprocess
+import sys
 import threading
 import time
 
@@ -140,6 +142,9 @@ class _RecordingExecutor:
         self._events.append('executor shutdown')
         return self._executor.shutdown(*args, **kwargs)
 
+    def __del__(self):
+        self._events.append('executor dropped')    # the real one goes with it (its only holder)
+
 
 @pytest.mark.parametrize('kind', ['events', 'single'])
 def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
@@ -155,8 +160,16 @@ def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
             events.append('node destroyed')
             super().destroy_node()
 
+    real_shutdown = rclpy.try_shutdown
+
+    def recording_shutdown(context=None):
+        events.append('context shut down')
+        real_shutdown(context=context)
+    monkeypatch.setattr(rclpy, 'try_shutdown', recording_shutdown)
     assert run_node(_FinishesAndRecords, 'finishes', []) == 0
-    assert events == ['executor shutdown', 'node destroyed']
+    # The executor is dropped (its C++ destructor run) inside the teardown limit, before the
+    # context goes down, not as run_node returns (stop 32).
+    assert events == ['executor shutdown', 'node destroyed', 'executor dropped', 'context shut down']
     assert not rclpy.ok()
 
 
@@ -177,3 +190,58 @@ def test_a_runner_keeps_the_test_process_heap_out_of_full_collections():
     with RosRunner():
         assert gc.get_freeze_count() >= len(ballast)
     assert gc.get_freeze_count() == 0
+
+
+#: A node process run by ``run_node`` with a short teardown limit: its node ends at once and
+#: its ``destroy_node`` takes ``{destroy}`` s; then the process lives on ``{after}`` s.
+_TEARDOWN_SCRIPT = '''
+import sys, time
+import rclpy.task
+from rclpy.node import Node
+from grip_force_ros.nodes import common
+
+
+class Ends(Node):
+    def __init__(self):
+        super().__init__('teardown_limit')
+        self.finished = rclpy.task.Future()
+        self.finished.set_result(True)
+
+    def destroy_node(self):
+        time.sleep({destroy})
+        super().destroy_node()
+
+
+common.TEARDOWN_LIMIT = 0.5
+code = common.run_node(Ends, 'teardown_limit', [])
+time.sleep({after})
+print('ended with', code, flush=True)
+sys.exit(code)
+'''
+
+
+def _run_teardown(destroy: float, after: float):
+    started = time.monotonic()
+    done = subprocess.run([sys.executable, '-c', _TEARDOWN_SCRIPT.format(destroy=destroy, after=after)],
+                          capture_output=True, text=True, timeout=120)
+    return done, time.monotonic() - started
+
+
+def test_a_teardown_that_does_not_end_leaves_its_stacks_and_exits_1():
+    """Stop 32: the master, deaf to SIGINT and SIGTERM after its loop, was SIGKILLed by
+    ``ros2 launch`` with nothing in its log. A teardown stuck past the limit (here: 60 s in
+    ``destroy_node``, limit 0.5 s) ends the process with code 1 and every thread's stack."""
+    done, took = _run_teardown(destroy=60.0, after=0.0)
+    assert done.returncode == 1, (done.returncode, done.stdout, done.stderr)
+    assert took < 60.0                        # not waited out: ended by the limit
+    assert 'Timeout (0:00:00.500000)!' in done.stderr, done.stderr
+    assert 'in destroy_node' in done.stderr, done.stderr     # where it was stuck
+    assert 'ended with' not in done.stdout
+
+
+def test_a_teardown_within_the_limit_leaves_no_timer_behind():
+    """``run_node`` also runs inside test processes: the limit must not outlive the teardown."""
+    done, _ = _run_teardown(destroy=0.0, after=1.5)
+    assert done.returncode == 0, (done.returncode, done.stdout, done.stderr)
+    assert 'ended with 0' in done.stdout
+    assert 'Timeout' not in done.stderr, done.stderr

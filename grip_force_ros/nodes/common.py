@@ -201,6 +201,18 @@ def unfreeze_heap() -> None:
     gc.unfreeze()
 
 
+#: Time a node's teardown (executor, node, context) may take before :func:`run_node` writes
+#: every thread's stack to stderr and ends the process with exit code 1 (s). A loaded run
+#: (stop 32) saw the master ignore ``ros2 launch``'s SIGINT and SIGTERM at a stop and get
+#: SIGKILLed 15 s later, with nothing in its log of where it was; a teardown stuck in the
+#: middleware (Fast DDS has an open deadlock of a participant's own threads,
+#: eProsima/Fast-DDS#6502, seen here once before) is deaf to every signal rclpy handles. The
+#: limit ends the process before this package's runners kill it (5 s after SIGINT) and
+#: before ``ros2 launch`` does (15 s), so the stacks reach the log; docs/reliability.md
+#: (sixteenth round) gives the teardown times it is set against.
+TEARDOWN_LIMIT = 4.0
+
+
 def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bool:
     """Whether the default context is, or within ``wait`` s goes, down (s; polled every ``poll`` s)."""
     return wait_until(lambda: not rclpy.ok(), wait, poll)
@@ -221,7 +233,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback
         print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
         return 2
-    node = executor = None
+    node = executor = finished = None
     try:
         try:
             node = make_node()
@@ -248,8 +260,17 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         if not shutdown_follows():
             raise
     finally:
-        close_node(executor, node)
-        shutdown_once()
+        # A teardown that never ends (a process deaf to SIGINT and SIGTERM, killed by whoever
+        # started it, with nothing in its log) ends here instead: stacks, then exit code 1.
+        faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
+        try:
+            close_node(executor, node)
+            # Dropped here, inside the limit, not as the function returns: the EventsExecutor's
+            # C++ destructor runs now (stop 30 caught the sim hung in one).
+            executor = node = finished = None
+            shutdown_once()
+        finally:
+            faulthandler.cancel_dump_traceback_later()
     return 0
 
 
