@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.nodes.processes import child_setup
+from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, catches_signal, child_setup
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -191,6 +191,36 @@ def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, group: bool = False,
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
         return None
+
+
+_STARTED = re.compile(r'\[(?P<name>[\w.]+)-\d+\]: process started with pid \[(?P<pid>\d+)\]')
+#: ``ros2 launch`` sends SIGTERM this long after its SIGINT (its ``sigterm_timeout``), SIGKILL
+#: 10 s later; the stacks are asked for just before its SIGTERM.
+LAUNCH_SIGTERM_AFTER = 5.0
+
+
+def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int | None:
+    """SIGINT to a ``ros2 launch`` process; a node of it still running shortly before launch's
+    SIGTERM is asked for its threads' stacks (into the launch log), then wait as :func:`stop`.
+
+    Launch kills a node that ignores its SIGINT and SIGTERM without asking where it was (a
+    loaded run, stop 32: the master). ``run_node``'s own teardown limit covers a hang after
+    the node's loop; this covers one anywhere.
+    """
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        return proc.wait(timeout=LAUNCH_SIGTERM_AFTER - 0.5)
+    except subprocess.TimeoutExpired:
+        pass
+    for started in _STARTED.finditer(log.read_text(errors='replace')):
+        pid = int(started['pid'])
+        if catches_signal(pid, STACK_DUMP_SIGNAL):     # alive, and a run_node process
+            try:
+                os.kill(pid, STACK_DUMP_SIGNAL)
+            except ProcessLookupError:
+                pass
+    return stop(proc, signal.SIGINT, timeout=timeout)
 
 
 def stop_daemon(env: dict[str, str] | None = None) -> None:

@@ -10,12 +10,11 @@ resolution (params.files.instrument_path) is tested directly.
 from __future__ import annotations
 
 import re
-import signal
 
 import pytest
 
 from _ros_tools import (ROOT, cli, launch_exit_codes, lifecycle_transition, require_ros_tools,
-                        retry, ros_env, run, start, stop, stop_daemon)
+                        retry, ros_env, run, start, stop_daemon, stop_launch)
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 
@@ -101,7 +100,7 @@ def _wait_for_param(node, name, env, timeout=90.0):
 
 def _stop_launch(proc, log, env):
     try:
-        code = stop(proc, signal.SIGINT)     # the launch process only
+        code = stop_launch(proc, log)     # SIGINT to the launch process only
     finally:
         stop_daemon(env)
     text = log.read_text()

@@ -11,7 +11,9 @@ import importlib.util
 import re
 import signal
 import subprocess
+import sys
 import sysconfig
+import time
 from pathlib import Path
 
 
@@ -147,3 +149,40 @@ def test_fast_dds_log_lines_are_told_from_a_commands_answer():
     assert FASTDDS_LOG_LINE.match(logged)
     for answer in ('unconfigured [1]', 'Error: node not found', '2026-11-27 plain text Error'):
         assert not FASTDDS_LOG_LINE.match(answer)
+
+
+#: A stand-in for ``ros2 launch``: starts one node that ignores SIGINT (its stderr into the
+#: launch output, as launch does), names its pid as launch does, and on SIGINT waits 6 s
+#: (past the helper's stack request) before it kills the node and ends.
+_STUCK_NODE = ('import faulthandler, signal, time; '
+               'faulthandler.register(signal.SIGUSR1, all_threads=True); '
+               'signal.signal(signal.SIGINT, signal.SIG_IGN); '
+               'print("ready", flush=True); time.sleep(120)')
+_FAKE_LAUNCH = f'''
+import signal, subprocess, sys, time
+node = subprocess.Popen([sys.executable, '-c', {_STUCK_NODE!r}], stdout=sys.stdout, stderr=sys.stdout)
+print(f'[INFO] [stuck-1]: process started with pid [{{node.pid}}]', flush=True)
+got = []
+signal.signal(signal.SIGINT, lambda *args: got.append(time.monotonic()))
+while not got:
+    time.sleep(0.05)
+time.sleep(6.0)
+node.kill()
+node.wait()
+'''
+
+
+def test_a_launched_node_still_running_before_launch_s_sigterm_leaves_its_stacks(tmp_path):
+    """Stop 32: ``ros2 launch`` SIGKILLed a master deaf to SIGINT/SIGTERM, nothing in its log."""
+    from _ros_tools import stop_launch
+    log = tmp_path / 'launch.log'
+    with open(log, 'w') as out:
+        proc = subprocess.Popen([sys.executable, '-c', _FAKE_LAUNCH], stdout=out, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + 60
+    while 'ready' not in log.read_text() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert 'ready' in log.read_text()
+    assert stop_launch(proc, log) == 0
+    text = log.read_text()
+    assert 'most recent call first' in text, text        # faulthandler's dump of the node
+    assert 'line 1 in <module>' in text, text
