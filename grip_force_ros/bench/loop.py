@@ -178,7 +178,7 @@ def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: f
 
 def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
                 executor: str | None = None, rt_priority: int = 0, sensor_order: str | None = None,
-                force_outputs: str | None = None) -> dict:
+                force_outputs: str | None = None, controller_params: dict | None = None) -> dict:
     """Measure the sim -> controller -> sim round trip and the full path at 1 kHz, the shipped nodes.
 
     Starts the shipped controller node as :mod:`.product_controller` (it notes the input
@@ -207,7 +207,11 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
         The sim's joint state and load cell 'deferred' (once answered) or 'first' (before
         the actuator state); default the node's (the A/B of :mod:`.order_ab`).
     force_outputs : str, optional
-        The controller's estimated/target force 'deferred' or 'at-once'; default the node's.
+        The controller's estimated/target force 'deferred', 'at-once' or 'off' (never
+        published); default the node's.
+    controller_params : dict, optional
+        Further controller parameters (name -> value) over the instrument file's, e.g.
+        ``{'control_rate': 250.0}`` (the A/B of :mod:`.order_ab`).
 
     Returns
     -------
@@ -229,7 +233,8 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
             children.append(Child('controller', python_module(
                 'grip_force_ros.bench.product_controller', '--record', steps,
                 *(['--force-outputs', force_outputs] if force_outputs else []),
-                *ros_args(config, {'force_sensor_enabled': True}, log_level='warn')), env,
+                *ros_args(config, {'force_sensor_enabled': True, **(controller_params or {})},
+                          log_level='warn')), env,
                 rt_priority=rt))
             children.append(Child('master', node_command('master', config, {'repeat': True},
                                                          log_level='warn'), env))

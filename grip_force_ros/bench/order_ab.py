@@ -9,6 +9,8 @@ right after the command). Each round measures the floor once, then every variant
 all in one ROS domain, so that the rounds see the same machine state::
 
     .venv/bin/python -m grip_force_ros.bench.order_ab --rounds 3 --seconds 20
+    .venv/bin/python -m grip_force_ros.bench.order_ab --rounds 3 --seconds 20 \
+        --variants plain,no_forces,lean,timer_250 [--rt-priority 50]
 
 Prints one JSON line per run as it goes (stderr) and the whole result (stdout): per variant
 the mean and the worst over the rounds of the full-path and round-trip p99 ratios and of the
@@ -27,14 +29,21 @@ from grip_force_ros.bench.procs import DomainLock
 from grip_force_ros.bench.run import parse_domains
 from grip_force_ros.params.files import instrument_path
 
-#: name -> (the sim's sensor order, the controller's force outputs): both narrowing choices,
-#: one of them at a time, neither
+#: name -> (the sim's sensor order, the controller's force outputs, further controller
+#: parameters): both narrowing choices, one of them at a time, neither (the shipped
+#: order: plain); then, on the plain order, what the controller's own work on the path costs
+#: (BENCHMARKS.md, 2026-11-27): no force output at all, the watchdog timer at 250 Hz, both.
 VARIANTS = {
-    'narrowed': ('deferred', 'deferred'),
-    'sensors_first': ('first', 'deferred'),
-    'forces_at_once': ('deferred', 'at-once'),
-    'plain': ('first', 'at-once'),
+    'narrowed': ('deferred', 'deferred', {}),
+    'sensors_first': ('first', 'deferred', {}),
+    'forces_at_once': ('deferred', 'at-once', {}),
+    'plain': ('first', 'at-once', {}),
+    'no_forces': ('first', 'off', {}),
+    'timer_250': ('first', 'at-once', {'control_rate': 250.0}),
+    'lean': ('first', 'off', {'control_rate': 250.0}),
 }
+#: The publish-order A/B (the default of ``--variants``).
+ORDER_VARIANTS = ('narrowed', 'sensors_first', 'forces_at_once', 'plain')
 
 
 def _row(name: str, loop: dict) -> dict:
@@ -52,7 +61,7 @@ def _row(name: str, loop: dict) -> dict:
             'cpu_percent': loop['cpu_percent']['product']}
 
 
-def run_ab(rounds: int, seconds: float, variants=tuple(VARIANTS), config: str | None = None,
+def run_ab(rounds: int, seconds: float, variants=ORDER_VARIANTS, config: str | None = None,
            domains=None, rt_priority: int = 0, say=None) -> dict:
     """Measure ``rounds`` interleaved rounds: the floor, then each variant (rotated order).
 
@@ -71,9 +80,10 @@ def run_ab(rounds: int, seconds: float, variants=tuple(VARIANTS), config: str | 
             floor = run_floor(seconds, domain, replace(BEST, rt_priority=rt_priority))
             order = list(variants[k % len(variants):]) + list(variants[:k % len(variants)])
             for name in order:
-                sensor_order, force_outputs = VARIANTS[name]
+                sensor_order, force_outputs, controller_params = VARIANTS[name]
                 product = run_product(seconds, domain, config, rt_priority=rt_priority,
-                                      sensor_order=sensor_order, force_outputs=force_outputs)
+                                      sensor_order=sensor_order, force_outputs=force_outputs,
+                                      controller_params=controller_params)
                 row = {'round': k, **_row(name, compare(floor, product))}
                 say(json.dumps(row))
                 runs.append(row)
@@ -93,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--rounds', type=int, default=3)
     parser.add_argument('--seconds', type=float, default=20.0, help='window of each run (s)')
-    parser.add_argument('--variants', default=','.join(VARIANTS),
+    parser.add_argument('--variants', default=','.join(ORDER_VARIANTS),
                         help=f'comma-separated subset of {list(VARIANTS)}')
     parser.add_argument('--config', default=None, help='instrument YAML (path or shipped name)')
     parser.add_argument('--domain-ids', default=None, help="candidate ROS domains, e.g. '70-99'")

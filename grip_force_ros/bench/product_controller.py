@@ -45,7 +45,10 @@ class BenchController(ControllerNode):
         self._record_path = opts.record
         self._rows = np.zeros((opts.capacity, len(COLUMNS)), np.int64)
         self._n = 0
-        if opts.force_outputs is not None:
+        if opts.force_outputs == 'off':      # the A/B's bound: no force output at all
+            io = self.io
+            io.publish_forces = lambda: setattr(io, 'forces_pending', False)
+        elif opts.force_outputs is not None:
             self.io.defer_forces = opts.force_outputs == 'deferred'
         publish = self.io.publish
 
@@ -78,9 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.product_controller')
     p.add_argument('--record', required=True, help='.npz written at shutdown')
     p.add_argument('--capacity', type=int, default=200_000, help='newest steps kept')
-    p.add_argument('--force-outputs', choices=('deferred', 'at-once'), default=None,
-                   help="estimated/target force after the loop closed or right after the command "
-                        "(default: the node's)")
+    p.add_argument('--force-outputs', choices=('deferred', 'at-once', 'off'), default=None,
+                   help="estimated/target force after the loop closed, right after the command, "
+                        "or never (off: what the two publishes cost; default: the node's)")
     return p
 
 
