@@ -200,8 +200,10 @@ LAUNCH_SIGTERM_AFTER = 5.0
 
 
 def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int | None:
-    """SIGINT to a ``ros2 launch`` process; a node of it still running shortly before launch's
-    SIGTERM is asked for its threads' stacks (into the launch log), then wait as :func:`stop`.
+    """Stop a ``ros2 launch`` process with SIGINT, asking a node that hangs for its stacks.
+
+    A node of it still running shortly before launch's SIGTERM is asked for its threads'
+    stacks (into the launch log); then wait as :func:`stop`.
 
     Launch kills a node that ignores its SIGINT and SIGTERM without asking where it was (a
     loaded run, stop 32: the master). ``run_node``'s own teardown limit covers a hang after
