@@ -177,10 +177,10 @@ def retry(fn, ok, timeout: float = 60.0, pause: float = 0.5):
         time.sleep(pause)
 
 
-def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, group: bool = False,
+def stop(proc: subprocess.Popen, sig: int | None = signal.SIGINT, group: bool = False,
          timeout: float = 30.0) -> int | None:
-    """Signal the process (or its group) and wait; kill its group if it does not end."""
-    if proc.poll() is None:
+    """Signal the process or its group (``sig`` None: none) and wait; kill its group if it does not end."""
+    if sig is not None and proc.poll() is None:
         if group:
             os.killpg(proc.pid, sig)
         else:
@@ -222,7 +222,7 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
                 os.kill(pid, STACK_DUMP_SIGNAL)
             except ProcessLookupError:
                 pass
-    return stop(proc, signal.SIGINT, timeout=timeout)
+    return stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
 
 
 def stop_daemon(env: dict[str, str] | None = None) -> None:
