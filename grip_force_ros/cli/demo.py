@@ -72,6 +72,28 @@ def _sigterm_as_interrupt() -> None:
         pass
 
 
+def interrupt_behind(exc: BaseException) -> bool:
+    """Whether a Ctrl-C (KeyboardInterrupt) is behind ``exc``, in its chain of causes.
+
+    A KeyboardInterrupt raised while a pybind11 extension converts its return value comes out
+    as a ``TypeError`` ("Unable to convert function return value to a Python type!") caused by
+    it: the fresh-clone CI of stop 32 saw the demo, interrupted inside rclpy's
+    ``deserialize_message``, exit 1 with that traceback instead of 130.
+    """
+    seen: set[int] = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _interrupted_exit() -> int:
+    print('interrupted: every node was stopped', file=sys.stderr)
+    return 130
+
+
 def _fmt(value, spec='.3f', unit=' N') -> str:
     return f'{value:{spec}}{unit}' if isinstance(value, (int, float)) and math.isfinite(value) \
         else 'n/a'
@@ -180,8 +202,11 @@ def run(args) -> int:
             print_report(report)
         return 0
     except KeyboardInterrupt:
-        print('interrupted: every node was stopped', file=sys.stderr)
-        return 130
-    except (ProcessError, ParameterError, FileNotFoundError, ValueError) as exc:
-        print(f'error: {exc}', file=sys.stderr)
-        return 1
+        return _interrupted_exit()
+    except Exception as exc:
+        if interrupt_behind(exc):
+            return _interrupted_exit()
+        if isinstance(exc, (ProcessError, ParameterError, FileNotFoundError, ValueError)):
+            print(f'error: {exc}', file=sys.stderr)
+            return 1
+        raise
