@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, catches_signal, child_setup
+from grip_force_ros.nodes.processes import child_setup, request_stacks
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -216,12 +216,7 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
     except subprocess.TimeoutExpired:
         pass
     for started in _STARTED.finditer(log.read_text(errors='replace')):
-        pid = int(started['pid'])
-        if catches_signal(pid, STACK_DUMP_SIGNAL):     # alive, and a run_node process
-            try:
-                os.kill(pid, STACK_DUMP_SIGNAL)
-            except ProcessLookupError:
-                pass
+        request_stacks(int(started['pid']))     # only a live process that handles it
     return stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
 
 

@@ -13,12 +13,12 @@ import signal
 import subprocess
 import sys
 import sysconfig
-import time
 from pathlib import Path
 
 
 from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
                         stop_daemon, vendor_dir)
+from grip_force_ros.nodes.processes import wait_until
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
 
@@ -178,10 +178,7 @@ def test_a_launched_node_still_running_before_launch_s_sigterm_leaves_its_stacks
     log = tmp_path / 'launch.log'
     with open(log, 'w') as out:
         proc = subprocess.Popen([sys.executable, '-c', _FAKE_LAUNCH], stdout=out, stderr=subprocess.STDOUT)
-    deadline = time.monotonic() + 60
-    while 'ready' not in log.read_text() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert 'ready' in log.read_text()
+    assert wait_until(lambda: 'ready' in log.read_text(), 60.0, 0.05)
     assert stop_launch(proc, log) == 0
     text = log.read_text()
     assert 'most recent call first' in text, text        # faulthandler's dump of the node

@@ -410,6 +410,21 @@ def catches_signal(pid: int, sig: int) -> bool:
     return False
 
 
+def request_stacks(pid: int) -> bool:
+    """Ask process ``pid`` for its threads' stacks in its log (:data:`STACK_DUMP_SIGNAL`).
+
+    Only a process that handles that signal gets it (for any other its default action would
+    end the process): True when it was sent.
+    """
+    if not catches_signal(pid, STACK_DUMP_SIGNAL):
+        return False
+    try:
+        os.kill(pid, STACK_DUMP_SIGNAL)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def child_setup(preexec_fn: Callable[[], None] | None = None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
 
@@ -532,13 +547,7 @@ class NodeProcess:
         Only a process that handles that signal gets it (for any other its default action
         would end the process): True when it was sent.
         """
-        if not self.alive() or not catches_signal(self.pid, STACK_DUMP_SIGNAL):
-            return False
-        try:
-            os.kill(self.pid, STACK_DUMP_SIGNAL)
-        except ProcessLookupError:
-            return False
-        return True
+        return self.alive() and request_stacks(self.pid)
 
     def signal(self, sig: int) -> None:
         """Send ``sig`` to the process (to its process group when it has its own session)."""
