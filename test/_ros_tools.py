@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.nodes.processes import child_setup, request_stacks
+from grip_force_ros.nodes.processes import STACK_DUMP_WAIT, child_setup, request_stacks
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -218,6 +219,59 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
     for started in _STARTED.finditer(log.read_text(errors='replace')):
         request_stacks(int(started['pid']))     # only a live process that handles it
     return stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
+
+
+def process_tree(pid: int) -> list[int]:
+    """``pid`` and its live descendants, parents first (Linux ``/proc/<pid>/task/*/children``)."""
+    tree, todo = [], [pid]
+    while todo:
+        current = todo.pop(0)
+        tree.append(current)
+        for task in Path(f'/proc/{current}/task').glob('*'):
+            try:
+                todo += [int(child) for child in (task / 'children').read_text().split()]
+            except (OSError, ValueError):
+                pass
+    return [one for one in tree if Path(f'/proc/{one}').exists()]
+
+
+def native_stacks(pid: int, timeout: float = 60.0) -> str:
+    """Every thread's native stack of process ``pid`` (gdb, batch mode), or why there is none.
+
+    A participant whose Fast DDS threads deadlock (eProsima/Fast-DDS#6502) goes deaf to
+    discovery with its Python threads parked in C; only the native stacks show where.
+    """
+    gdb = shutil.which('gdb')
+    if gdb is None:
+        return 'no gdb on this machine'
+    try:
+        got = subprocess.run([gdb, '-p', str(pid), '-batch', '-nx', '-ex', 'thread apply all bt'],
+                             capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return f'gdb did not finish in {timeout:.0f} s'
+    return got.stdout or got.stderr
+
+
+def process_report(proc: subprocess.Popen, log: Path) -> str:
+    """Tell what is known of a started command (:func:`start`) that a CLI call did not find.
+
+    Whether it still runs; each process of its tree asked for its Python stacks (into
+    ``log``, when it handles the signal) and its native stacks taken with gdb; then ``log``.
+    Called only once a test has failed: it costs seconds.
+    """
+    code = proc.poll()
+    lines = ['the command runs' if code is None else f'the command exited {code}']
+    for pid in process_tree(proc.pid) if code is None else []:
+        try:
+            command = Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ')[:160]
+        except OSError:
+            continue                                        # ended meanwhile
+        asked = 'asked into the log' if request_stacks(pid) else 'not handled'
+        lines += [f'--- pid {pid} {command.decode(errors="replace")}: Python stacks {asked}; '
+                  'native stacks:', native_stacks(pid)]
+    time.sleep(STACK_DUMP_WAIT)
+    lines += ['--- log:', log.read_text(errors='replace')]
+    return '\n'.join(lines)
 
 
 def stop_daemon(env: dict[str, str] | None = None) -> None:

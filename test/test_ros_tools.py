@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -16,8 +17,8 @@ import sysconfig
 from pathlib import Path
 
 
-from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, require_ros_tools, retry, ros_env, run, start, stop,
-                        stop_daemon, vendor_dir)
+from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, process_report, require_ros_tools, retry, ros_env, run,
+                        start, stop, stop_daemon, vendor_dir)
 from grip_force_ros.nodes.processes import wait_until
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
@@ -89,21 +90,24 @@ def test_setup_file_ament_index_and_one_grip_force_ros(tmp_path):
 def test_ros2_run_param_node_topic_lifecycle(tmp_path):
     require_ros_tools()
     env = ros_env()
+    log = tmp_path / 'controller.log'
     proc = start('ros2', 'run', 'grip_force_ros', 'controller', '--ros-args', '--params-file',
-                 'config/paper_needle_driver.yaml', log=tmp_path / 'controller.log', env=env)
+                 'config/paper_needle_driver.yaml', log=log, env=env)
     try:
         got = retry(lambda: run('ros2', 'param', 'get', '/controller', 'instrument_name',
                                 '--no-daemon', env=env),
                     lambda r: r.returncode == 0, timeout=60)
         assert got.stdout.strip() == 'String value is: paper_needle_driver', \
-            (got.stdout, got.stderr, (tmp_path / 'controller.log').read_text())
+            (got.stdout, got.stderr, process_report(proc, log))
         nodes = retry(lambda: run('ros2', 'node', 'list', '--no-daemon', '--spin-time', '2', env=env),
                       lambda r: '/controller' in r.stdout.split(), timeout=30)
-        assert '/controller' in nodes.stdout.split(), nodes
+        assert '/controller' in nodes.stdout.split(), (nodes, process_report(proc, log))
+        # CI of 2af15e3: 30 s of tries saw only the CLI's own two topics, just after the
+        # node list had found /controller; whether the controller still ran was not asked
         topics = retry(lambda: run('ros2', 'topic', 'list', '--no-daemon', '--spin-time', '2', env=env),
                        lambda r: '/instrument/actuator/servo_jf' in r.stdout.split(), timeout=30)
         assert {'/instrument/actuator/servo_jf', '/grip/estimated_force', '/diagnostics'} <= \
-            set(topics.stdout.split()), topics.stdout
+            set(topics.stdout.split()), (topics.stdout, process_report(proc, log))
         # ros2lifecycle: imports, lists its verbs, and finds the controller, a lifecycle node
         helped = run('ros2', 'lifecycle', '--help', env=env)
         assert helped.returncode == 0, helped.stderr
@@ -115,15 +119,38 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
                                       '2', env=env),
                           lambda r: '/controller' in r.stdout.split(), timeout=30)
         assert lifecycle.returncode == 0, lifecycle.stderr
-        assert '/controller' in lifecycle.stdout.split(), lifecycle.stdout
+        assert '/controller' in lifecycle.stdout.split(), (lifecycle.stdout, process_report(proc, log))
         assert proc.poll() is None
     finally:
         # ros2 run does not pass SIGINT on to its child: signal the process group.
         code = stop(proc, signal.SIGINT, group=True)
         stop_daemon(env)
-    log = (tmp_path / 'controller.log').read_text()
-    assert code == 0, log
-    assert 'Traceback' not in log, log
+    text = log.read_text()
+    assert code == 0, text
+    assert 'Traceback' not in text, text
+
+
+def test_a_failed_discovery_reports_whether_the_node_runs_and_where_it_is(tmp_path):
+    """:func:`process_report`, for a test that fails on what a CLI call did not find."""
+    require_ros_tools()
+    log = tmp_path / 'node.log'
+    waiting = ('import faulthandler, signal, time; '
+               'faulthandler.register(signal.SIGUSR1, all_threads=True); '
+               'print("ready", flush=True); time.sleep(120)')
+    proc = start(sys.executable, '-c', waiting, log=log)
+    try:
+        assert wait_until(lambda: 'ready' in log.read_text(), timeout=30), log.read_text()
+        report = process_report(proc, log)
+        assert report.startswith('the command runs'), report
+        assert 'Python stacks asked into the log' in report, report
+        assert 'File "<string>", line 1 in <module>' in report, report   # faulthandler's dump
+        if shutil.which('gdb'):
+            assert re.search(r'^#\d+ +(0x[0-9a-f]+ in )?\w', report, re.M), report   # gdb's frames
+        else:
+            assert 'no gdb on this machine' in report, report
+    finally:
+        stop(proc, signal.SIGKILL)
+    assert process_report(proc, log).startswith('the command exited -9')
 
 
 def test_dev_ros2_runs_the_cli_from_the_callers_directory(tmp_path):
