@@ -483,7 +483,7 @@ def test_a_ctrl_c_a_c_extension_wrapped_is_still_an_interrupt(tmp_path, capsys, 
     monkeypatch.setattr(signal, 'signal', lambda *args: None)    # the demo's SIGTERM handler: not here
     assert cli_main(['demo', '--out', str(tmp_path / 'run'), '--domain-id', '7']) == 130
     assert 'interrupted' in capsys.readouterr().err
-    from grip_force_ros.cli.demo import interrupt_behind
+    from grip_force_ros.demo.recorder import interrupt_behind
     with pytest.raises(TypeError) as wrapped:
         _raise_as_pybind11_does()
     assert interrupt_behind(wrapped.value)

@@ -72,23 +72,6 @@ def _sigterm_as_interrupt() -> None:
         pass
 
 
-def interrupt_behind(exc: BaseException) -> bool:
-    """Whether a Ctrl-C (KeyboardInterrupt) is behind ``exc``, in its chain of causes.
-
-    A KeyboardInterrupt raised while a pybind11 extension converts its return value comes out
-    as a ``TypeError`` ("Unable to convert function return value to a Python type!") caused by
-    it: the fresh-clone CI of stop 32 saw the demo, interrupted inside rclpy's
-    ``deserialize_message``, exit 1 with that traceback instead of 130.
-    """
-    seen: set[int] = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return True
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return False
-
-
 def _interrupted_exit() -> int:
     print('interrupted: every node was stopped', file=sys.stderr)
     return 130
@@ -138,6 +121,7 @@ def print_report(result: dict, stream=sys.stdout) -> None:
 
 
 def run(args) -> int:
+    from grip_force_ros.demo.recorder import interrupt_behind
     from grip_force_ros.nodes.processes import ProcessError, reserve_domains
     from grip_force_ros.params import ParameterError, load_params_file
     from grip_force_ros.params.files import instrument_path

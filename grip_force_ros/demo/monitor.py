@@ -148,7 +148,7 @@ def monitor(duration: float | None = None, period: float = 0.2, stream: TextIO |
     import rclpy
     from rclpy.context import Context
 
-    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.demo.recorder import RecorderNode, SpinThread, interrupt_behind
 
     stream = stream or sys.stdout
     tty = stream.isatty() if tty is None else tty
@@ -180,6 +180,9 @@ def monitor(duration: float | None = None, period: float = 0.2, stream: TextIO |
                 break
     except KeyboardInterrupt:
         pass
+    except Exception as exc:
+        if not interrupt_behind(exc):     # a Ctrl-C inside ``latest``'s deserialization
+            raise
     finally:
         spinner.stop()
         node.destroy_node()
