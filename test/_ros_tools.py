@@ -252,6 +252,22 @@ def native_stacks(pid: int, timeout: float = 60.0) -> str:
     return got.stdout or got.stderr
 
 
+#: Fast DDS's deadlock of a participant's own threads (eProsima/Fast-DDS#6502, open): a
+#: receive thread, removing a remote writer under the PDP mutex, waits in ``unregister_timer``
+#: for the event thread, which waits for that mutex in ``check_remote_participant_liveliness``.
+#: The participant receives nothing from then on. Reproduced here with participants that come
+#: and go (docs/reliability.md, seventeenth round).
+FAST_DDS_6502 = ('check_remote_participant_liveliness', 'unregister_timer')
+
+
+def known_deadlock(native: str) -> str | None:
+    """Name a known deadlock seen in gdb's stacks of one process, or None."""
+    if all(frame in native for frame in FAST_DDS_6502):
+        return ('Fast DDS deadlock eProsima/Fast-DDS#6502: the event thread in '
+                'check_remote_participant_liveliness, a receive thread in unregister_timer')
+    return None
+
+
 def process_report(proc: subprocess.Popen, log: Path) -> str:
     """Tell what is known of a started command (:func:`start`) that a CLI call did not find.
 
@@ -267,8 +283,9 @@ def process_report(proc: subprocess.Popen, log: Path) -> str:
         except OSError:
             continue                                        # ended meanwhile
         asked = 'asked into the log' if request_stacks(pid) else 'not handled'
+        native = native_stacks(pid)
         lines += [f'--- pid {pid} {command.decode(errors="replace")}: Python stacks {asked}; '
-                  'native stacks:', native_stacks(pid)]
+                  f'{known_deadlock(native) or "no known deadlock"}; native stacks:', native]
     time.sleep(STACK_DUMP_WAIT)
     lines += ['--- log:', log.read_text(errors='replace')]
     return '\n'.join(lines)
