@@ -11,8 +11,10 @@ from types import SimpleNamespace
 import pytest
 
 from _ros_tools import require_ros_tools
+from grip_force_ros.control.inputs import TIMEOUT_PARAMS
+from grip_force_ros.faults import dvrk
 from grip_force_ros.faults.catalogue import OUTCOMES, catalogue
-from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, dvrk_cases,
+from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, _master_case, _Probe, dvrk_cases,
                                         lines_since, run_process_cases)
 from grip_force_ros.params.files import instrument_path
 
@@ -108,11 +110,62 @@ def test_the_kill_case_takes_the_held_current_from_the_sims_cut_line():
     assert problems == ['the sim carried no grip current at the kill']
 
 
+class _SilencedLoop:
+    """A stand-in for the master case: the master paused, the controller safe at once, and
+    the sim's states of the silence (``current`` A) reaching the probe ``delay`` s after the
+    pause (None: never)."""
+
+    def __init__(self, current: float, delay: float | None):
+        self.params = _TimeoutParams({name: 0.1 for name in TIMEOUT_PARAMS.values()})
+        self.mode = 'grip'
+        self.probe = SimpleNamespace(lock=threading.Lock(), states=[], latest=self.latest,
+                                     wait=lambda predicate, timeout: _Probe.wait(None, predicate, timeout))
+        self.procs = {'master': SimpleNamespace(pause=lambda: self.paused(current, delay),
+                                                resume=self.resumed)}
+
+    def latest(self, _name):
+        return {'values': {'mode': self.mode, 'reasons': 'stale master input: 100.4 ms old > 100.0 ms',
+                           'current_command_A': '0.24' if self.mode == 'grip' else '0.0'}}
+
+    def paused(self, current, delay):
+        self.mode, stopped = 'safe', time.time()
+        if delay is not None:
+            def arrive():
+                time.sleep(delay)
+                with self.probe.lock:
+                    self.probe.states += [(stopped + 0.41 + k * 0.01, current) for k in range(10)]
+            threading.Thread(target=arrive, daemon=True).start()
+
+    def resumed(self):
+        self.mode = 'grip'
+        with self.probe.lock:
+            self.probe.states += [(time.time() + k * 0.01, 0.24) for k in range(5)]
+
+
+class _TimeoutParams(dict):
+    expected_state_rate = 100.0        # Hz, the dVRK profile's
+    current_noise_std = 0.002          # A
+
+
+def test_the_master_case_waits_for_the_states_of_the_silence(monkeypatch):
+    """A loaded run (load 14.5, stop 33): 'the current did not ramp to 0', with no word of
+    whether any state of the silence had come in by the judging, 0.5 s after the safe
+    state. They are waited for, as in the kill case, and their absence is told apart."""
+    assert _master_case(_SilencedLoop(current=0.0, delay=1.5), detail := {}) == []
+    assert detail['states_while_silent'] == 10 and detail['largest_current_while_silent_A'] == 0.0
+    assert _master_case(_SilencedLoop(current=0.2, delay=0.0), {}) == ['the current did not ramp to 0']
+    monkeypatch.setattr(dvrk, 'KILL_STATE_WAIT', 0.5)
+    problems = _master_case(_SilencedLoop(current=0.0, delay=None), detail := {})
+    assert problems == ['no instrument state stamped 0.4 s after the master went silent within 0.5 s']
+    assert detail['states_while_silent'] == 0 and detail['largest_current_while_silent_A'] is None
+
+
 def test_dvrk_and_drive_faults_on_real_processes():
     require_ros_tools()
     details = {d['name']: d for d in run_process_cases(dvrk_cases(), instrument_path(None))}
     failed = {n: d.get('why') for n, d in details.items() if not d['passed']}
-    assert not failed, (failed, {n: d.get('logs') for n, d in details.items()})
+    assert not failed, (failed, {n: details[n] for n in failed},      # the failed cases' details
+                        {n: d.get('logs') for n, d in details.items()})
     for name in ('controller_sigkill_crtk', 'controller_sigkill_dvrk'):
         d = details[name]
         assert d['current_at_kill_A'] > 0.1                      # it was gripping

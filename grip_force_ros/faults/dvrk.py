@@ -60,8 +60,12 @@ STARVED_SLACK = 0.02
 SIM_CUT = re.compile(r'no command for (?P<silence>[0-9.]+) ms .*drive current cut'
                      r'(?: from (?P<held>-?[0-9.]+) A)?'
                      r'(?:.*not scheduled for (?P<starved>[0-9.]+) ms)?')
-#: Longest wait (s) for a sim state past KILL_TO_ZERO after the kill (a starved machine).
+#: Longest wait (s) for a sim state past KILL_TO_ZERO after the kill, or past SILENT_TO_ZERO
+#: after the master went silent (a starved machine).
 KILL_STATE_WAIT = 5.0
+#: From the master's silence to a current of 0 A (s): its 100 ms watchdog, the /diagnostics
+#: period and the safe ramp, with room for a loaded machine.
+SILENT_TO_ZERO = 0.4
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
 ZERO_NOISE_STD = 5.0
 #: How long (s) the ros2 CLI that sends a state command stays up after publishing it, so
@@ -419,10 +423,21 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
         problems.append(f'safe after {reacted:.3f} s, bound {bound:.3f} s')
     if not status or 'stale master' not in status['values'].get('reasons', ''):
         problems.append('the reason does not name the stale master')
-    with loop.probe.lock:
-        late = [i for t, i in loop.probe.states if t > stopped + 0.4]
+
+    def silent_states() -> list[float]:
+        with loop.probe.lock:
+            return [i for t, i in loop.probe.states if t > stopped + SILENT_TO_ZERO]
+    # on a starved machine the sim's states of that time (or the probe taking them) can come
+    # later still: wait for one, as the kill case does (a loaded run, load 14.5, failed here
+    # as "did not ramp" with its states not told)
+    loop.probe.wait(lambda: bool(silent_states()), KILL_STATE_WAIT)
+    late = silent_states()
+    detail['states_while_silent'] = len(late)
     detail['largest_current_while_silent_A'] = round(max(map(abs, late)), 4) if late else None
-    if not late or max(map(abs, late)) >= _zero_current(loop):
+    if not late:
+        problems.append(f'no instrument state stamped {SILENT_TO_ZERO} s after the master '
+                        f'went silent within {KILL_STATE_WAIT} s')
+    elif max(map(abs, late)) >= _zero_current(loop):
         problems.append('the current did not ramp to 0')
     master.resume()
     if not loop.probe.wait(lambda: _gripping(loop.probe), 10.0):
