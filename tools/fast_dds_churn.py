@@ -91,6 +91,8 @@ def churn(workers: int, seconds: float) -> None:
             rclpy.shutdown(context=context)
             with lock:
                 count[0] += 1
+                if count[0] % 100 == 0:
+                    print(f'participants created and removed: {count[0]}', flush=True)
 
     threads = [threading.Thread(target=worker, args=(i,), daemon=True) for i in range(workers)]
     for thread in threads:
@@ -149,7 +151,8 @@ def watch(args) -> int:
                                     timeout=120).stdout
             (out / 'long_gdb.txt').write_text(stacks)
             named = all(frame in stacks for frame in DEADLOCK_FRAMES)
-            print(f'deaf after {elapsed:.0f} s ({echoes["count"]} echoes): '
+            print(f'deaf after {elapsed:.0f} s ({echoes["count"]} echoes, '
+                  f'{(out / "churn.log").read_text().strip().splitlines()[-1:]}): '
                   f'{"the deadlock of eProsima/Fast-DDS#6502" if named else "another cause"}; '
                   f'stacks in {out / "long_gdb.txt"}', flush=True)
         else:
