@@ -204,7 +204,9 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
     """Stop a ``ros2 launch`` process with SIGINT, asking a node that hangs for its stacks.
 
     A node of it still running shortly before launch's SIGTERM is asked for its threads'
-    stacks (into the launch log); then wait as :func:`stop`.
+    stacks (into the launch log) and its native stacks are taken (gdb: a Fast DDS thread's
+    deadlock shows only there); then wait as :func:`stop`, and add the native stacks to the
+    log once launch has ended.
 
     Launch kills a node that ignores its SIGINT and SIGTERM without asking where it was (a
     loaded run, stop 32: the master). ``run_node``'s own teardown limit covers a hang after
@@ -216,9 +218,15 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
         return proc.wait(timeout=LAUNCH_SIGTERM_AFTER - 0.5)
     except subprocess.TimeoutExpired:
         pass
-    for started in _STARTED.finditer(log.read_text(errors='replace')):
-        request_stacks(int(started['pid']))     # only a live process that handles it
-    return stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
+    launched = [int(started['pid']) for started in _STARTED.finditer(log.read_text(errors='replace'))]
+    stuck = [pid for pid in launched if request_stacks(pid)]   # a live process that handles it
+    native = {pid: native_stacks(pid) for pid in stuck}   # before launch's SIGTERM comes through
+    code = stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
+    with open(log, 'a') as out:                   # launch has ended: the log is ours
+        for pid, stacks in native.items():
+            named = known_deadlock(stacks) or 'no known deadlock'
+            out.write(f'--- native stacks of pid {pid} (gdb): {named}\n{stacks}\n')
+    return code
 
 
 def process_tree(pid: int) -> list[int]:

@@ -102,6 +102,13 @@ def churn(workers: int, seconds: float) -> None:
     print(f'participants created and removed: {count[0]}', flush=True)
 
 
+def churned(out: Path) -> str:
+    """Return the churn process's last count, from its log (Fast DDS writes its lines there too)."""
+    counts = [line for line in (out / 'churn.log').read_text(errors='replace').splitlines()
+              if line.startswith('participants created and removed')]
+    return counts[-1] if counts else 'no participant count yet'
+
+
 def watch(args) -> int:
     """Start both processes, ping the long-lived one, and report; 1 when it went deaf."""
     import rclpy
@@ -151,13 +158,12 @@ def watch(args) -> int:
                                     timeout=120).stdout
             (out / 'long_gdb.txt').write_text(stacks)
             named = all(frame in stacks for frame in DEADLOCK_FRAMES)
-            print(f'deaf after {elapsed:.0f} s ({echoes["count"]} echoes, '
-                  f'{(out / "churn.log").read_text().strip().splitlines()[-1:]}): '
+            print(f'deaf after {elapsed:.0f} s ({echoes["count"]} echoes, {churned(out)}): '
                   f'{"the deadlock of eProsima/Fast-DDS#6502" if named else "another cause"}; '
                   f'stacks in {out / "long_gdb.txt"}', flush=True)
         else:
-            print(f'no deaf participant in {elapsed:.0f} s ({echoes["count"]} echoes); '
-                  f'{(out / "churn.log").read_text().strip().splitlines()[-1:]}', flush=True)
+            print(f'no deaf participant in {elapsed:.0f} s ({echoes["count"]} echoes, {churned(out)})',
+                  flush=True)
     finally:
         churning.kill()
         lived.kill()
