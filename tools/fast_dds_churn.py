@@ -125,15 +125,16 @@ def watch(args) -> int:
     sec, nanosec = divmod(round(args.lease * 1e9), 1_000_000_000)
     asec, ananosec = divmod(round(args.lease * 1e9 / 4), 1_000_000_000)
     profile.write_text(PROFILE.format(sec=sec, nanosec=nanosec, asec=asec, ananosec=ananosec))
-    me = [sys.executable, __file__]
-    lived = subprocess.Popen(me + ['--role', 'long'], env=env, stdout=open(out / 'long.log', 'w'),
-                             stderr=subprocess.STDOUT)
-    churning = subprocess.Popen(me + ['--role', 'churn', '--workers', str(args.workers), '--seconds',
-                                      str(args.seconds)],
-                                env=dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile)),
-                                stdout=open(out / 'churn.log', 'w'), stderr=subprocess.STDOUT)
     rclpy.init()
     node = rclpy.create_node('pinger')
+    me = [sys.executable, __file__]
+    with open(out / 'long.log', 'w') as long_log, open(out / 'churn.log', 'w') as churn_log:
+        lived = subprocess.Popen(me + ['--role', 'long'], env=env, stdout=long_log,
+                                 stderr=subprocess.STDOUT)
+        churning = subprocess.Popen(me + ['--role', 'churn', '--workers', str(args.workers),
+                                          '--seconds', str(args.seconds)],
+                                    env=dict(env, FASTRTPS_DEFAULT_PROFILES_FILE=str(profile)),
+                                    stdout=churn_log, stderr=subprocess.STDOUT)
     echoes = {'last': time.monotonic(), 'count': 0}
 
     def echoed(_msg) -> None:
@@ -183,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--domain-id', type=int, default=221, help='ROS domain (unless ROS_DOMAIN_ID is set)')
     parser.add_argument('--out', help='folder for the logs and the stacks (default: a new temporary one)')
     args = parser.parse_args(argv)
+    if not 0 <= args.domain_id <= 232:                # Fast DDS's ports for larger ones overflow
+        parser.error(f'--domain-id {args.domain_id}: 0 to 232')
     if args.role == 'long':
         long_lived()
         return 0
