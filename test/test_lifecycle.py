@@ -19,8 +19,8 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, require_ros_tools, retry,
-                        ros_env, run, start, stop, stop_daemon)
+from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, process_report, require_ros_tools,
+                        retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
 from grip_force_ros.faults.probe import LimitMonitor
 from grip_force_ros.nodes.common import RECORD_QOS
@@ -81,6 +81,7 @@ def rig(tmp_path):
     require_ros_tools()
     env = ros_env()
     procs = []
+    logs = {}                       # pid -> its log
 
     class Rig:
         probe: Recorder
@@ -95,6 +96,7 @@ def rig(tmp_path):
                          '--params-file', str(CONFIG), *args, log=tmp_path / f'{name}.log',
                          env=env)
             procs.append(proc)
+            logs[proc.pid] = tmp_path / f'{name}.log'
             return proc
 
         def controller(self, *args):
@@ -116,9 +118,23 @@ def rig(tmp_path):
                                  f'/{topics.MASTER_JS}', 'sensor_msgs/msg/JointState', msg,
                                  log=tmp_path / 'master.log', env=env)
             procs.append(self._master)
+            logs[self._master.pid] = tmp_path / 'master.log'
 
         def log(self, name):
             return (tmp_path / f'{name}.log').read_text()
+
+        def report(self, topic):
+            """Tell what is known when ``ros2`` CLI calls did not see ``topic`` (a loaded run of
+            stop 33: 30 s of "Unknown topic" for the topic the sim and the probe subscribe):
+            the probe's own view of it, one CLI given 10 s, each process's state and stacks."""
+            seen = self.probe.get_publishers_info_by_topic(topic) + \
+                self.probe.get_subscriptions_info_by_topic(topic)
+            slow = cli_once(env, 'topic', 'info', topic, '--no-daemon', '--spin-time', '10')
+            return '\n'.join([
+                f'the probe (in pytest) sees on {topic}: {sorted(i.node_name for i in seen)}; '
+                f'nodes {sorted(self.probe.get_node_names())}',
+                f'one CLI given 10 s: {(slow.stdout + slow.stderr).strip()}',
+                *(process_report(proc, logs[proc.pid]) for proc in procs if proc.poll() is None)])
 
     rig = Rig()
     rig.env, rig.tmp = env, tmp_path
@@ -348,9 +364,17 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
     time.sleep(1.0)
     assert probe.commands == []
     servo = f'/{topics.SERVO_CURRENT}'
+    # the sim's subscription and the probe's (this test's): a new CLI process has to discover
+    # both, and the controller's participant, within its 2 s; tried again until it has. (It
+    # waited for "Subscription count: 1", which two subscriptions never give: every run spent
+    # its 30 s and judged the last try, and a loaded run's last try had not discovered the
+    # topic yet, "Unknown topic".)
     info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
-                 lambda r: 'Subscription count: 1' in r.stdout, timeout=30)   # the sim's
-    assert 'Publisher count: 0' in info.stdout, info
+                 lambda r: 'Subscription count: 2' in r.stdout, timeout=60)
+    assert 'Subscription count: 2' in info.stdout, (info, rig.report(servo))
+    assert 'Publisher count: 0' in info.stdout, (info, rig.report(servo))
+    assert wait_until(lambda: 'controller' in probe.get_node_names(), 30.0)
+    assert probe.count_publishers(servo) == 0      # and in the probe's own view of the graph
     recent = [i for t, i in probe.currents[-200:]]
     assert recent and max(abs(i) for i in recent) < 6 * CURRENT_NOISE, recent[-5:]
     ok, message = trigger(env, 'tare', attempts=5)
