@@ -220,12 +220,11 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
         pass
     launched = [int(started['pid']) for started in _STARTED.finditer(log.read_text(errors='replace'))]
     stuck = [pid for pid in launched if request_stacks(pid)]   # a live process that handles it
-    native = {pid: native_stacks(pid) for pid in stuck}   # before launch's SIGTERM comes through
+    native = {pid: named_native_stacks(pid) for pid in stuck}   # before launch's SIGTERM comes
     code = stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
     with open(log, 'a') as out:                   # launch has ended: the log is ours
         for pid, stacks in native.items():
-            named = known_deadlock(stacks) or 'no known deadlock'
-            out.write(f'--- native stacks of pid {pid} (gdb): {named}\n{stacks}\n')
+            out.write(f'--- native stacks of pid {pid} (gdb): {stacks}\n')
     return code
 
 
@@ -276,6 +275,12 @@ def known_deadlock(native: str) -> str | None:
     return None
 
 
+def named_native_stacks(pid: int) -> str:
+    """Return :func:`native_stacks` of ``pid`` after the name of a known deadlock they show."""
+    stacks = native_stacks(pid)
+    return f'{known_deadlock(stacks) or "no known deadlock"}\n{stacks}'
+
+
 def process_report(proc: subprocess.Popen, log: Path) -> str:
     """Tell what is known of a started command (:func:`start`) that a CLI call did not find.
 
@@ -291,9 +296,8 @@ def process_report(proc: subprocess.Popen, log: Path) -> str:
         except OSError:
             continue                                        # ended meanwhile
         asked = 'asked into the log' if request_stacks(pid) else 'not handled'
-        native = native_stacks(pid)
-        lines += [f'--- pid {pid} {command.decode(errors="replace")}: Python stacks {asked}; '
-                  f'{known_deadlock(native) or "no known deadlock"}; native stacks:', native]
+        lines.append(f'--- pid {pid} {command.decode(errors="replace")}: Python stacks {asked}; '
+                     f'native stacks (gdb): {named_native_stacks(pid)}')
     time.sleep(STACK_DUMP_WAIT)
     lines += ['--- log:', log.read_text(errors='replace')]
     return '\n'.join(lines)

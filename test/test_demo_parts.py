@@ -11,6 +11,7 @@ import numpy as np
 import psutil
 import pytest
 
+from _interrupts import raise_as_pybind11_does
 from grip_force_ros import topics
 from grip_force_ros.demo import analysis
 from grip_force_ros.demo.compare import calibration_csv, plant_scales
@@ -466,26 +467,18 @@ def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
         assert 'is not empty' in capsys.readouterr().err
 
 
-def _raise_as_pybind11_does(*args, **kwargs):
-    """A Ctrl-C inside a pybind11 conversion: a TypeError caused by the KeyboardInterrupt."""
-    try:
-        raise KeyboardInterrupt
-    except KeyboardInterrupt as interrupt:
-        raise TypeError('Unable to convert function return value to a Python type!') from interrupt
-
-
 def test_a_ctrl_c_a_c_extension_wrapped_is_still_an_interrupt(tmp_path, capsys, monkeypatch):
     """Fresh-clone CI, stop 32: the demo, interrupted inside rclpy's deserialize_message, exited 1
     with pybind11's TypeError (caused by the KeyboardInterrupt) instead of 130."""
     from grip_force_ros.cli import main as cli_main
     from grip_force_ros.demo import run as demo_run
-    monkeypatch.setattr(demo_run, 'run_task', _raise_as_pybind11_does)
+    monkeypatch.setattr(demo_run, 'run_task', raise_as_pybind11_does)
     monkeypatch.setattr(signal, 'signal', lambda *args: None)    # the demo's SIGTERM handler: not here
     assert cli_main(['demo', '--out', str(tmp_path / 'run'), '--domain-id', '7']) == 130
     assert 'interrupted' in capsys.readouterr().err
     from grip_force_ros.demo.recorder import interrupt_behind
     with pytest.raises(TypeError) as wrapped:
-        _raise_as_pybind11_does()
+        raise_as_pybind11_does()
     assert interrupt_behind(wrapped.value)
     assert interrupt_behind(KeyboardInterrupt())
     try:

@@ -6,6 +6,7 @@ import time
 
 import pytest
 
+from _interrupts import raise_as_pybind11_does
 from grip_force_ros import topics
 from grip_force_ros.demo.monitor import Snapshot, controller_mode, plain_line, render
 
@@ -96,20 +97,12 @@ def test_monitor_redraws_in_place_on_a_tty():
     assert 'no data' in text
 
 
-def _interrupted_inside_pybind11(*args):
-    """A Ctrl-C while rclpy's deserialize_message converts its value: pybind11's TypeError."""
-    try:
-        raise KeyboardInterrupt
-    except KeyboardInterrupt as interrupt:
-        raise TypeError('Unable to convert function return value to a Python type!') from interrupt
-
-
 def test_a_ctrl_c_inside_a_deserialization_ends_the_monitor_as_a_ctrl_c(monkeypatch):
     """The demo's CI failure of stop 32, in the monitor: its main thread deserializes too."""
     from grip_force_ros.demo import monitor as monitor_module
 
     domain = int(os.environ['ROS_DOMAIN_ID'])
-    monkeypatch.setattr(monitor_module._Collector, 'snapshot', _interrupted_inside_pybind11)
+    monkeypatch.setattr(monitor_module._Collector, 'snapshot', raise_as_pybind11_does)
     assert monitor_module.monitor(duration=5.0, period=0.05, stream=io.StringIO(), domain_id=domain) == 0
     monkeypatch.setattr(monitor_module._Collector, 'snapshot', lambda self: int('not a number'))
     with pytest.raises(ValueError):                                  # a real error still raises
