@@ -50,11 +50,12 @@ class Recorder(Node):
         self.commands: list[tuple[float, float, float]] = []   # (receipt s, stamp s, A)
         self.currents: list[tuple[float, float]] = []          # (receipt s, sim's measured A)
         self.forces: list[float] = []                          # N, the controller's estimate
+        # the controller's steps: (receipt s, its clock at the step s), from the estimate's stamp
+        self.steps: list[tuple[float, float]] = []
         self.status: list[str] = []                            # the controller's messages
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
-        self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE,
-                                 lambda m: self.forces.append(m.wrench.force.z), RECORD_QOS)
+        self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_force, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, RECORD_QOS)
 
     def now(self) -> float:
@@ -63,6 +64,10 @@ class Recorder(Node):
     def _on_command(self, msg) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         self.commands.append((self.now(), stamp, float(msg.effort[0])))
+
+    def _on_force(self, msg) -> None:
+        self.forces.append(msg.wrench.force.z)
+        self.steps.append((self.now(), msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9))
 
     def _on_current(self, msg) -> None:
         self.currents.append((self.now(), float(msg.effort[0])))
@@ -226,24 +231,71 @@ def wait_gripping(probe, timeout=60.0):
                       and abs(probe.forces[-1] - target) < 0.1 * target, timeout)
 
 
-def slew_violations(commands):
-    """Every pair of commands against the slew limit (the fault probe's judge), each with the
-    commands around it ((receipt s, stamp s, A), times from the first of them)."""
+def slew_violations(commands, steps):
+    """Every command against the limits, judged as the fault probe judges them live.
+
+    ``commands`` are (receipt s, stamp s, A), ``steps`` the controller's steps (receipt s,
+    its clock at the step s). A command carries the stamp of the state it answers (the
+    sim's clock), or the controller's own for a step on its timer or of the deactivation
+    ramp: those stamps mix two sources and can run backwards, so they do not give the
+    controller's step times. The stamps of its estimate do (its clock at each step): the
+    monitor bounds a step's change by the slew limit over the step that sent it. With
+    violations, the commands and steps received around each step beyond one period's slew
+    follow them ((receipt, stamp, A) and (receipt, stamp), times from the first of them).
+    """
     period = 1.0 / PARAMS.expected_state_rate
     monitor = LimitMonitor(PARAMS.max_current, PARAMS.max_current_slew * period, period,
                            PARAMS.watchdog_timeout)
-    found = []
-    for k, (receipt, stamp, value) in enumerate(commands):
-        monitor.check(value, receipt)
-        # the controller steps on each state and its command carries that state's stamp:
-        # the stamps' intervals are its step times (the probe has its target forces too)
-        monitor.note_step(receipt, stamp)
-        if len(monitor.violations) > len(found):
-            around = commands[max(k - 3, 0):k + 2]
-            t0 = around[0][0]
-            found.append((monitor.violations[-1],
-                          [(round(r - t0, 4), round(s - t0, 4), round(a, 4)) for r, s, a in around]))
+    # in order of receipt; a step's estimate goes out after its command (a tie: command first)
+    events = sorted([(r, 0, s, a) for r, s, a in commands] + [(r, 1, s, None) for r, s in steps],
+                    key=lambda e: (e[0], e[1]))
+    for receipt, is_step, stamp, value in events:
+        if is_step:
+            monitor.note_step(receipt, stamp)
+        else:
+            monitor.check(value, receipt)
+    found = list(monitor.violations)
+    if not found:
+        return found
+    for k in range(1, len(commands)):
+        if abs(commands[k][2] - commands[k - 1][2]) > monitor.max_step:
+            receipt = commands[k][0]
+            near = [c for c in commands if abs(c[0] - receipt) < 0.005]
+            near_steps = [t for t in steps if abs(t[0] - receipt) < 0.005]
+            t0 = near[0][0]
+            found.append({'commands': [(round(r - t0, 5), round(s - t0, 5), round(a, 4)) for r, s, a in near],
+                          'steps': [(round(r - t0, 5), round(s - t0, 5)) for r, s in near_steps]})
     return found
+
+
+def test_slew_judge_uses_the_controllers_step_times():
+    """The judge of the deactivation test, on the figures of its stop-33 failure: a ramp step
+    of 300 A/s over the controller's 1.144 ms step (0.343 A) between commands whose own
+    stamps run backwards is within the limit; a 0.7 A step over a 1 ms step is not."""
+    period = 1.0 / PARAMS.expected_state_rate                 # s
+    slew_step = PARAMS.max_current_slew * period              # A, one nominal step's slew
+    assert PARAMS.max_current_slew * 1.144e-3 > slew_step      # the step is beyond one period's
+
+    def ramp(changes, step_times):
+        commands, steps, current, clock, receipt = [], [], 0.5, 100.0, 0.0
+        for k, (change, dt) in enumerate(zip(changes, step_times)):
+            clock += dt
+            receipt += dt
+            current += change
+            # the commands' own stamps: 0.35 s old, running backwards (as in the failure)
+            commands.append((receipt, clock - 0.35 - 1.6e-3 * k, current))
+            steps.append((receipt + 1e-5, clock))
+        return commands, steps
+
+    changes = [-slew_step * 0.5, -PARAMS.max_current_slew * 1.144e-3, -slew_step * 0.2, 0.0]
+    commands, steps = ramp(changes, [period, 1.144e-3, period, period])
+    assert slew_violations(commands, steps) == []
+    commands, steps = ramp([0.0, -0.7, 0.0, 0.0], [period] * 4)
+    found = slew_violations(commands, steps)
+    assert found and 'beyond the slew limit' in found[0], found
+    # a command past max_current is caught whatever the steps
+    commands, steps = ramp([0.0, PARAMS.max_current, 0.0], [period] * 3)
+    assert any('above max_current' in str(v) for v in slew_violations(commands, steps))
 
 
 def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
@@ -294,7 +346,9 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
     # bumpless: a fresh controller from 0 A, its first step over the nominal state period,
     # so one slew step at most (0.1 A, below the 0.2-0.3 A the needle grip held)
     assert abs(first) <= PARAMS.max_current_slew / PARAMS.expected_state_rate + 1e-12, first
-    assert slew_violations(probe.commands) == [], slew_violations(probe.commands)[:5]
+    assert len(probe.steps) > len(probe.commands) // 2, (len(probe.steps), len(probe.commands))
+    found = slew_violations(probe.commands, probe.steps)
+    assert found == [], found[:6]
     assert ctl.poll() is None, rig.log('controller')
 
     # cleanup releases the topics: back to unconfigured, no publisher on the drive's topic
