@@ -269,32 +269,35 @@ def slew_violations(commands, steps):
 
 
 def test_slew_judge_uses_the_controllers_step_times():
-    """The judge of the deactivation test, on the figures of its stop-33 failure: a ramp step
-    of 300 A/s over the controller's 1.144 ms step (0.343 A) between commands whose own
-    stamps run backwards is within the limit; a 0.7 A step over a 1 ms step is not."""
+    """The judge of the deactivation test, on the figures of its stop-33 failure: a step of
+    -0.343 A, which the controller's slew limit allows over its ramp step of 3.43 ms (100 A/s),
+    between commands whose own stamps were 0.5 ms apart and received in a backlog, is within
+    the limit; a 0.7 A step over a 1 ms step and a command past max_current are not."""
     period = 1.0 / PARAMS.expected_state_rate                 # s
-    slew_step = PARAMS.max_current_slew * period              # A, one nominal step's slew
-    assert PARAMS.max_current_slew * 1.144e-3 > slew_step      # the step is beyond one period's
+    slew = PARAMS.max_current_slew                            # A/s
+    assert slew * 3.43e-3 > slew * period * 1.5               # beyond what 0.5 ms stamps allow
 
-    def ramp(changes, step_times):
-        commands, steps, current, clock, receipt = [], [], 0.5, 100.0, 0.0
-        for k, (change, dt) in enumerate(zip(changes, step_times)):
-            clock += dt
-            receipt += dt
+    def ramp(changes, step_times, stamp_steps):
+        """Commands received 70 us apart (a backlog), each followed by its step's estimate."""
+        commands, steps, current, clock, stamp = [], [], 0.5, 100.0, 99.65
+        for k, (change, dt, stamp_step) in enumerate(zip(changes, step_times, stamp_steps)):
+            clock += dt                   # the controller's clock at the step (s)
+            stamp += stamp_step           # the command's own stamp: the state it answers (s)
             current += change
-            # the commands' own stamps: 0.35 s old, running backwards (as in the failure)
-            commands.append((receipt, clock - 0.35 - 1.6e-3 * k, current))
-            steps.append((receipt + 1e-5, clock))
+            commands.append((7e-5 * k, stamp, current))
+            steps.append((7e-5 * k + 1e-5, clock))
         return commands, steps
 
-    changes = [-slew_step * 0.5, -PARAMS.max_current_slew * 1.144e-3, -slew_step * 0.2, 0.0]
-    commands, steps = ramp(changes, [period, 1.144e-3, period, period])
+    # the failure: one nominal step, the 3.43 ms ramp step, the rest to 0 A; the stamps'
+    # intervals 1 ms, 0.5 ms, then backwards (-0.6 ms)
+    changes = [0.0, -slew * period, -slew * 3.43e-3, -(0.5 - slew * (period + 3.43e-3))]
+    commands, steps = ramp(changes, [period, period, 3.43e-3, period],
+                           [period, period, 0.5e-3, -0.6e-3])
     assert slew_violations(commands, steps) == []
-    commands, steps = ramp([0.0, -0.7, 0.0, 0.0], [period] * 4)
+    commands, steps = ramp([0.0, -0.7, 0.0], [period] * 3, [period] * 3)
     found = slew_violations(commands, steps)
     assert found and 'beyond the slew limit' in found[0], found
-    # a command past max_current is caught whatever the steps
-    commands, steps = ramp([0.0, PARAMS.max_current, 0.0], [period] * 3)
+    commands, steps = ramp([0.0, PARAMS.max_current, 0.0], [period] * 3, [period] * 3)
     assert any('above max_current' in str(v) for v in slew_violations(commands, steps))
 
 
