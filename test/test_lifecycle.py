@@ -23,7 +23,7 @@ from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, process_repor
                         retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
 from grip_force_ros.faults.probe import LimitMonitor
-from grip_force_ros.nodes.common import RECORD_QOS
+from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
 from grip_force_ros.nodes.controller import ControllerNode
 from grip_force_ros.nodes.harness import RosRunner, wait_until
 from grip_force_ros.nodes.processes import DEFAULT_RT_PRIORITY, can_use_realtime, master_rt_priority
@@ -62,12 +62,11 @@ class Recorder(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_command(self, msg) -> None:
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.commands.append((self.now(), stamp, float(msg.effort[0])))
+        self.commands.append((self.now(), stamp_seconds(msg.header.stamp), float(msg.effort[0])))
 
     def _on_force(self, msg) -> None:
         self.forces.append(msg.wrench.force.z)
-        self.steps.append((self.now(), msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9))
+        self.steps.append((self.now(), stamp_seconds(msg.header.stamp)))
 
     def _on_current(self, msg) -> None:
         self.currents.append((self.now(), float(msg.effort[0])))
