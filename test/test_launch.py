@@ -13,8 +13,8 @@ import re
 
 import pytest
 
-from _ros_tools import (ROOT, cli, launch_exit_codes, lifecycle_transition, require_ros_tools,
-                        retry, ros_env, run, start, stop_daemon, stop_launch)
+from _ros_tools import (ROOT, cli, known_deadlock, launch_exit_codes, lifecycle_transition,
+                        require_ros_tools, retry, ros_env, run, start, stop_daemon, stop_launch)
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 
@@ -98,6 +98,14 @@ def _wait_for_param(node, name, env, timeout=90.0):
                  lambda r: r.returncode == 0, timeout=timeout)
 
 
+def _named(text: str) -> str:
+    """A launch log, after the name of a known deadlock its nodes' native stacks show.
+
+    A node whose teardown runs long writes them to the log (``watch_own_teardown``).
+    """
+    return f'{known_deadlock(text) or "no known deadlock in the log"}\n{text}'
+
+
 def _stop_launch(proc, log, env):
     try:
         code = stop_launch(proc, log)     # SIGINT to the launch process only
@@ -134,7 +142,7 @@ def test_grasp_launch_echo_param_and_clean_exit(tmp_path):
     finally:
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
-    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
     assert 'Traceback' not in text, text
 
 
@@ -169,7 +177,7 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
     finally:
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
-    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
 
 
 def test_launch_rejects_unknown_interface_and_instrument(tmp_path):
@@ -214,7 +222,7 @@ def test_grasp_launch_dvrk_profile_as_psm2_and_mtmr(tmp_path):
     finally:
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
-    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
     assert 'asked arm PSM2 to enable' in text and 'Traceback' not in text
 
 
@@ -234,7 +242,7 @@ def test_controller_launch_alone(tmp_path):
     finally:
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
-    assert launch_exit_codes(text) == {'controller': 0}, text
+    assert launch_exit_codes(text) == {'controller': 0}, _named(text)
 
 
 def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
@@ -271,7 +279,7 @@ def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
     finally:
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
-    assert launch_exit_codes(text) == {name: 0 for name in NODES}, text
+    assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
     # the launch_ros LifecycleNode's transition events, as launch logs them
     for seen in ('controller: unconfigured -> configuring', 'controller: inactive -> activating'):
         assert seen in text, text

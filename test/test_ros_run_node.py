@@ -8,6 +8,8 @@ run (stop 22) found the other order: the callback's error just before the contex
 from __future__ import annotations
 
 import gc
+import re
+import shutil
 import subprocess
 import sys
 import threading
@@ -221,27 +223,52 @@ sys.exit(code)
 
 
 def _run_teardown(destroy: float, after: float):
+    """Run the script; its result, the time it took (s) and its pid."""
     started = time.monotonic()
-    done = subprocess.run([sys.executable, '-c', _TEARDOWN_SCRIPT.format(destroy=destroy, after=after)],
-                          capture_output=True, text=True, timeout=120)
-    return done, time.monotonic() - started
+    proc = subprocess.Popen([sys.executable, '-c', _TEARDOWN_SCRIPT.format(destroy=destroy, after=after)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    done = subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+    return done, time.monotonic() - started, proc.pid
+
+
+def _watchers_of(pid: int) -> list[str]:
+    """Command lines of teardown watchers (``watch_own_teardown``) still watching ``pid``."""
+    found = subprocess.run(['pgrep', '-af', f'teardown-watch [0-9.]+ {pid}$'],
+                           capture_output=True, text=True)
+    return found.stdout.splitlines()
 
 
 def test_a_teardown_that_does_not_end_leaves_its_stacks_and_exits_1():
     """Stop 32: the master, deaf to SIGINT and SIGTERM after its loop, was SIGKILLed by
     ``ros2 launch`` with nothing in its log. A teardown stuck past the limit (here: 60 s in
-    ``destroy_node``, limit 0.5 s) ends the process with code 1 and every thread's stack."""
-    done, took = _run_teardown(destroy=60.0, after=0.0)
+    ``destroy_node``, limit 0.5 s) ends the process with code 1 and every thread's stack:
+    Python's (faulthandler) at the limit, and before that the native ones (gdb), which
+    say where in the middleware a real teardown waits (stop 35: the controller's
+    ``destroy_node`` ran past the limit in a loaded run, and its Python stack alone could not
+    tell a Fast DDS deadlock from a slow teardown)."""
+    done, took, pid = _run_teardown(destroy=60.0, after=0.0)
     assert done.returncode == 1, (done.returncode, done.stdout, done.stderr)
     assert took < 60.0                        # not waited out: ended by the limit
     assert 'Timeout (0:00:00.500000)!' in done.stderr, done.stderr
     assert 'in destroy_node' in done.stderr, done.stderr     # where it was stuck
     assert 'ended with' not in done.stdout
+    assert f'[teardown] pid {pid} still tearing down after 0.375 s' in done.stderr, done.stderr
+    if shutil.which('gdb'):                   # every thread's native frames, numbered by gdb
+        assert re.search(r'^Thread 1 .*\n#0 ', done.stderr, re.M), done.stderr
+    else:
+        assert '[teardown] no gdb on this machine' in done.stderr, done.stderr
 
 
 def test_a_teardown_within_the_limit_leaves_no_timer_behind():
-    """``run_node`` also runs inside test processes: the limit must not outlive the teardown."""
-    done, _ = _run_teardown(destroy=0.0, after=1.5)
+    """``run_node`` also runs inside test processes: the limit must not outlive the teardown,
+    nor must the watcher of its native stacks (nor its ``sleep``)."""
+    done, _, pid = _run_teardown(destroy=0.0, after=1.5)
     assert done.returncode == 0, (done.returncode, done.stdout, done.stderr)
     assert 'ended with 0' in done.stdout
     assert 'Timeout' not in done.stderr, done.stderr
+    assert '[teardown]' not in done.stderr, done.stderr     # alive 1.5 s past the 0.375 s watch
+    assert _watchers_of(pid) == []

@@ -33,6 +33,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 
 from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
+from grip_force_ros.nodes.processes import stop_watch, watch_own_teardown
 
 
 def state_qos(depth: int) -> QoSProfile:
@@ -211,6 +212,13 @@ def unfreeze_heap() -> None:
 #: before ``ros2 launch`` does (15 s), so the stacks reach the log; docs/reliability.md
 #: (sixteenth round) gives the teardown times it is set against.
 TEARDOWN_LIMIT = 4.0
+#: Fraction of :data:`TEARDOWN_LIMIT` after which a teardown still running has its native
+#: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).
+#: Stop 35: the controller's ``destroy_node`` ran past the limit in a loaded run, and its
+#: Python stack could not tell a Fast DDS deadlock from a slow teardown. gdb stops the process
+#: while it reads the stacks (seconds on a loaded machine), so it comes late: 3 s, 3.8 times the
+#: slowest loaded teardown measured (0.79 s, docs/reliability.md, sixteenth round).
+NATIVE_STACKS_AT = 0.75
 
 
 def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bool:
@@ -262,7 +270,9 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     finally:
         # A teardown that never ends (a process deaf to SIGINT and SIGTERM, killed by whoever
         # started it, with nothing in its log) ends here instead: stacks, then exit code 1.
+        # Before that, its native stacks too (where in the middleware it waits).
         faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
+        watcher = watch_own_teardown(NATIVE_STACKS_AT * TEARDOWN_LIMIT)
         try:
             close_node(executor, node)
             # Dropped here, inside the limit, not as the function returns: the EventsExecutor's
@@ -271,6 +281,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
             shutdown_once()
         finally:
             faulthandler.cancel_dump_traceback_later()
+            stop_watch(watcher)
     return 0
 
 

@@ -425,6 +425,61 @@ def request_stacks(pid: int) -> bool:
     return True
 
 
+_PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
+
+#: The watcher of :func:`watch_own_teardown`: plain ``sh`` and ``gdb``, outside this process,
+#: because a teardown stuck in C below Python may hold the GIL (no Python thread runs then).
+_TEARDOWN_WATCH = r'''exec 1>&2
+sleep "$1"
+kill -0 "$2" 2>/dev/null || exit 0
+echo "[teardown] pid $2 still tearing down after $1 s; its native stacks (gdb):"
+command -v gdb >/dev/null 2>&1 || { echo "[teardown] no gdb on this machine"; exit 0; }
+exec gdb -p "$2" -batch -nx -iex "set auto-load python-scripts off" -ex "thread apply all bt"'''
+
+
+def watch_own_teardown(after: float) -> subprocess.Popen | None:
+    """Start a watcher that writes this process's native stacks to its stderr in ``after`` s.
+
+    For a teardown that may hang in the middleware: ``faulthandler`` shows the Python
+    frame (``destroy_node``), not where in Fast DDS it waits. The watcher sleeps ``after``
+    s, then, if this process still runs, attaches gdb (where installed) and writes every
+    thread's native stack to the stderr it shares with this process (the node's log). Stop
+    it with :func:`stop_watch` once the teardown has ended.
+
+    Parameters
+    ----------
+    after : float
+        Delay (s) before the stacks are taken.
+
+    Returns
+    -------
+    subprocess.Popen or None
+        The watcher (its own session), None where ``sh`` cannot be started.
+    """
+    try:
+        watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
+                                    str(os.getpid())],
+                                   stdin=subprocess.DEVNULL, start_new_session=True)
+    except OSError:
+        return None
+    if _PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace; gdb keeps the pid (exec)
+        _PRCTL(_PR_SET_PTRACER, watcher.pid, 0, 0, 0)
+    return watcher
+
+
+def stop_watch(watcher: subprocess.Popen | None) -> None:
+    """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group)."""
+    if watcher is None:
+        return
+    try:
+        os.killpg(watcher.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    watcher.wait()
+    if _PRCTL is not None:   # no tracer named any more (the pid may be reused)
+        _PRCTL(_PR_SET_PTRACER, 0, 0, 0, 0)
+
+
 def child_setup(preexec_fn: Callable[[], None] | None = None) -> Callable[[], None]:
     """Run in a child before ``exec``: SIGINT at its default, then ``preexec_fn``.
 
