@@ -215,8 +215,8 @@ TEARDOWN_LIMIT = 4.0
 #: Fraction of :data:`TEARDOWN_LIMIT` after which a teardown still running has its native
 #: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).
 #: Stop 35: the controller's ``destroy_node`` ran past the limit in a loaded run, and its
-#: Python stack could not tell a Fast DDS deadlock from a slow teardown. gdb stops the process
-#: while it reads the stacks (seconds on a loaded machine), so it comes late: 3 s, 3.8 times the
+#: Python stack could not tell a Fast DDS deadlock from a slow teardown. The process is stopped
+#: while gdb starts and reads (seconds on a loaded machine), so it comes late: 3 s, 3.8 times the
 #: slowest loaded teardown measured (0.79 s, docs/reliability.md, sixteenth round).
 NATIVE_STACKS_AT = 0.75
 

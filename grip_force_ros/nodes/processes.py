@@ -36,7 +36,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, MutableMapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, MutableMapping, NamedTuple, Sequence
 
 #: The node executables of the package (console scripts of setup.py).
 NODE_EXECUTABLES = ('controller', 'sim_instrument', 'master')
@@ -429,22 +429,44 @@ _PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
 
 #: The watcher of :func:`watch_own_teardown`: plain ``sh`` and ``gdb``, outside this process,
 #: because a teardown stuck in C below Python may hold the GIL (no Python thread runs then).
+#: It leaves the scheduling class it inherits (SCHED_FIFO for the demo's nodes under load) for
+#: SCHED_OTHER first: gdb reading stacks for seconds must not outrank the machine's other work.
+#: It stops the process (SIGSTOP) while gdb starts and reads, so that the teardown limit cannot
+#: end it meanwhile, and continues it after. A lock (``flock`` on the process's temporary file
+#: ``$3``, opened anew through ``/proc``: a lock of its own, not the process's) makes that stop
+#: and the process's own end of the watch (:func:`stop_watch`) exclude each other: a teardown
+#: that ends just then is never left stopped.
 _TEARDOWN_WATCH = r'''exec 1>&2
+chrt -o -p 0 $$ >/dev/null 2>&1
 sleep "$1"
-kill -0 "$2" 2>/dev/null || exit 0
-echo "[teardown] pid $2 still tearing down after $1 s; its native stacks (gdb):"
-command -v gdb >/dev/null 2>&1 || { echo "[teardown] no gdb on this machine"; exit 0; }
-exec gdb -p "$2" -batch -nx -iex "set auto-load python-scripts off" -ex "thread apply all bt"'''
+exec 9<"/proc/$2/fd/$3" 2>/dev/null || exit 0
+flock -n 9 || exit 0
+kill -STOP "$2" 2>/dev/null || exit 0
+echo "[teardown] pid $2 still tearing down after $1 s; stopped for its native stacks (gdb):"
+if command -v gdb >/dev/null 2>&1; then
+  timeout 120 gdb -p "$2" -batch -nx -iex "set auto-load python-scripts off" -ex "thread apply all bt"
+else
+  echo "[teardown] no gdb on this machine"
+fi
+kill -CONT "$2"'''
 
 
-def watch_own_teardown(after: float) -> subprocess.Popen | None:
+class TeardownWatch(NamedTuple):
+    """A running :func:`watch_own_teardown` watcher and the lock it shares with this process."""
+
+    process: subprocess.Popen
+    lock: Any          # this process's temporary file, which the watcher locks while it has it stopped
+
+
+def watch_own_teardown(after: float) -> TeardownWatch | None:
     """Start a watcher that writes this process's native stacks to its stderr in ``after`` s.
 
     For a teardown that may hang in the middleware: ``faulthandler`` shows the Python
     frame (``destroy_node``), not where in Fast DDS it waits. The watcher sleeps ``after``
-    s, then, if this process still runs, attaches gdb (where installed) and writes every
-    thread's native stack to the stderr it shares with this process (the node's log). Stop
-    it with :func:`stop_watch` once the teardown has ended.
+    s, then, if this process still runs and :func:`stop_watch` has not begun, stops it,
+    attaches gdb (where installed), writes every thread's native stack to the stderr it
+    shares with this process (the node's log) and continues it. End it with
+    :func:`stop_watch` once the teardown has ended.
 
     Parameters
     ----------
@@ -453,29 +475,37 @@ def watch_own_teardown(after: float) -> subprocess.Popen | None:
 
     Returns
     -------
-    subprocess.Popen or None
+    TeardownWatch or None
         The watcher (its own session), None where ``sh`` cannot be started.
     """
+    lock = tempfile.TemporaryFile()
     try:
         watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
-                                    str(os.getpid())],
+                                    str(os.getpid()), str(lock.fileno())],
                                    stdin=subprocess.DEVNULL, start_new_session=True)
     except OSError:
+        lock.close()
         return None
-    if _PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace; gdb keeps the pid (exec)
+    if _PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace: name the watcher
         _PRCTL(_PR_SET_PTRACER, watcher.pid, 0, 0, 0)
-    return watcher
+    return TeardownWatch(watcher, lock)
 
 
-def stop_watch(watcher: subprocess.Popen | None) -> None:
-    """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group)."""
-    if watcher is None:
+def stop_watch(watch: TeardownWatch | None) -> None:
+    """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group).
+
+    Takes the watcher's lock first: a watcher that has this process stopped for gdb holds it
+    until it has continued the process.
+    """
+    if watch is None:
         return
+    fcntl.flock(watch.lock.fileno(), fcntl.LOCK_EX)
     try:
-        os.killpg(watcher.pid, signal.SIGKILL)
+        os.killpg(watch.process.pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
-    watcher.wait()
+    watch.process.wait()
+    watch.lock.close()
     if _PRCTL is not None:   # no tracer named any more (the pid may be reused)
         _PRCTL(_PR_SET_PTRACER, 0, 0, 0, 0)
 
