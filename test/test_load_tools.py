@@ -124,6 +124,28 @@ def test_loadcheck_groups_failures_by_test(tmp_path):
     assert table['skips'] == {'test/test_demo_e2e.py::test_c: not built': 2}
 
 
+def test_a_failed_run_keeps_its_temporary_files_and_a_passed_one_does_not(tmp_path):
+    """A failed loaded run's node logs are its best witness: loadcheck gives each run its own
+    pytest temporary folder (``run<k>.tmp``) and removes it only when the run passed (loaded
+    run 35/c4/1 lost them to pytest's rotation of the user's numbered folders)."""
+    from grip_force_ros.bench.loadcheck import run_once
+    for name, verdict in (('test_ok.py', 'True'), ('test_bad.py', 'False')):
+        (tmp_path / name).write_text(textwrap.dedent(f"""
+            def test_writes_a_log(tmp_path):
+                (tmp_path / 'node.log').write_text('what the node said')
+                assert {verdict}
+        """))
+    out = tmp_path / 'out'
+    out.mkdir()
+    passed = run_once(1, out, workers=0, select='not nothing', files=[str(tmp_path / 'test_ok.py')])
+    failed = run_once(2, out, workers=0, select='not nothing', files=[str(tmp_path / 'test_bad.py')])
+    assert passed['failed'] == [] and 'temporary_files' not in passed
+    assert not (out / 'run1.tmp').exists()
+    assert len(failed['failed']) == 1 and failed['failed'][0]['test'].endswith('::test_writes_a_log'), failed
+    assert failed['temporary_files'] == str(out / 'run2.tmp')
+    assert [p.read_text() for p in (out / 'run2.tmp').rglob('node.log')] == ['what the node said']
+
+
 def test_load_command_refuses_values_beyond_its_bounds(capsys):
     from grip_force_ros.cli import main
     assert main(['load', '--seconds', '0']) == 2

@@ -14,6 +14,7 @@ No rclpy here: the tests run in child processes.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -98,7 +99,8 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
     index : int
         Run number (names the junit and log files).
     out_dir : Path
-        Where ``run<index>.xml`` and ``run<index>.log`` go.
+        Where ``run<index>.xml`` and ``run<index>.log`` go, and ``run<index>.tmp``: the run's
+        pytest temporary files (each test's node logs, bags), kept only when the run failed.
     workers, duty
         Of the :class:`LoadGenerator` (default: one busy process per core, full duty);
         ``workers=0`` runs without load (a quiet reference).
@@ -114,8 +116,13 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
     tests = test_dir()
     junit = out_dir / f'run{index}.xml'
     log = out_dir / f'run{index}.log'
+    # The run's own temporary files: pytest's numbered ones keep the last three sessions of
+    # the user, and any pytest run beside the series (or after it) rotates a failed run's
+    # node logs away (loaded run 35/c4/1 lost them so).
+    basetemp = out_dir / f'run{index}.tmp'
     cmd = [sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider', '-m', select,
-           f'--junitxml={junit}', *(files or [str(tests)]), *(pytest_args or [])]
+           f'--junitxml={junit}', f'--basetemp={basetemp}', *(files or [str(tests)]),
+           *(pytest_args or [])]
     env = dict(os.environ)
     env.pop('ROS_DOMAIN_ID', None)     # each run reserves its own (test/conftest.py)
     load = LoadGenerator(workers, seconds=timeout + 60.0, duty=duty) if workers != 0 else None
@@ -152,6 +159,10 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
         result.update(tests=0, failed=[{'test': '(session)', 'kind': 'error',
                                         'message': f'no junit report; exit code {code}'}],
                       skipped=[])
+    if result['failed'] or code:
+        result['temporary_files'] = str(basetemp)
+    else:
+        shutil.rmtree(basetemp, ignore_errors=True)
     return result
 
 
