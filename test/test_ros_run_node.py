@@ -288,6 +288,22 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
     assert watch.process.returncode is not None and _watchers_of(os.getpid()) == []
 
 
+def test_a_teardown_goes_on_without_its_watcher_where_none_can_start(monkeypatch):
+    """No temporary file (a full /tmp) or no ``sh``: no watcher, and no exception out of the
+    teardown's ``finally`` (which would skip the node's destruction)."""
+    from grip_force_ros.nodes import processes
+
+    def no_file():
+        raise OSError(28, 'No space left on device')
+
+    monkeypatch.setattr(processes.tempfile, 'TemporaryFile', no_file)
+    assert processes.watch_own_teardown(60.0) is None
+    monkeypatch.undo()
+    monkeypatch.setenv('PATH', '/nonexistent')
+    assert processes.watch_own_teardown(60.0) is None
+    processes.stop_watch(None)                  # what run_node then does
+
+
 def test_a_teardown_within_the_limit_leaves_no_timer_behind():
     """``run_node`` also runs inside test processes: the limit must not outlive the teardown,
     nor must the watcher of its native stacks (nor its ``sleep``)."""

@@ -476,15 +476,18 @@ def watch_own_teardown(after: float) -> TeardownWatch | None:
     Returns
     -------
     TeardownWatch or None
-        The watcher (its own session), None where ``sh`` cannot be started.
+        The watcher (its own session), None where it cannot be started (no ``sh``, no
+        temporary file): the teardown then goes on without it.
     """
-    lock = tempfile.TemporaryFile()
+    lock = None
     try:
+        lock = tempfile.TemporaryFile()
         watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
                                     str(os.getpid()), str(lock.fileno())],
                                    stdin=subprocess.DEVNULL, start_new_session=True)
     except OSError:
-        lock.close()
+        if lock is not None:
+            lock.close()
         return None
     if _PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace: name the watcher
         _PRCTL(_PR_SET_PTRACER, watcher.pid, 0, 0, 0)
