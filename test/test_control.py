@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from grip_force_ros.closed_loop import NO_FORCE_SENSOR, closed_loop_step
 from grip_force_ros.control import PID, ControlInputs, CurrentLimiter, ForceMap, GripController, Mode
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
@@ -525,13 +526,8 @@ def test_a_jaw_resting_open_past_its_target_is_not_an_object():
     modes = set()
     for k in range(2000):
         t = k * 1e-3
-        m = sim.measure()
-        inputs.set_master(t, 0.8)
-        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-        out = ctrl.step(t, inputs)
+        _, out = closed_loop_step(sim, ctrl, inputs, t, 0.8, 1e-3, sources=NO_FORCE_SENSOR)
         modes.add(out.mode)
-        sim.step(out.current_command, 1e-3)
     assert Mode.GRIP not in modes
     assert sim.measure().jaw_angle == pytest.approx(0.8, abs=0.01)
 

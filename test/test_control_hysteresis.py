@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grip_force_ros.closed_loop import ALL_SOURCES, NO_SOURCES, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file
@@ -37,14 +38,9 @@ def run(params, trajectory, seconds, seed, blackout=None):
     rows = []
     for k in range(int(round(seconds / PERIOD))):
         t = k * PERIOD
-        m = sim.measure()
-        if blackout is None or not blackout[0] <= t < blackout[0] + blackout[1]:
-            inputs.set_master(t, trajectory.angle(t))
-            inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-            inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-            inputs.set_force(t, m.grip_force)
-        out = ctrl.step(t, inputs)
-        sim.step(out.current_command, PERIOD)
+        dark = blackout is not None and blackout[0] <= t < blackout[0] + blackout[1]
+        m, out = closed_loop_step(sim, ctrl, inputs, t, trajectory.angle(t), PERIOD,
+                                  sources=NO_SOURCES if dark else ALL_SOURCES)
         rows.append((t, out.target_force, sim.truth()['grip_force'], out.estimated_force,
                      out.current_command, m.current, m.jaw_angle,
                      {'free': 0, 'grip': 1, 'safe': 2}[out.mode]))

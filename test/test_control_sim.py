@@ -6,6 +6,7 @@ cables, a current loop, contact dynamics and sensor noise.
 import numpy as np
 import pytest
 
+from grip_force_ros.closed_loop import ALL_SOURCES, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.params import load_params_file
 from grip_force_ros.sim.plant import InstrumentSim
@@ -24,14 +25,9 @@ def grasp(params, obj='needle', seconds=1.5, plant_changes=None, stale_from=None
     for k in range(int(seconds / PERIOD)):
         t = k * PERIOD
         master = max(0.0, 0.8 - 1.6 * t) if t < 1.0 else min(0.8, 2.0 * (t - 1.0))
-        m = sim.measure()
-        inputs.set_master(t, master)
-        if stale_from is None or t < stale_from:
-            inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-        inputs.set_force(t, m.grip_force)
-        out = ctrl.step(t, inputs)
-        sim.step(out.current_command, PERIOD)
+        stale = stale_from is not None and t >= stale_from
+        m, out = closed_loop_step(sim, ctrl, inputs, t, master, PERIOD,
+                                  sources=ALL_SOURCES - {'instrument'} if stale else ALL_SOURCES)
         rows.append((t, master, m.jaw_angle, out.target_jaw_angle, out.target_force,
                      m.grip_force, out.current_command, {'free': 0, 'grip': 1, 'safe': 2}[out.mode]))
     return np.array(rows)

@@ -34,6 +34,7 @@ import numpy as np
 import pytest
 
 from grip_force_ros.cli.predict import predict_log
+from grip_force_ros.closed_loop import NO_FORCE_SENSOR, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.diagnosis import build_frame, load_decimated
 from grip_force_ros.model import GripForceModel
@@ -76,12 +77,8 @@ def closed_loop(wrist_amplitude: float = 0.0):
     for k in range(n):
         t = k * PERIOD
         sim.set_wrist_angle(wrist_amplitude * np.sin(2 * np.pi * t / 6.0))
-        m = sim.measure()
-        inputs.set_master(t, float(traj.angle(t)))
-        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-        out = ctrl.step(t, inputs)
-        sim.step(out.current_command, PERIOD)
+        m, out = closed_loop_step(sim, ctrl, inputs, t, float(traj.angle(t)), PERIOD,
+                                  sources=NO_FORCE_SENSOR)
         rows.append((m.t, m.current, m.motor_angle, m.wrist_angle, m.jaw_angle, m.grip_force,
                      out.target_force, out.feedforward_current, out.current_command, out.mode == 'grip'))
     cols = np.array(rows).T

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from grip_force_ros.closed_loop import closed_loop_step
 from grip_force_ros.control import GripController, Mode
 from grip_force_ros.demo import analysis
 from grip_force_ros.params import load_params_file
@@ -80,18 +81,12 @@ def offline_grasp(params, rate: float, seed: int = 0, jitter: float = JITTER,
     t = 0.0
     safe = 0
     for k in range(n):
-        m = sim.measure()
         master = float(traj.angle(t))
-        inputs.set_master(t, master, t)
-        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity, t)
-        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity, t)
-        inputs.set_force(t, m.grip_force, t)
-        out = ctrl.step(t, inputs)
+        m, out = closed_loop_step(sim, ctrl, inputs, t, master, float(intervals[k]), stamped=True)
         safe += out.mode is Mode.SAFE
         rows.append((t, master, out.target_force, m.grip_force, out.estimated_force,
                      out.current_command, m.jaw_angle, out.target_jaw_angle,
                      out.mode is Mode.FREE))
-        sim.step(out.current_command, float(intervals[k]))
         t += float(intervals[k])
     a = np.array(rows)
     series = {'t': a[:, 0], 'master_angle': a[:, 1], 'target_force': a[:, 2],

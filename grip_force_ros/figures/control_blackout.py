@@ -14,6 +14,7 @@ import sys
 
 import numpy as np
 
+from grip_force_ros.closed_loop import NO_FORCE_SENSOR, NO_SOURCES, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file
@@ -57,13 +58,9 @@ def blackout_run(params, stick_band: bool, seed: int = 3) -> np.ndarray:
     inputs, traj, rows = ctrl.new_inputs(), needle_grasp(), []
     for k in range(int(round(SECONDS / 1e-3))):
         t = k * 1e-3
-        m = sim.measure()
-        if not BLACKOUT[0] <= t < BLACKOUT[0] + BLACKOUT[1]:
-            inputs.set_master(t, traj.angle(t))
-            inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-            inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-        out = ctrl.step(t, inputs)
-        sim.step(out.current_command, 1e-3)
+        dark = BLACKOUT[0] <= t < BLACKOUT[0] + BLACKOUT[1]
+        _, out = closed_loop_step(sim, ctrl, inputs, t, traj.angle(t), 1e-3,
+                                  sources=NO_SOURCES if dark else NO_FORCE_SENSOR)
         tr = sim.truth()
         rows.append((t, out.target_force, tr['grip_force'], out.estimated_force, out.current_command,
                      tr['current'], tr['drum_tension'], tr['jaw_tension'], tr['efficiency']))

@@ -21,6 +21,7 @@ import sys
 
 import numpy as np
 
+from grip_force_ros.closed_loop import closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.control.controller import HOLD_BAND
 from grip_force_ros.params import load_params_file
@@ -52,13 +53,7 @@ def hold_run(params, seed: int) -> tuple[np.ndarray, dict]:
     inputs, traj, rows = ctrl.new_inputs(), needle_grasp(time_scale=TIME_SCALE), []
     for k in range(int(round(HOLD[1] / PERIOD))):
         t = k * PERIOD
-        m = sim.measure()
-        inputs.set_master(t, traj.angle(t))
-        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity)
-        inputs.set_actuator(t, m.current, m.motor_angle, m.motor_velocity)
-        inputs.set_force(t, m.grip_force)
-        out = ctrl.step(t, inputs)
-        sim.step(out.current_command, PERIOD)
+        m, out = closed_loop_step(sim, ctrl, inputs, t, traj.angle(t), PERIOD)
         rows.append((t, out.target_force, sim.truth()['grip_force'], out.estimated_force,
                      out.current_command, m.current, out.feedforward_current,
                      BRANCH_CODE[ctrl.branch], float(ctrl.hysteresis.on_loading_edge)))
