@@ -3,6 +3,7 @@
 No rclpy: the domain locks, the busy processes and the junit tables are plain processes
 and files.
 """
+import json
 import os
 import signal
 import subprocess
@@ -14,7 +15,9 @@ import psutil
 import pytest
 
 from grip_force_ros.bench.load import LoadError, LoadGenerator
-from grip_force_ros.bench.loadcheck import parse_junit, tabulate
+from grip_force_ros.bench import loadcheck
+from grip_force_ros.bench.loadcheck import (code_fingerprint, parse_junit, render_tally, source_revision,
+                                            tabulate, tally)
 from grip_force_ros.nodes.processes import (ProcessError, domain_locked, held_domains,
                                             pick_domain_ids, reserve_domains)
 
@@ -144,6 +147,97 @@ def test_a_failed_run_keeps_its_temporary_files_and_a_passed_one_does_not(tmp_pa
     assert len(failed['failed']) == 1 and failed['failed'][0]['test'].endswith('::test_writes_a_log'), failed
     assert failed['temporary_files'] == str(out / 'run2.tmp')
     assert [p.read_text() for p in (out / 'run2.tmp').rglob('node.log')] == ['what the node said']
+    # each run leaves its record, with the code it ran (this checkout's, as git sees it)
+    record = json.loads((out / 'run2.json').read_text())
+    assert record['failed'] == failed['failed']
+    assert record['code'] == source_revision(loadcheck.test_dir().parent)
+
+
+def git(repo, *args):
+    done = subprocess.run(['git', '-C', str(repo), '-c', 'user.name=t', '-c', 'user.email=t@t',
+                           *args], capture_output=True, text=True, check=True)
+    return done.stdout.strip()
+
+
+def test_code_fingerprint_ignores_documentation_and_nothing_else(tmp_path):
+    """A docs-only commit runs the same code (same fingerprint, a series goes on counting);
+    any other file starts a new count; an uncommitted change to code is ``dirty``."""
+    git(tmp_path, 'init', '-q')
+    (tmp_path / 'docs').mkdir()
+    for name, text in (('node.py', 'x = 1\n'), ('docs/guide.md', 'a\n'), ('README.md', 'r\n')):
+        (tmp_path / name).write_text(text)
+    git(tmp_path, 'add', '-A')
+    git(tmp_path, 'commit', '-q', '-m', 'one')
+    first = source_revision(tmp_path)
+    assert first['commit'] == git(tmp_path, 'rev-parse', 'HEAD') and first['dirty'] is False
+    (tmp_path / 'docs' / 'guide.md').write_text('b\n')
+    assert source_revision(tmp_path)['dirty'] is False           # documentation only
+    git(tmp_path, 'commit', '-q', '-am', 'docs')
+    second = source_revision(tmp_path)
+    assert second['commit'] != first['commit'] and second['fingerprint'] == first['fingerprint']
+    (tmp_path / 'node.py').write_text('x = 2\n')
+    assert source_revision(tmp_path)['dirty'] is True
+    git(tmp_path, 'commit', '-q', '-am', 'code')
+    assert source_revision(tmp_path)['fingerprint'] != first['fingerprint']
+    assert code_fingerprint(tmp_path, '0' * 40) is None           # not a commit of the repo
+    assert source_revision(tmp_path / 'nowhere') == {'commit': None, 'fingerprint': None, 'dirty': None}
+
+
+def write_run(folder, index, failed=(), tests=3, record=None):
+    """A run's junit file (``failed``: test names) and, given ``record``, its run record."""
+    folder.mkdir(exist_ok=True)
+    cases = ''.join(f'<testcase classname="test.test_x" name="t{k}" time="1.0"/>'
+                    for k in range(tests - len(failed)))
+    cases += ''.join(f'<testcase classname="test.test_x" name="{name}" time="1.0">'
+                     f'<failure message="AssertionError: {name}">trace</failure></testcase>'
+                     for name in failed)
+    (folder / f'run{index}.xml').write_text(
+        f'<testsuites><testsuite name="pytest" tests="{tests}" time="700.5">{cases}</testsuite></testsuites>')
+    if record is not None:
+        (folder / f'run{index}.json').write_text(json.dumps(
+            {'run': index, 'seconds': 700.5, 'load_average_mean': 4.1,
+             **parse_junit(folder / f'run{index}.xml'), **record}))
+
+
+def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
+    """Two series of one code (one by an older loadcheck without run records, its code given)
+    and one of another: clean of complete per code; a run stopped midway (exit code 2, or
+    fewer tests than its folder's others without a record) is neither clean nor failed."""
+    same = {'commit': 'a' * 40, 'fingerprint': 'f1', 'dirty': False}
+    docs_later = {'commit': 'b' * 40, 'fingerprint': 'f1', 'dirty': False}
+    other = {'commit': 'c' * 40, 'fingerprint': 'f2', 'dirty': False}
+    new, old = tmp_path / 'new', tmp_path / 'old'
+    write_run(new, 1, record={'exit_code': 0, 'code': same})
+    write_run(new, 2, failed=['test_race'], record={'exit_code': 1, 'code': docs_later})
+    write_run(new, 3, tests=2, record={'exit_code': 2, 'code': docs_later})     # stopped
+    write_run(new, 4, record={'exit_code': 0, 'code': other})
+    write_run(new, 5, record={'exit_code': 1, 'timed_out': True, 'code': other})  # hung
+    write_run(old, 1)
+    write_run(old, 2, tests=1)                                                     # stopped
+    write_run(old, 3, failed=['test_race'])
+    (old / 'run4.log').write_text('killed before its junit file')
+    table = tally([new, old], {old: 'old-label'})
+    assert [(r['run'], r['status']) for r in table['runs']] == [
+        (1, 'clean'), (2, 'failed'), (3, 'incomplete'), (4, 'clean'), (5, 'failed'),
+        (1, 'clean'), (2, 'incomplete'), (3, 'failed')]
+    assert table['by_code'] == {
+        'f1': {'commits': ['a' * 40, 'b' * 40], 'runs': 2, 'clean': 1,
+               'failed': [f'{new}/run2: test/test_x.py::test_race']},
+        'f2': {'commits': ['c' * 40], 'runs': 2, 'clean': 1, 'failed': [f'{new}/run5: (exit code 1)']},
+        'old-label': {'commits': ['old-label'], 'runs': 2, 'clean': 1,
+                      'failed': [f'{old}/run3: test/test_x.py::test_race']}}
+    text = render_tally(table)
+    assert 'code f1 (commits aaaaaaaaaaaa, bbbbbbbbbbbb): 1 clean of 2 complete loaded runs' in text
+    assert f'{old}/run2  old-label  1 tests  700 s  load ?  incomplete (stopped midway)' in text
+
+
+def test_tally_command_prints_the_table_and_refuses_a_missing_folder(tmp_path, capsys):
+    from grip_force_ros.cli import main
+    write_run(tmp_path / 's', 1, record={'exit_code': 0, 'code': {'commit': 'a' * 40, 'fingerprint': 'f1'}})
+    assert main(['loadcheck', '--tally', str(tmp_path / 's'), '--json']) == 0
+    assert json.loads(capsys.readouterr().out)['by_code']['f1']['clean'] == 1
+    assert main(['loadcheck', '--tally', str(tmp_path / 'nowhere')]) == 2
+    assert 'no such folder' in capsys.readouterr().err
 
 
 def test_load_command_refuses_values_beyond_its_bounds(capsys):

@@ -9,11 +9,22 @@ of each run says which tests failed, erred or skipped and why; the report groups
 test over the runs. A test that fails in some runs only is a race: its message and the
 runs it failed in are what to start from.
 
+Each run also leaves ``run<k>.json``: its outcome and the commit of the checkout it ran,
+with a fingerprint of its files but the documentation (so that a commit of docs alone
+does not start a new count) and ``dirty`` when the tracked files differed from it. A
+series is counted per code:
+``grip-force loadcheck --tally FOLDER...`` reads the run files of any number of series
+and says, per commit, how many loaded runs were clean (:func:`tally`); a run stopped
+midway is incomplete, neither clean nor failed. Issue 13's bar is 20 clean runs of one code.
+
 No rclpy here: the tests run in child processes.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -43,6 +54,54 @@ def test_dir() -> Path:
     if not (path / 'conftest.py').is_file():
         raise FileNotFoundError(f'no test suite at {path} (loadcheck needs a source checkout)')
     return path
+
+
+def _git(path: Path, *args) -> subprocess.CompletedProcess | None:
+    try:
+        return subprocess.run(['git', '-C', str(path), *args], capture_output=True, text=True,
+                              timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+
+
+def is_documentation(path: str) -> bool:
+    """Tell whether a file is one that no test runs: under ``docs/``, or Markdown (README, notes)."""
+    return path.startswith('docs/') or path.endswith('.md')
+
+
+def code_fingerprint(repo: Path, commit: str) -> str | None:
+    """Hash every file of ``commit`` but its documentation (12 hex digits).
+
+    Two commits that differ only in :func:`is_documentation` files run the same code and
+    tests: a loaded series counts them as one code. None when ``commit`` is not in ``repo``.
+    """
+    listing = _git(repo, 'ls-tree', '-r', commit)
+    if listing is None or listing.returncode != 0:
+        return None
+    kept = [line for line in listing.stdout.splitlines()
+            if not is_documentation(line.split('\t', 1)[-1])]
+    return hashlib.sha1('\n'.join(kept).encode()).hexdigest()[:12]
+
+
+def source_revision(path: Path) -> dict:
+    """Return the checkout's git commit, its code fingerprint and whether it is dirty.
+
+    Returns
+    -------
+    dict
+        ``commit`` (40 hex digits, or None outside a git checkout or without git),
+        ``fingerprint`` (:func:`code_fingerprint` of the commit) and ``dirty`` (bool: its
+        tracked files other than documentation differ from the commit; None when unknown).
+    """
+    head = _git(path, 'rev-parse', 'HEAD')
+    if head is None or head.returncode != 0:
+        return {'commit': None, 'fingerprint': None, 'dirty': None}
+    commit = head.stdout.strip()
+    status = _git(path, 'status', '--porcelain', '--untracked-files=no')
+    dirty = None
+    if status is not None and status.returncode == 0:
+        dirty = any(not is_documentation(line[3:]) for line in status.stdout.splitlines())
+    return {'commit': commit, 'fingerprint': code_fingerprint(path, commit), 'dirty': dirty}
 
 
 def parse_junit(path: Path) -> dict:
@@ -163,6 +222,9 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
         result['temporary_files'] = str(basetemp)
     else:
         shutil.rmtree(basetemp, ignore_errors=True)
+    result['code'] = source_revision(tests.parent)
+    result['ended'] = time.strftime('%Y-%m-%dT%H:%M:%S%z')
+    (out_dir / f'run{index}.json').write_text(json.dumps(result, indent=1) + '\n')
     return result
 
 
@@ -200,6 +262,124 @@ def loadcheck(runs: int, out_dir: Path, progress=None, **run_options) -> dict:
     report['details'] = results
     report['out_dir'] = str(out_dir)
     return report
+
+
+_RUN_XML = re.compile(r'run(\d+)\.xml$')
+
+
+def read_series(folder: Path) -> list[dict]:
+    """Read the runs of one loadcheck folder that left a junit file, in run order.
+
+    Its ``run<k>.json`` adds the code, load and exit code; a folder of an older loadcheck
+    has none (those fields are None).
+    """
+    runs = []
+    for junit in Path(folder).glob('run*.xml'):
+        match = _RUN_XML.search(junit.name)
+        if not match:
+            continue
+        index = int(match.group(1))
+        record = junit.with_suffix('.json')
+        if record.is_file():
+            run = json.loads(record.read_text())
+        else:
+            suite = ET.parse(junit).getroot().find('testsuite')
+            run = {'run': index, 'exit_code': None, 'load_average_mean': None,
+                   'code': {'commit': None, 'dirty': None},
+                   'seconds': float(suite.get('time')) if suite is not None else None,
+                   **parse_junit(junit)}
+        run['folder'] = str(folder)
+        runs.append(run)
+    return sorted(runs, key=lambda r: r['run'])
+
+
+#: pytest's exit code of a session stopped by SIGINT (its junit file holds the tests done).
+INTERRUPTED = 2
+
+
+def run_status(run: dict, most_tests: int) -> str:
+    """Judge one run of a series: ``clean``, ``failed`` or ``incomplete`` (stopped midway).
+
+    ``most_tests``: the largest test count of the run's folder. Without a run record (an
+    older loadcheck) the exit code is unknown, and a run with fewer tests than that was
+    stopped midway.
+    """
+    if run['failed'] or run.get('timed_out'):
+        return 'failed'
+    code = run.get('exit_code')
+    if code is None:
+        return 'clean' if run['tests'] == most_tests else 'incomplete'
+    if code == 0:
+        return 'clean'
+    return 'incomplete' if code == INTERRUPTED else 'failed'
+
+
+def tally(folders: list[Path], given_codes: dict | None = None) -> dict:
+    """Count the loaded runs of several series per code.
+
+    ``given_codes``: folder -> the commit its runs ran, for folders of an older loadcheck
+    whose runs have no record of it (a run's own record wins); its fingerprint is taken
+    from this checkout's git history when the commit is in it.
+
+    Runs are grouped by code fingerprint (:func:`code_fingerprint`): commits that differ
+    only in documentation are one code.
+
+    Returns
+    -------
+    dict
+        ``runs``: one row per run with a junit file (folder, run, commit, code, seconds,
+        load average, tests, ``status`` from :func:`run_status`, failed tests); ``by_code``:
+        per code (the fingerprint; the commit when it has none, ``unknown`` without either;
+        ``+dirty`` for a modified checkout) its commits, the complete runs, the clean ones,
+        and the failed tests in the order met.
+    """
+    repo = test_dir().parent
+    rows, by_code = [], {}
+    for folder in folders:
+        series = read_series(Path(folder))
+        most_tests = max((r['tests'] for r in series), default=0)
+        for r in series:
+            code = dict(r.get('code') or {})
+            given = (given_codes or {}).get(folder)
+            if not code.get('commit') and given:
+                code = {'commit': given, 'fingerprint': code_fingerprint(repo, given), 'dirty': None}
+            commit = code.get('commit') or 'unknown'
+            key = code.get('fingerprint') or commit
+            if code.get('dirty'):
+                key += '+dirty'
+            failed = [f['test'] for f in r['failed']]
+            status = run_status(r, most_tests)
+            rows.append({'folder': r['folder'], 'run': r['run'], 'commit': commit, 'code': key,
+                         'seconds': r.get('seconds'), 'load_average_mean': r.get('load_average_mean'),
+                         'tests': r['tests'], 'status': status, 'failed': failed})
+            if status == 'incomplete':
+                continue
+            entry = by_code.setdefault(key, {'commits': [], 'runs': 0, 'clean': 0, 'failed': []})
+            if commit not in entry['commits']:
+                entry['commits'].append(commit)
+            entry['runs'] += 1
+            entry['clean'] += status == 'clean'
+            if status == 'failed':
+                entry['failed'] += [f"{r['folder']}/run{r['run']}: {t}"
+                                    for t in failed or [f"(exit code {r.get('exit_code')})"]]
+    return {'runs': rows, 'by_code': by_code}
+
+
+def render_tally(table: dict) -> str:
+    """Return the text of a :func:`tally`: one line per run, then one per code."""
+    lines = []
+    for r in table['runs']:
+        load = r['load_average_mean'] if r['load_average_mean'] is not None else '?'
+        seconds = f"{r['seconds']:.0f} s" if r['seconds'] is not None else '?'
+        verdict = {'clean': 'clean', 'incomplete': 'incomplete (stopped midway)'}.get(
+            r['status'], 'FAILED ' + ', '.join(r['failed'] or ['(exit code)']))
+        lines.append(f"{r['folder']}/run{r['run']}  {r['commit'][:12]}  {r['tests']} tests  "
+                     f"{seconds}  load {load}  {verdict}")
+    for code, e in table['by_code'].items():
+        commits = ', '.join(c[:12] for c in e['commits'])
+        lines.append(f"code {code} (commits {commits}): {e['clean']} clean of {e['runs']} "
+                     'complete loaded runs')
+    return '\n'.join(lines)
 
 
 def render(report: dict) -> str:

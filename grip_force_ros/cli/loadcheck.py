@@ -17,6 +17,10 @@ def add_arguments(parser) -> None:
                         help='folder of the junit files and logs (default out/loadcheck/<time>)')
     parser.add_argument('--timeout', type=float, default=1800.0, help='longest run (s, default 1800)')
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
+    parser.add_argument('--tally', nargs='+', metavar='FOLDER',
+                        help='run nothing: count the loaded runs of these loadcheck folders per '
+                             'code (commit), clean of complete; FOLDER=CODE names the code of a '
+                             "folder whose runs have no record of it (an older loadcheck's)")
 
 
 def run(args) -> int:
@@ -26,8 +30,18 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
-    from grip_force_ros.bench.loadcheck import loadcheck, render
+    from grip_force_ros.bench.loadcheck import loadcheck, render, render_tally, tally
 
+    if args.tally:
+        folders = [Path(f.partition('=')[0]) for f in args.tally]
+        given = {Path(f.partition('=')[0]): f.partition('=')[2] for f in args.tally if '=' in f}
+        missing = [str(f) for f in folders if not f.is_dir()]
+        if missing:
+            print(f'error: no such folder: {", ".join(missing)}', file=sys.stderr)
+            return 2
+        table = tally(folders, given)
+        print(json.dumps(table, indent=1) if args.json else render_tally(table))
+        return 0
     if args.runs < 1:
         print('error: --runs must be >= 1', file=sys.stderr)
         return 2
