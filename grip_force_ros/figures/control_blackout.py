@@ -18,7 +18,7 @@ from grip_force_ros.closed_loop import NO_FORCE_SENSOR, NO_SOURCES, closed_loop_
 from grip_force_ros.control import GripController
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file
-from grip_force_ros.plotting import pyplot
+from grip_force_ros.plotting import pyplot, save
 from grip_force_ros.sim.plant import InstrumentSim
 from grip_force_ros.trajectories import needle_grasp
 
@@ -104,9 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         ax.legend(fontsize=8)
     fig.suptitle('Sensorless grip, 50 ms blackout of every input at t = 1.5 s '
                  '(paper_needle_driver, needle_grasp, sim seed 3)')
-    fig.tight_layout()
-    fig.savefig(out, dpi=80)
-    print(f'wrote {out}')
+    print(f'wrote {save(fig, out, dpi=80)}')
     return 0
 
 

@@ -25,7 +25,7 @@ from grip_force_ros.closed_loop import closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.control.controller import HOLD_BAND
 from grip_force_ros.params import load_params_file
-from grip_force_ros.plotting import pyplot
+from grip_force_ros.plotting import pyplot, save
 from grip_force_ros.sim.plant import InstrumentSim
 from grip_force_ros.trajectories import needle_grasp
 
@@ -165,9 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     ax.legend(fontsize=8)
     fig.suptitle('Sensorless hold of the demo grasp (paper_needle_driver, 4 N): the current walks '
                  'inside the stick band, the force does not')
-    fig.tight_layout()
-    fig.savefig(out, dpi=80)
-    print(f'wrote {out}')
+    print(f'wrote {save(fig, out, dpi=80)}')
     return 0
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
-from grip_force_ros.plotting import pyplot
+from grip_force_ros.plotting import pyplot, save
 from grip_force_ros.sim.offline import simulate
 from grip_force_ros.sim.plant import InstrumentSim
 from grip_force_ros.sim.step_response import metrics_of_signal
@@ -70,9 +70,7 @@ def step_figure(out: Path, current=0.35) -> dict:
         ax.axvline(100, color='grey', lw=0.6)
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / 'sim_step_response.png', dpi=80)
-    plt.close(fig)
+    save(fig, out / 'sim_step_response.png', dpi=80)
     return numbers
 
 
@@ -101,9 +99,7 @@ def effects_figure(out: Path) -> None:
         ax.set_ylabel('grip force (N)')
     axes[0, 0].legend(fontsize=8)
     fig.suptitle('needle, current 0.25 + 0.15 sin(2 pi 0.5 t) A, 6 s: grip force vs current per effect')
-    fig.tight_layout()
-    fig.savefig(out / 'sim_effects.png', dpi=70)
-    plt.close(fig)
+    save(fig, out / 'sim_effects.png', dpi=70)
 
 
 def main(argv: list[str] | None = None) -> int:
