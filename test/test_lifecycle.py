@@ -127,6 +127,22 @@ def rig(tmp_path):
         def log(self, name):
             return (tmp_path / f'{name}.log').read_text()
 
+        def topic_info(self, topic, *want, timeout=60.0):
+            """``ros2 topic info TOPIC``, a fresh CLI process a try, until its answer holds
+            every line of ``want``; fails with :meth:`report`. Returns the answer.
+
+            Each try gives the CLI a longer discovery spin (2, 4, 8 s, then 10): a new
+            participant on a loaded machine may need more than 2 s to hear every endpoint
+            (loaded run 36/c1/5: 30 s of 2 s tries saw "Unknown topic", and once one
+            subscription of two and no publisher, where the probe's own view had them).
+            """
+            spins = iter(('2', '4', '8'))
+            info = retry(lambda: cli(env, 'topic', 'info', topic, '--no-daemon', '--spin-time',
+                                     next(spins, '10')),
+                         lambda r: all(line in r.stdout for line in want), timeout=timeout)
+            assert all(line in info.stdout for line in want), (want, info, self.report(topic))
+            return info
+
         def report(self, topic):
             """Tell what is known when ``ros2`` CLI calls did not see ``topic`` (a loaded run of
             stop 33: 30 s of "Unknown topic" for the topic the sim and the probe subscribe):
@@ -358,9 +374,11 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
         transition(env, name, state, lambda: rig.log('controller'))
     assert lifecycle(env, 'get', '/controller').stdout.split() == ['unconfigured', '[1]']
     servo = f'/{topics.SERVO_CURRENT}'
-    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
-                 lambda r: 'Publisher count: 0' in r.stdout, timeout=30)
-    assert 'Publisher count: 0' in info.stdout, info
+    # the product's fact in the probe's own view of the graph (which still sees the sim's
+    # subscription and its own), then as the ros2 CLI shows it
+    assert wait_until(lambda: (probe.count_publishers(servo), probe.count_subscribers(servo)) == (0, 2),
+                      30.0), rig.report(servo)
+    rig.topic_info(servo, 'Publisher count: 0', 'Subscription count: 2')
     assert ctl.poll() is None and 'Traceback' not in rig.log('controller'), rig.log('controller')
 
 
@@ -421,16 +439,13 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
     assert probe.commands == []
     servo = f'/{topics.SERVO_CURRENT}'
     # the sim's subscription and the probe's (this test's): a new CLI process has to discover
-    # both, and the controller's participant, within its 2 s; tried again until it has. (It
-    # waited for "Subscription count: 1", which two subscriptions never give: every run spent
-    # its 30 s and judged the last try, and a loaded run's last try had not discovered the
-    # topic yet, "Unknown topic".)
-    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
-                 lambda r: 'Subscription count: 2' in r.stdout, timeout=60)
-    assert 'Subscription count: 2' in info.stdout, (info, rig.report(servo))
-    assert 'Publisher count: 0' in info.stdout, (info, rig.report(servo))
-    assert wait_until(lambda: 'controller' in probe.get_node_names(), 30.0)
-    assert probe.count_publishers(servo) == 0      # and in the probe's own view of the graph
+    # both, and the controller's participant; tried again, with a longer spin, until it has.
+    # (It waited for "Subscription count: 1", which two subscriptions never give: every run
+    # spent its 30 s and judged the last try, and a loaded run's last try had not discovered
+    # the topic yet, "Unknown topic".)
+    assert wait_until(lambda: 'controller' in probe.get_node_names(), 30.0), rig.report(servo)
+    assert probe.count_publishers(servo) == 0      # the probe's own view of the graph
+    rig.topic_info(servo, 'Subscription count: 2', 'Publisher count: 0')
     recent = [i for t, i in probe.currents[-200:]]
     assert recent and max(abs(i) for i in recent) < 6 * CURRENT_NOISE, recent[-5:]
     ok, message = trigger(env, 'tare', attempts=5)
@@ -438,9 +453,8 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
 
     transition(env, 'configure', 'inactive', lambda: rig.log('controller'))
     assert lifecycle(env, 'get', '/controller').stdout.split() == ['inactive', '[2]']
-    info = retry(lambda: cli(env, 'topic', 'info', servo, '--no-daemon', '--spin-time', '2'),
-                 lambda r: 'Publisher count: 1' in r.stdout, timeout=30)
-    assert 'Publisher count: 1' in info.stdout, info
+    assert wait_until(lambda: probe.count_publishers(servo) == 1, 30.0), rig.report(servo)
+    rig.topic_info(servo, 'Publisher count: 1')
     time.sleep(0.5)
     assert probe.commands == []              # inactive: the publisher is idle
 
