@@ -338,11 +338,13 @@ def tally(folders: list[Path], given_codes: dict | None = None) -> dict:
     for folder in folders:
         series = read_series(Path(folder))
         most_tests = max((r['tests'] for r in series), default=0)
+        given = (given_codes or {}).get(folder)
+        given_code = ({'commit': given, 'fingerprint': code_fingerprint(repo, given), 'dirty': None}
+                      if given else None)
         for r in series:
             code = dict(r.get('code') or {})
-            given = (given_codes or {}).get(folder)
-            if not code.get('commit') and given:
-                code = {'commit': given, 'fingerprint': code_fingerprint(repo, given), 'dirty': None}
+            if not code.get('commit') and given_code:
+                code = given_code
             commit = code.get('commit') or 'unknown'
             key = code.get('fingerprint') or commit
             if code.get('dirty'):
