@@ -11,6 +11,7 @@ import gc
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -173,6 +174,63 @@ def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
     # The executor is dropped (its C++ destructor run) inside the teardown limit, before the
     # context goes down, not as run_node returns (stop 32).
     assert events == ['executor shutdown', 'node destroyed', 'executor dropped', 'context shut down']
+    assert not rclpy.ok()
+
+
+class _SignalsItselfInsideItsTick(Node):
+    """Its 1 kHz tick sends ``signum`` to its own process at the 50th step, then goes on.
+
+    Python runs the handler at the tick's next line: inside the callback, where a Ctrl-C
+    mostly lands in a node stepping at 1 kHz. rclpy's own handler raised KeyboardInterrupt
+    there; the EventsExecutor logged "[FATAL] Exception in 'timers' callback:" (2 of 6 stops
+    of the sim, stop 37) and queued callbacks published into a dead context.
+    """
+
+    signum = signal.SIGINT
+    made: list = []
+
+    def __init__(self):
+        super().__init__('signals_itself')
+        self.ticks = 0
+        self.finished_ticks: list[int] = []      # ticks that ran to their last line
+        self.create_timer(0.001, self._tick)
+        self.made.append(self)
+
+    def _tick(self):
+        self.ticks += 1
+        if self.ticks == 50:
+            os.kill(os.getpid(), self.signum)
+        self.finished_ticks.append(self.ticks)
+
+
+@pytest.mark.parametrize('kind', ['events', 'single'])
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_inside_a_callback_ends_the_spin_after_that_callback(monkeypatch, kind, signum):
+    real_make = common.make_executor
+    monkeypatch.setattr(common, 'make_executor', lambda: real_make(kind=kind))
+    monkeypatch.setattr(_SignalsItselfInsideItsTick, 'signum', signum)
+    monkeypatch.setattr(_SignalsItselfInsideItsTick, 'made', [])
+    before = {s: signal.getsignal(s) for s in common.SignalStop.SIGNALS}
+    assert run_node(_SignalsItselfInsideItsTick, 'signals_itself', []) == 0
+    node = _SignalsItselfInsideItsTick.made[0]
+    assert 50 in node.finished_ticks, 'the tick the signal came in was cut short'
+    # The spin ends a few periods after the signal: the wake timer fires 1 ms later. 200
+    # periods leave room for a loaded machine; a signal that never ends the spin runs on.
+    assert node.ticks - 50 <= 200, node.ticks
+    assert {s: signal.getsignal(s) for s in common.SignalStop.SIGNALS} == before
+    assert not rclpy.ok()
+
+
+class _SignalsItselfWhileStarting(Node):
+    def __init__(self):
+        super().__init__('signals_while_starting')
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(1.0)                           # the handler runs within this call
+        raise AssertionError('a signal before the spin did not interrupt the start')
+
+
+def test_a_signal_before_the_spin_interrupts_the_start():
+    assert run_node(_SignalsItselfWhileStarting, 'signals_while_starting', []) == 0
     assert not rclpy.ok()
 
 

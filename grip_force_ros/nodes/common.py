@@ -22,6 +22,7 @@ import faulthandler
 import gc
 import math
 import os
+import signal
 import sys
 from typing import Callable, Iterable, Sequence
 
@@ -30,6 +31,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
 from rclpy.task import Future
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
@@ -226,6 +228,74 @@ def shutdown_follows(wait: float = SHUTDOWN_RACE_WAIT, poll: float = 0.01) -> bo
     return wait_until(lambda: not rclpy.ok(), wait, poll)
 
 
+class SignalStop:
+    """SIGINT and SIGTERM ask a node process to stop; they do not interrupt a callback.
+
+    With rclpy's own handlers (``rclpy.init``'s default), a Ctrl-C shuts the context down from
+    rclpy's signal thread and raises KeyboardInterrupt in the main thread at its next Python
+    line, which, in a node stepping at 1 kHz, is mostly inside a timer callback: the
+    EventsExecutor logged ``[FATAL] Exception in 'timers' callback:`` (an empty message)
+    there, and callbacks already queued then published into a dead context (2 of 6 stops of
+    ``sim_instrument``, stop 37; five node logs of a loaded run, stop 36). This handler only
+    records the request and resets a stopped one-shot timer (the EventsExecutor of Jazzy takes
+    no guard condition; a timer reset from inside a callback fires 0.6 ms later), whose
+    callback completes the spin's future: the callback running then ends, the spin returns,
+    and the teardown (executor, node, context) runs in that order. Python runs a signal handler
+    between two lines of the main thread; while the executor waits in C++ with no callback
+    due, that is when the spin's slice (:data:`SPIN_SLICE`) ends.
+
+    Phases: before the spin, a signal raises KeyboardInterrupt (a start that hangs can still
+    be interrupted); during it, it asks the stop; after it (the teardown, bounded by
+    :data:`TEARDOWN_LIMIT`), it is noted and ignored. :meth:`restore` puts the previous
+    handlers back (``run_node`` runs inside test processes too).
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.requested = False          # a signal asked the stop
+        self.phase = 'starting'         # 'starting', 'spinning', 'stopping'
+        self._wake: Callable[[], None] | None = None
+        self._previous = {signum: signal.signal(signum, self._handle) for signum in self.SIGNALS}
+
+    def spin_until_stopped(self, executor, node, finished: Future) -> None:
+        """Spin ``executor`` until ``finished`` is done, the context is down or a signal came."""
+        def complete():
+            wake.cancel()
+            if not finished.done():
+                finished.set_result(None)
+        wake = node.create_timer(WAKE_DELAY, complete, autostart=False)
+        self._wake = wake.reset
+        self.phase = 'spinning'
+        try:
+            # EventsExecutor (Jazzy) never returns from spin() or from spin_until_future_complete
+            # without a timeout once the context is down: spin in slices.
+            while rclpy.ok() and not finished.done() and not self.requested:
+                executor.spin_until_future_complete(finished, timeout_sec=SPIN_SLICE)
+        finally:
+            self.phase = 'stopping'
+            self._wake = None
+
+    def restore(self) -> None:
+        """Put back the handlers found at construction."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _handle(self, signum, frame) -> None:
+        if self.phase == 'starting':
+            raise KeyboardInterrupt
+        self.requested = True
+        if self._wake is not None:
+            self._wake()
+
+
+#: Longest a spin waits in C++ before the main thread runs Python again (s): the latest a
+#: signal is handled by a node with no callback due (:class:`SignalStop`).
+SPIN_SLICE = 0.5
+#: Period of :class:`SignalStop`'s wake timer (s): how soon after a signal the spin ends.
+WAKE_DELAY = 0.001
+
+
 def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
              args: list[str] | None = None) -> int:
     """Run the main loop of an executable node (ros2/demos Jazzy style).
@@ -237,11 +307,13 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     # that has to be killed because it did not stop was doing (NodeProcess.stop asks).
     faulthandler.register(STACK_DUMP_SIGNAL, all_threads=True)
     try:
-        rclpy.init(args=args)
+        # SIGINT and SIGTERM are this process's (SignalStop), not rclpy's.
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback
         print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
         return 2
     node = executor = finished = None
+    stop = SignalStop()
     try:
         try:
             node = make_node()
@@ -252,19 +324,16 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         executor.add_node(node)
         # A node may end itself by completing its ``finished`` Future.
         finished = getattr(node, 'finished', None) or Future()
-        # EventsExecutor (Jazzy) never returns from spin() or from
-        # spin_until_future_complete without a timeout once a signal has shut
-        # the context down: poll with a timeout.
-        while rclpy.ok() and not finished.done():
-            executor.spin_until_future_complete(finished, timeout_sec=0.5)
+        stop.spin_until_stopped(executor, node, finished)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (_RCLError, RuntimeError):
-        # Ctrl-C / SIGINT shuts the context down under the executor: a callback already
-        # queued may then fail to publish ("publisher's context is invalid"), or the
-        # EventsExecutor (rclpy 7.1.x) may fail to hand it its arguments, even just before
-        # the context is down. That is the shutdown racing the callback, not a fault; an
-        # error with the context still up SHUTDOWN_RACE_WAIT later is.
+        # A context shut down under the executor (not by a signal since SignalStop; by
+        # another thread of the process): a callback already queued may then fail to
+        # publish ("publisher's context is invalid"), or the EventsExecutor (rclpy 7.1.x)
+        # may fail to hand it its arguments, even just before the context is down. That is
+        # the shutdown racing the callback, not a fault; an error with the context still up
+        # SHUTDOWN_RACE_WAIT later is.
         if not shutdown_follows():
             raise
     finally:
@@ -282,6 +351,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         finally:
             faulthandler.cancel_dump_traceback_later()
             stop_watch(watcher)
+            stop.restore()
     return 0
 
 
