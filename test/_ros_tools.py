@@ -66,6 +66,17 @@ def sourced(*args: str) -> list[str]:
 FASTDDS_LOG_LINE = re.compile(r'^\x1b\[[0-9;]*m\d{4}-\d\d-\d\d .*\b(Error|Warning|Info)\b')
 
 
+#: What a node's log shows of an error: a Python traceback, and the lines the EventsExecutor
+#: writes for an exception it caught in a callback ("[FATAL] ... Exception in 'timers'
+#: callback: ..." then "Error occurred at:" and the stack), which hold no "Traceback".
+_LOG_ERROR = re.compile(r"Traceback|Exception in '\w+' callback|Error occurred at:")
+
+
+def log_errors(text: str) -> list[str]:
+    """Return the lines of a node or launch log that show an error (:data:`_LOG_ERROR`)."""
+    return [line for line in text.splitlines() if _LOG_ERROR.search(line)]
+
+
 def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
         env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     """Run a command in the sourced environment; output captured as text.
@@ -281,15 +292,88 @@ def named_native_stacks(pid: int) -> str:
     return f'{known_deadlock(stacks) or "no known deadlock"}\n{stacks}'
 
 
+def _domain_ports(domain_id: int) -> range:
+    """Return the UDP and shared-memory port numbers of ``domain_id``'s participants.
+
+    RTPS port mapping: 7400 + 250 x domain; + 10 + 2 x id for discovery, + 11 + 2 x id for
+    user data.
+    """
+    base = 7400 + 250 * domain_id
+    return range(base + 10, base + 250)
+
+
+def _socket_inodes(pid: int) -> set[str]:
+    """Inodes of the sockets process ``pid`` holds open (``/proc/<pid>/fd``)."""
+    inodes = set()
+    for fd in Path(f'/proc/{pid}/fd').iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue                                            # closed meanwhile
+        if target.startswith('socket:['):
+            inodes.add(target[len('socket:['):-1])
+    return inodes
+
+
+def dds_ports_report(domain_id: int, pids) -> str:
+    """Tell what Fast DDS's transports hold for ``domain_id``, for a CLI that saw nothing.
+
+    The hypothesis it tests (the CLI's blind spell, stops 33-36): a new participant reuses
+    the participant id, so the ports, of one that was killed; it finds a port's shared-memory
+    segment a zombie and makes a new one, while the long-lived nodes keep writing into the old
+    one they have mapped (eProsima/Fast-DDS#4728). For each of ``pids``: the UDP ports it binds
+    in the domain and the ``fastrtps_port`` segments it maps, a ``(deleted)`` one being such
+    an orphan; then each segment named (age, lock file). Fast DDS 2.14 maps, beside the
+    domain's own port numbers, one segment per participant id shared by every domain
+    (``fastrtps_port7000`` + id, seen here). Called only once a test has failed.
+    """
+    ports = _domain_ports(domain_id)
+    lines, named = [f'Fast DDS ports of domain {domain_id}:'], set()
+    for pid in pids:
+        try:
+            command = Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ')[:80]
+            maps = Path(f'/proc/{pid}/maps').read_text()
+            udp = Path(f'/proc/{pid}/net/udp').read_text()      # the network namespace's sockets
+            inodes = _socket_inodes(pid)
+        except OSError:
+            continue                                            # ended meanwhile
+        bound = []
+        for row in udp.splitlines()[1:]:
+            fields = row.split()
+            port = int(fields[1].split(':')[1], 16)
+            if fields[9] in inodes and port in ports:
+                bound.append(port)
+        mapped = sorted({line.split(None, 5)[5].replace('/dev/shm/', '') for line in maps.splitlines()
+                         if 'fastrtps_port' in line and len(line.split(None, 5)) == 6})
+        named.update(m.split()[0] for m in mapped)
+        lines.append(f'  pid {pid} {command.decode(errors="replace")}: binds UDP {sorted(bound)}; '
+                     f'maps {mapped}')
+    now = time.time()
+    named.update(f'fastrtps_port{number}' for number in ports)
+    for name in sorted(named):
+        segment = Path('/dev/shm') / name
+        try:
+            age = now - segment.stat().st_mtime
+        except OSError:
+            continue
+        lock = ' + lock file' if Path(f'{segment}_el').exists() else ''
+        lines.append(f'  {name}: written {age:.0f} s ago{lock}')
+    return '\n'.join(lines)
+
+
 def process_report(proc: subprocess.Popen, log: Path) -> str:
     """Tell what is known of a started command (:func:`start`) that a CLI call did not find.
 
-    Whether it still runs; each process of its tree asked for its Python stacks (into
-    ``log``, when it handles the signal) and its native stacks taken with gdb; then ``log``.
+    Whether it still runs; what Fast DDS's transports hold (:func:`dds_ports_report`); each
+    process of its tree asked for its Python stacks (into ``log``, when it handles the
+    signal) and its native stacks taken with gdb; then ``log``.
     Called only once a test has failed: it costs seconds.
     """
     code = proc.poll()
     lines = ['the command runs' if code is None else f'the command exited {code}']
+    domain = os.environ.get('ROS_DOMAIN_ID')       # the suite's (conftest), which ros_env passes on
+    if domain and code is None:                    # first: gdb stops each process a while
+        lines.append(dds_ports_report(int(domain), [os.getpid(), *process_tree(proc.pid)]))
     for pid in process_tree(proc.pid) if code is None else []:
         try:
             command = Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ')[:160]

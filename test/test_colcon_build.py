@@ -19,6 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
+from _ros_tools import log_errors
 from grip_force_ros import topics
 from grip_force_ros.nodes.harness import RosRunner
 from grip_force_ros.nodes.processes import NodeProcess, ros_environment
@@ -99,4 +100,4 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
     # the installed copy ran, with the instrument file's values
     assert 'paper_needle_driver' in logs['controller']
     assert 'paper_needle_driver' in logs['sim_instrument']
-    assert 'Traceback' not in ''.join(logs.values())
+    assert not log_errors(''.join(logs.values())), logs

@@ -17,8 +17,8 @@ import sysconfig
 from pathlib import Path
 
 
-from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, known_deadlock, process_report, require_ros_tools,
-                        retry, ros_env, run, start, stop, stop_daemon, vendor_dir)
+from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, known_deadlock, log_errors, process_report,
+                        require_ros_tools, retry, ros_env, run, start, stop, stop_daemon, vendor_dir)
 from grip_force_ros.nodes.processes import wait_until
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
@@ -127,7 +127,7 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
         stop_daemon(env)
     text = log.read_text()
     assert code == 0, text
-    assert 'Traceback' not in text, text
+    assert not log_errors(text), text
 
 
 def test_a_failed_discovery_reports_whether_the_node_runs_and_where_it_is(tmp_path):
@@ -235,3 +235,16 @@ def test_a_launched_node_still_running_before_launch_s_sigterm_leaves_its_stacks
     assert 'native stacks of pid' in text and 'no known deadlock' in text, text
     if shutil.which('gdb'):
         assert re.search(r'^#\d+ +(0x[0-9a-f]+ in )?\w', text, re.M), text   # gdb's frames
+
+
+def test_log_errors_sees_a_callback_error_the_events_executor_caught():
+    """A loaded run's sim log (stop 36): a KeyboardInterrupt caught in a timer callback."""
+    caught = ("[sim_instrument-1] [FATAL] [1795825648.018376419] [sim_instrument]: Exception in "
+              "'timers' callback: \n"
+              "[sim_instrument-1] [WARN] [1795825648.022793734] [sim_instrument]: Error occurred at:\n"
+              '[sim_instrument-1]   File "plant.py", line 437, in step\n')
+    assert len(log_errors(caught)) == 2
+    assert log_errors('Traceback (most recent call last):\n') == ['Traceback (most recent call last):']
+    clean = ('[INFO] [controller-2]: process has finished cleanly [pid 4151]\n'
+             '[sim_instrument-1] [INFO] [1795825648.0] [sim_instrument]: stepping at 1000 Hz\n')
+    assert log_errors(clean) == []
