@@ -400,6 +400,11 @@ sys.stdin.readline()
         recorder = RecorderNode(tmp_path / 'bag', context=ctx)
         recorder.subscribe_all()
         assert proc.stdout.readline().strip() == 'matched'
+        # 'matched' is the writers' side; the recorder's readers may match them later, and a
+        # writer keeps only its last 10 messages: loaded run 37/c3/1 lost the first 3 of each
+        # stream (2997 of 3000). The streams start once both sides have matched.
+        assert wait_until(lambda: all(recorder.matched_publishers(t) for t in streams), 30.0), \
+            {t: recorder.matched_publishers(t) for t in streams}
         proc.stdin.write('go\n')
         proc.stdin.flush()
         time.sleep(0.5)                       # the recorder not spinning: a stall

@@ -159,6 +159,16 @@ class RecorderNode(Node):
         with self._lock:
             return self.counts[absolute(topic)]
 
+    def matched_publishers(self, topic: str) -> int:
+        """Return how many publishers the subscription on ``topic`` has matched (0: none yet).
+
+        A publisher may see this subscription before the subscription sees it: what it sends
+        in between reaches the subscription only while the publisher still keeps it (its
+        history depth).
+        """
+        subscription = self._subs.get(absolute(topic), self._subs.get(topic))
+        return 0 if subscription is None else subscription.get_publisher_count()
+
     # -- end -----------------------------------------------------------------
     def close(self) -> Path | None:
         """Close the bag (topics never seen get a connection with no messages)."""
