@@ -22,7 +22,8 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.nodes.processes import STACK_DUMP_WAIT, child_setup, request_stacks
+from grip_force_ros.nodes.processes import (STACK_DUMP_WAIT, child_setup, domain_ports,  # noqa: F401
+                                            log_errors, request_stacks)
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -64,17 +65,6 @@ def sourced(*args: str) -> list[str]:
 #: ... open_and_lock_file failed -> Function open_port_internal<ESC>[m`` before its answer
 #: (the shared-memory transport falls back to UDP; the answer was right).
 FASTDDS_LOG_LINE = re.compile(r'^\x1b\[[0-9;]*m\d{4}-\d\d-\d\d .*\b(Error|Warning|Info)\b')
-
-
-#: What a node's log shows of an error: a Python traceback, and the lines the EventsExecutor
-#: writes for an exception it caught in a callback ("[FATAL] ... Exception in 'timers'
-#: callback: ..." then "Error occurred at:" and the stack), which hold no "Traceback".
-_LOG_ERROR = re.compile(r"Traceback|Exception in '\w+' callback|Error occurred at:")
-
-
-def log_errors(text: str) -> list[str]:
-    """Return the lines of a node or launch log that show an error (:data:`_LOG_ERROR`)."""
-    return [line for line in text.splitlines() if _LOG_ERROR.search(line)]
 
 
 def run(*args: str, timeout: float = 60.0, cwd: Path | str | None = None,
@@ -292,16 +282,6 @@ def named_native_stacks(pid: int) -> str:
     return f'{known_deadlock(stacks) or "no known deadlock"}\n{stacks}'
 
 
-def _domain_ports(domain_id: int) -> range:
-    """Return the UDP and shared-memory port numbers of ``domain_id``'s participants.
-
-    RTPS port mapping: 7400 + 250 x domain; + 10 + 2 x id for discovery, + 11 + 2 x id for
-    user data.
-    """
-    base = 7400 + 250 * domain_id
-    return range(base + 10, base + 250)
-
-
 def _socket_inodes(pid: int) -> set[str]:
     """Inodes of the sockets process ``pid`` holds open (``/proc/<pid>/fd``)."""
     inodes = set()
@@ -324,10 +304,11 @@ def dds_ports_report(domain_id: int, pids) -> str:
     one they have mapped (eProsima/Fast-DDS#4728). For each of ``pids``: the UDP ports it binds
     in the domain and the ``fastrtps_port`` segments it maps, a ``(deleted)`` one being such
     an orphan; then each segment named (age, lock file). Fast DDS 2.14 maps, beside the
-    domain's own port numbers, one segment per participant id shared by every domain
-    (``fastrtps_port7000`` + id, seen here). Called only once a test has failed.
+    domain's own port numbers, a segment from one pool shared by every domain on the machine
+    (``fastrtps_port7000`` up, the lowest free number; docs/reliability.md, twenty-first
+    round). Called only once a test has failed.
     """
-    ports = _domain_ports(domain_id)
+    ports = domain_ports(domain_id)
     lines, named = [f'Fast DDS ports of domain {domain_id}:'], set()
     for pid in pids:
         try:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import signal
 import subprocess
 import sys
@@ -28,10 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from grip_force_ros.nodes.processes import reserve_domains, ros_environment
+from grip_force_ros.nodes.processes import log_errors, reserve_domains, ros_environment
 
-#: A log line that shows an error (the suite's ``log_errors`` reads the same three forms).
-LOG_ERROR = re.compile(r"Traceback|Exception in '\w+' callback|Error occurred at:")
 #: Longest wait for a node's first log line, and for its exit after SIGINT (s).
 START_LIMIT = 90.0
 EXIT_LIMIT = 60.0
@@ -56,7 +53,7 @@ def stop_once(python: str, exe: str, after: float, domain_id: int, log: Path) ->
         code = proc.wait()
     text = log.read_text(errors='replace')
     return {'python': python, 'exit_code': code, 'exit_s': round(time.monotonic() - sent, 3),
-            'errors': [line for line in text.splitlines() if LOG_ERROR.search(line)][:4],
+            'errors': log_errors(text)[:4],
             'log': str(log)}
 
 

@@ -166,7 +166,7 @@ class RecorderNode(Node):
         in between reaches the subscription only while the publisher still keeps it (its
         history depth).
         """
-        subscription = self._subs.get(absolute(topic), self._subs.get(topic))
+        subscription = self._subs.get(absolute(topic))
         return 0 if subscription is None else subscription.get_publisher_count()
 
     # -- end -----------------------------------------------------------------

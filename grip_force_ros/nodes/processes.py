@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import shlex
 import signal
 import subprocess
@@ -49,6 +50,17 @@ _PORT_BASE = 7400
 _DOMAIN_GAIN = 250
 #: Largest domain id whose ports stay valid for every participant on Linux.
 MAX_DOMAIN_ID = 101
+
+
+#: A line of a node's log that shows an error: a Python traceback, or the lines the
+#: EventsExecutor writes for an exception it caught in a callback ("[FATAL] ... Exception in
+#: 'timers' callback: ..." then "Error occurred at:" and the stack), which hold no "Traceback".
+LOG_ERROR = re.compile(r"Traceback|Exception in '\w+' callback|Error occurred at:")
+
+
+def log_errors(text: str) -> list[str]:
+    """Return the lines of a node or launch log that show an error (:data:`LOG_ERROR`)."""
+    return [line for line in text.splitlines() if LOG_ERROR.search(line)]
 
 
 class ProcessError(RuntimeError):
@@ -769,11 +781,17 @@ def _udp_ports_in_use() -> set[int]:
         return set()
 
 
+def domain_ports(domain_id: int) -> range:
+    """Return the DDS port numbers of ``domain_id`` (UDP, and Fast DDS's shared-memory ports)."""
+    low = _PORT_BASE + _DOMAIN_GAIN * domain_id
+    return range(low, low + _DOMAIN_GAIN)
+
+
 def domain_in_use(domain_id: int, ports: set[int] | None = None) -> bool:
     """Tell whether some process has bound a DDS port of ``domain_id`` on this machine."""
     ports = _udp_ports_in_use() if ports is None else ports
-    low = _PORT_BASE + _DOMAIN_GAIN * domain_id
-    return any(low <= p < low + _DOMAIN_GAIN for p in ports)
+    own = domain_ports(domain_id)
+    return any(p in own for p in ports)
 
 
 #: Domains the reservations of this process hold (see :func:`held_domains`).
