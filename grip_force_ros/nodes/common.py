@@ -204,8 +204,9 @@ def unfreeze_heap() -> None:
     gc.unfreeze()
 
 
-#: Time a node's teardown (executor, node, context) may take before :func:`run_node` writes
-#: every thread's stack to stderr and ends the process with exit code 1 (s). A loaded run
+#: Time a node's teardown (executor, node, context) may run before every thread's stack goes
+#: to stderr and the process is ended (s; time stopped for gdb's native stacks does not count,
+#: :func:`~grip_force_ros.nodes.processes.watch_own_teardown`). A loaded run
 #: (stop 32) saw the master ignore ``ros2 launch``'s SIGINT and SIGTERM at a stop and get
 #: SIGKILLed 15 s later, with nothing in its log of where it was; a teardown stuck in the
 #: middleware (Fast DDS has an open deadlock of a participant's own threads,
@@ -218,8 +219,9 @@ TEARDOWN_LIMIT = 4.0
 #: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).
 #: Stop 35: the controller's ``destroy_node`` ran past the limit in a loaded run, and its
 #: Python stack could not tell a Fast DDS deadlock from a slow teardown. The process is stopped
-#: while gdb starts and reads (seconds on a loaded machine), so it comes late: 3 s, 3.8 times the
-#: slowest loaded teardown measured (0.79 s, docs/reliability.md, sixteenth round).
+#: while gdb starts and reads (seconds on a loaded machine), which delays a teardown that would
+#: have ended, so it comes late: 3 s, 3.8 times the slowest loaded teardown measured (0.79 s,
+#: docs/reliability.md, sixteenth round).
 NATIVE_STACKS_AT = 0.75
 
 
@@ -338,10 +340,13 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
             raise
     finally:
         # A teardown that never ends (a process deaf to SIGINT and SIGTERM, killed by whoever
-        # started it, with nothing in its log) ends here instead: stacks, then exit code 1.
-        # Before that, its native stacks too (where in the middleware it waits).
-        faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
-        watcher = watch_own_teardown(NATIVE_STACKS_AT * TEARDOWN_LIMIT)
+        # started it, with nothing in its log) ends here instead: its native stacks (where in
+        # the middleware it waits), then its Python stacks and SIGKILL at the limit, counted
+        # in the time it runs (the watcher). Without a watcher, faulthandler's limit in wall
+        # time: Python stacks, then exit code 1.
+        watcher = watch_own_teardown(NATIVE_STACKS_AT * TEARDOWN_LIMIT, TEARDOWN_LIMIT)
+        if watcher is None:
+            faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
         try:
             close_node(executor, node)
             # Dropped here, inside the limit, not as the function returns: the EventsExecutor's

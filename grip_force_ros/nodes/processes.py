@@ -443,11 +443,17 @@ _PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
 #: because a teardown stuck in C below Python may hold the GIL (no Python thread runs then).
 #: It leaves the scheduling class it inherits (SCHED_FIFO for the demo's nodes under load) for
 #: SCHED_OTHER first: gdb reading stacks for seconds must not outrank the machine's other work.
-#: It stops the process (SIGSTOP) while gdb starts and reads, so that the teardown limit cannot
-#: end it meanwhile, and continues it after. A lock (``flock`` on the process's temporary file
-#: ``$3``, opened anew through ``/proc``: a lock of its own, not the process's) makes that stop
-#: and the process's own end of the watch (:func:`stop_watch`) exclude each other: a teardown
-#: that ends just then is never left stopped.
+#: It stops the process (SIGSTOP) while gdb starts and reads and continues it after, then gives
+#: it the rest of its limit: the limit counts the time the process runs, not the time gdb held
+#: it (stop 37: a wall-clock limit, running on while gdb read for over a second, ended a slow
+#: teardown the moment gdb let go). A process still tearing down at the limit gets
+#: STACK_DUMP_SIGNAL (its Python stacks, ``faulthandler``), then SIGKILL. A lock (``flock`` on
+#: the process's temporary file ``$3``, opened anew through ``/proc``: a lock of its own, not
+#: the process's) makes each of the watcher's steps on the process and the process's own end
+#: of the watch (:func:`stop_watch`) exclude each other: a teardown that ends just then is never
+#: left stopped, and ``[ -ef ]`` (the same file) makes sure a pid reused meanwhile is not hit.
+#: Arguments: delay before the stacks (s), pid, fd of the lock file, rest of the limit (s), the
+#: limit (s, for the message), the stack signal's number, the time to write stacks (s).
 _TEARDOWN_WATCH = r'''exec 1>&2
 chrt -o -p 0 $$ >/dev/null 2>&1
 sleep "$1"
@@ -460,7 +466,15 @@ if command -v gdb >/dev/null 2>&1; then
 else
   echo "[teardown] no gdb on this machine"
 fi
-kill -CONT "$2"'''
+kill -CONT "$2"
+flock -u 9
+sleep "$4"
+flock -n 9 || exit 0
+[ "/proc/$2/fd/$3" -ef /dev/fd/9 ] || exit 0
+echo "[teardown] pid $2 still tearing down after $5 s of its own time; its Python stacks, then SIGKILL:"
+kill -"$6" "$2" 2>/dev/null || exit 0
+sleep "$7"
+kill -KILL "$2" 2>/dev/null'''
 
 
 class TeardownWatch(NamedTuple):
@@ -470,20 +484,25 @@ class TeardownWatch(NamedTuple):
     lock: Any          # this process's temporary file, which the watcher locks while it has it stopped
 
 
-def watch_own_teardown(after: float) -> TeardownWatch | None:
-    """Start a watcher that writes this process's native stacks to its stderr in ``after`` s.
+def watch_own_teardown(after: float, limit: float) -> TeardownWatch | None:
+    """Start a watcher of this process's teardown: native stacks at ``after`` s, an end at ``limit``.
 
     For a teardown that may hang in the middleware: ``faulthandler`` shows the Python
     frame (``destroy_node``), not where in Fast DDS it waits. The watcher sleeps ``after``
     s, then, if this process still runs and :func:`stop_watch` has not begun, stops it,
     attaches gdb (where installed), writes every thread's native stack to the stderr it
-    shares with this process (the node's log) and continues it. End it with
-    :func:`stop_watch` once the teardown has ended.
+    shares with this process (the node's log) and continues it. It then waits the rest of
+    ``limit``; a teardown still running then has its Python stacks written
+    (:data:`STACK_DUMP_SIGNAL`) and is killed (SIGKILL): the time gdb held the process does
+    not count. End it with :func:`stop_watch` once the teardown has ended.
 
     Parameters
     ----------
     after : float
-        Delay (s) before the stacks are taken.
+        Delay (s) before the native stacks are taken.
+    limit : float
+        Time (s) the teardown may run, not counting the time stopped for gdb; not less than
+        ``after``.
 
     Returns
     -------
@@ -495,7 +514,8 @@ def watch_own_teardown(after: float) -> TeardownWatch | None:
     try:
         lock = tempfile.TemporaryFile()
         watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
-                                    str(os.getpid()), str(lock.fileno())],
+                                    str(os.getpid()), str(lock.fileno()), f'{max(limit - after, 0.0):g}',
+                                    f'{limit:g}', str(int(STACK_DUMP_SIGNAL)), f'{STACK_DUMP_WAIT:g}'],
                                    stdin=subprocess.DEVNULL, start_new_session=True)
     except OSError:
         if lock is not None:
@@ -510,7 +530,7 @@ def stop_watch(watch: TeardownWatch | None) -> None:
     """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group).
 
     Takes the watcher's lock first: a watcher that has this process stopped for gdb holds it
-    until it has continued the process.
+    until it has continued the process (and one ending it at the limit, until it is killed).
     """
     if watch is None:
         return
