@@ -119,7 +119,8 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
                                       '2', env=env),
                           lambda r: '/controller' in r.stdout.split(), timeout=30)
         assert lifecycle.returncode == 0, lifecycle.stderr
-        assert '/controller' in lifecycle.stdout.split(), (lifecycle.stdout, process_report(proc, log))
+        assert '/controller' in lifecycle.stdout.split(), \
+            (lifecycle.stdout, _graph_seen(env), process_report(proc, log))
         assert proc.poll() is None
     finally:
         # ros2 run does not pass SIGINT on to its child: signal the process group.
@@ -128,6 +129,21 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
     text = log.read_text()
     assert code == 0, text
     assert not log_errors(text), text
+
+
+def _graph_seen(env: dict[str, str]) -> str:
+    """What a new CLI process sees of the graph: its nodes, and its services with their types.
+
+    For a ``ros2 lifecycle nodes`` that printed nothing (the blind spell, stops 33-37): it
+    lists the nodes that have a ``<node>/get_state`` service of type
+    ``lifecycle_msgs/srv/GetState``, so an empty answer alone cannot say whether the node or
+    its service was missing.
+    """
+    seen = []
+    for verb in (('node', 'list'), ('service', 'list', '-t')):
+        done = run('ros2', *verb, '--no-daemon', '--spin-time', '2', env=env)
+        seen.append(f"ros2 {' '.join(verb)} (exit {done.returncode}):\n{done.stdout}{done.stderr}")
+    return '\n'.join(seen)
 
 
 def test_a_failed_discovery_reports_whether_the_node_runs_and_where_it_is(tmp_path):
