@@ -338,6 +338,37 @@ def test_a_jump_received_after_a_gap_is_judged_on_the_controllers_step():
     assert '-0.500000' in m.violations[0] and 'step that sent it 1.00 ms' in m.violations[0]
 
 
+def test_a_change_across_lost_commands_is_judged_on_the_steps_they_were():
+    """CI of c68dacc: pytest's process stalled ~0.3 s, its reader fell behind and lost the
+    controller's ramp (0.29 -> 0.19 -> 0.09 -> 0 A at 100 A/s), and the judge saw 0.29 -> 0 A
+    in one 1 ms step. DDS reports the loss (message-lost, ``note_lost``): a change across n
+    lost commands spans n + 1 steps. A report far from the change (beyond LOSS_WINDOW)
+    excuses nothing, and a jump bigger than the steps lost allow is still caught."""
+    from grip_force_ros.faults.probe import LOSS_WINDOW, LimitMonitor
+
+    def judged(jump_to, lost_at, lost):
+        m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
+        if lost:
+            m.note_lost(lost_at, lost)
+        # one control step a ms; from step 4 on received 0.293 s late (a backlog), and the
+        # commands of steps 4-6 (the ramp) never: their estimates (the steps) do arrive
+        for k in range(130):
+            stamp = 0.001 * k                                      # the controller's clock (s)
+            receipt = stamp + (0.0002 if k < 4 else 0.293)
+            if k < 4 or k > 6:
+                m.check(0.29 if k < 4 else jump_to if k == 7 else 0.0, t=receipt)
+            m.note_step(receipt + 0.00005, stamp)
+        return m.violations
+
+    assert len(judged(0.0, math.nan, 0)) == 1                       # no report: a jump
+    assert judged(0.0, 0.2995, 3) == []                             # 3 lost: 4 steps, 0.4 A
+    assert judged(0.0, 0.3001 + 0.9 * LOSS_WINDOW, 3) == []
+    far = judged(0.0, 0.3001 + 1.5 * LOSS_WINDOW, 3)
+    assert len(far) == 1 and 'lost' not in far[0], far
+    runaway = judged(-0.5, 0.2995, 3)                               # -0.79 A: beyond 4 steps
+    assert len(runaway) == 1 and 'across 3 lost commands' in runaway[0], runaway
+
+
 def test_a_slew_step_is_judged_on_the_controllers_own_step_time():
     """Receipt gaps can be shorter than the controller's step (commands that waited in the
     probe's queue while a slow callback held the shared thread): a step beyond the receipt

@@ -20,6 +20,7 @@ from collections import deque
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -60,6 +61,13 @@ def to_time_msg(seconds: float):
 DELIVERY_JITTER = 1.0
 #: Control steps kept to judge slew steps on (about 2 s at 1 kHz).
 STEP_RECORDS = 2000
+#: How far (s, receipt times) a loss of commands reported by DDS may lie from a change it
+#: spans (LimitMonitor.note_lost). A reader that falls behind (its process stalled) loses
+#: the samples its writer's history (KEEP_LAST 10) or the shared-memory port dropped; rmw
+#: reports them as message-lost events, which arrive within ~10 ms of the first sample after
+#: the gap (measured: a reader SIGSTOPped 1 s, 490 samples lost, events 1 ms before and
+#: 5 ms after that sample, split in several counts). Also how long a slew step waits for such a report.
+LOSS_WINDOW = 0.1
 
 
 class LimitMonitor:
@@ -95,12 +103,23 @@ class LimitMonitor:
         # beyond one period's slew, to be judged on the controller's own step times (resolve)
         self.steps: deque = deque(maxlen=STEP_RECORDS)
         self.pending: list[tuple[float, float]] = []
+        # commands the probe's reader lost: (receipt s of the report, how many)
+        self.lost: deque = deque(maxlen=STEP_RECORDS)
 
     @property
     def violations(self) -> list[str]:
         """Every limit violation so far (slew steps judged on the steps seen by now)."""
         self.resolve(final=True)
         return self._violations
+
+    def note_lost(self, t: float, count: int) -> None:
+        """Record ``count`` commands lost before they reached the probe, reported at ``t`` (s).
+
+        A change received across lost commands spans that many more controller steps:
+        :meth:`resolve` bounds it so (commands lost within :data:`LOSS_WINDOW` of it).
+        """
+        if count > 0:
+            self.lost.append((t, count))
 
     def note_step(self, t: float, controller_stamp: float) -> None:
         """Record a control step: received at ``t`` (s), the controller's clock at it (s)."""
@@ -120,8 +139,10 @@ class LimitMonitor:
         (delivery order across two topics). The longest of these intervals, plus
         :data:`DELIVERY_JITTER` periods, bounds the change; an interval beyond
         ``max_period`` is a stall after which the controller restarts from the measured
-        current (not bounded). Steps not yet followed by two control steps wait, unless
-        ``final``.
+        current (not bounded). Commands lost on the way (:meth:`note_lost`, within
+        :data:`LOSS_WINDOW`) were steps too: with ``n`` of them the change spans ``n + 1``
+        steps. Steps not yet followed by two control steps, and by :data:`LOSS_WINDOW` s of
+        steps, wait, unless ``final``.
         """
         if not self.pending:
             return
@@ -130,18 +151,20 @@ class LimitMonitor:
         still = []
         for t, change in self.pending:
             first = bisect.bisect_left(receipts, t)
-            if not final and len(steps) - first < 2:
+            if not final and (len(steps) - first < 2 or receipts[-1] < t + LOSS_WINDOW):
                 still.append((t, change))
                 continue
             intervals = [steps[j][1] - steps[j - 1][1] for j in (first - 1, first, first + 1)
                          if 1 <= j < len(steps)]
             longest = max((d for d in intervals if d == d), default=self.period)
-            allowed = self.max_step * (longest / self.period + DELIVERY_JITTER)
+            lost = sum(n for r, n in self.lost if abs(r - t) <= LOSS_WINDOW)
+            allowed = self.max_step * ((lost + 1) * longest / self.period + DELIVERY_JITTER)
             if longest > self.max_period or abs(change) <= allowed * (1 + 1e-6) + 1e-12:
                 continue
+            across = f', across {lost} lost commands' if lost else ''
             self._violations.append(
                 f'command step {change:+.6f} A beyond the slew limit {allowed:.6f} A over '
-                f"the controller's step that sent it {longest * 1e3:.2f} ms")
+                f"the controller's step that sent it {longest * 1e3:.2f} ms{across}")
         self.pending = still
 
     def check(self, command: float, t: float = math.nan) -> None:
@@ -234,7 +257,10 @@ class FaultProbe(Node):
                 self.create_subscription(msg_type, f'{relay}/{_TOPICS[source]}',
                                          lambda msg, s=source: self._on_relayed(s, msg),
                                          STATE_SUB_QOS if source == 'actuator' else RECORD_QOS)
-        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
+        self.commands_lost: list[tuple] = []   # (receive time [s], commands lost), DDS's count
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS,
+                                 event_callbacks=SubscriptionEventCallbacks(
+                                     message_lost=self._on_commands_lost))
         self.create_subscription(WrenchStamped, topics.TARGET_FORCE, self._on_target, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, RECORD_QOS)
@@ -426,6 +452,11 @@ class FaultProbe(Node):
         self.command = value if math.isfinite(value) else 0.0
         self.limits.check(value, self.now())
         self.commands.append((self.now(), self._stamp(msg), value))
+
+    def _on_commands_lost(self, info) -> None:
+        now = self.now()
+        self.commands_lost.append((now, info.total_count_change))
+        self.limits.note_lost(now, info.total_count_change)
 
     def _on_target(self, msg: WrenchStamped) -> None:
         f = msg.wrench.force.z
