@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+# log_errors: re-exported for the tests that import their helpers from here
 from grip_force_ros.nodes.processes import (STACK_DUMP_WAIT, child_setup, domain_ports,  # noqa: F401
                                             log_errors, request_stacks)
 

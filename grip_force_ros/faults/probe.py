@@ -257,7 +257,6 @@ class FaultProbe(Node):
                 self.create_subscription(msg_type, f'{relay}/{_TOPICS[source]}',
                                          lambda msg, s=source: self._on_relayed(s, msg),
                                          STATE_SUB_QOS if source == 'actuator' else RECORD_QOS)
-        self.commands_lost: list[tuple] = []   # (receive time [s], commands lost), DDS's count
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS,
                                  event_callbacks=SubscriptionEventCallbacks(
                                      message_lost=self._on_commands_lost))
@@ -454,9 +453,7 @@ class FaultProbe(Node):
         self.commands.append((self.now(), self._stamp(msg), value))
 
     def _on_commands_lost(self, info) -> None:
-        now = self.now()
-        self.commands_lost.append((now, info.total_count_change))
-        self.limits.note_lost(now, info.total_count_change)
+        self.limits.note_lost(self.now(), info.total_count_change)
 
     def _on_target(self, msg: WrenchStamped) -> None:
         f = msg.wrench.force.z
