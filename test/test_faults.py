@@ -234,7 +234,9 @@ def test_runtime_parameter_cases_name_schema_parameters():
 
 # ---------------------------------------------------------------------------- real nodes
 def _assert_report(report, n_cases):
-    failures = '\n'.join(f"{f['name']}: {f['why']}" for f in report['failures'])
+    details = {d['name']: d for d in report['details']}
+    failures = '\n'.join(f"{f['name']}: {f['why']}\n  detail: {details.get(f['name'])}"
+                         for f in report['failures'])
     assert report['cases'] == n_cases
     assert report['crashes'] == 0, failures
     assert report['limit_violations'] == 0, failures

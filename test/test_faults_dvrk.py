@@ -110,25 +110,37 @@ def test_the_kill_case_takes_the_held_current_from_the_sims_cut_line():
     assert problems == ['the sim carried no grip current at the kill']
 
 
+MASTER_REASON = 'stale master input: 100.4 ms old > 100.0 ms'
+
+
 class _SilencedLoop:
     """A stand-in for the master case: the master paused, the controller safe at once, and
     the sim's states of the silence (``current`` A) reaching the probe ``delay`` s after the
     pause (None: never)."""
 
-    def __init__(self, current: float, delay: float | None):
+    def __init__(self, current: float, delay: float | None, reasons=(MASTER_REASON,)):
         self.params = _TimeoutParams({name: 0.1 for name in TIMEOUT_PARAMS.values()})
         self.mode = 'grip'
+        self.stopped = None
+        self.reasons = reasons           # ((s after the pause, reasons), ...) or (reasons,)
         self.probe = SimpleNamespace(lock=threading.Lock(), states=[], latest=self.latest,
-                                     wait=lambda predicate, timeout: _Probe.wait(None, predicate, timeout))
+                                     wait=lambda predicate, timeout: _Probe.wait(None, predicate, timeout),
+                                     diagnostics_gap_since=lambda start: 0.1)
         self.procs = {'master': SimpleNamespace(pause=lambda: self.paused(current, delay),
                                                 resume=self.resumed)}
 
     def latest(self, _name):
-        return {'values': {'mode': self.mode, 'reasons': 'stale master input: 100.4 ms old > 100.0 ms',
+        reasons = 'ok'
+        if self.mode == 'safe':
+            since = time.time() - self.stopped
+            reasons = [r if isinstance(r, str) else r[1] for r in self.reasons
+                       if isinstance(r, str) or r[0] <= since][-1]
+        return {'values': {'mode': self.mode, 'reasons': reasons,
                            'current_command_A': '0.24' if self.mode == 'grip' else '0.0'}}
 
     def paused(self, current, delay):
         self.mode, stopped = 'safe', time.time()
+        self.stopped = stopped
         if delay is not None:
             def arrive():
                 time.sleep(delay)
@@ -175,4 +187,21 @@ def test_dvrk_and_drive_faults_on_real_processes():
     assert details['arm_disabled_mid_grasp']['servo_jf_after_disable'] == 0
     assert 'DISABLED' in details['arm_disabled_mid_grasp']['reason']
     assert details['current_on_effort_topic']['refused_by_effort_limit'] >= 40
-    assert 'stale master' in details['dvrk_master_silent']['reason']
+    assert 'stale master' in details['dvrk_master_silent']['reason_named']
+
+
+def test_the_master_case_names_the_master_after_a_safe_state_for_another_input():
+    """Loaded run 38/c1/6: 'the reason does not name the stale master', the reason unknown.
+    A safe state that comes first for another input (a stall of the sim or the controller as
+    the master stops) passes once a later status names the stale master; a controller that
+    never names it fails, with both reasons it gave."""
+    stall = 'stale instrument input: 31.0 ms old > 30.0 ms'
+    reasons = ((0.0, stall), (0.7, f'{stall}; {MASTER_REASON}'))   # named late: a starved probe
+    assert _master_case(_SilencedLoop(current=0.0, delay=0.0, reasons=reasons), detail := {}) == []
+    assert detail['reason_when_safe'] == stall
+    assert 0.7 <= detail['master_named_after_s'] < 1.5
+    assert MASTER_REASON in detail['reason_named']
+    problems = _master_case(_SilencedLoop(current=0.0, delay=0.0, reasons=(stall,)), detail := {})
+    assert problems == [f"no safe status named the stale master within {dvrk.MASTER_NAMED_WAIT} s "
+                        f"(reason when safe: {stall!r}; at +0.5 s: {stall!r})"]
+    assert detail['master_named_after_s'] is None

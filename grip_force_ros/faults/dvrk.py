@@ -66,6 +66,10 @@ KILL_STATE_WAIT = 5.0
 #: From the master's silence to a current of 0 A (s): its 100 ms watchdog, the /diagnostics
 #: period and the safe ramp, with room for a loaded machine.
 SILENT_TO_ZERO = 0.4
+#: Longest wait (s) after the master went silent for a safe /diagnostics status that names
+#: it: its 100 ms watchdog and a 10 Hz /diagnostics period, with room for a starved probe
+#: (its receipt gaps of 0.33-0.5 s, stops 37-38).
+MASTER_NAMED_WAIT = 2.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
 ZERO_NOISE_STD = 5.0
 #: How long (s) the ros2 CLI that sends a state command stays up after publishing it, so
@@ -161,6 +165,12 @@ class _Probe:
                 if name_part in status['name']:
                     return status
         return None
+
+    def diagnostics_gap_since(self, start: float) -> float | None:
+        """Longest gap (s) between /diagnostics receipts from ``start`` (time.time()) to now."""
+        with self.lock:
+            times = [start] + [t for t, _ in self.diagnostics if t > start] + [time.time()]
+        return round(max(b - a for a, b in zip(times, times[1:])), 3)
 
     def wait(self, predicate, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
@@ -402,6 +412,12 @@ def _units_case(loop: _Loop, detail: dict) -> list[str]:
     return problems
 
 
+def _names_stale_master(status: dict | None) -> bool:
+    """Tell whether a controller status is safe and names the stale master among its reasons."""
+    return (status is not None and status['values'].get('mode') == 'safe'
+            and 'stale master' in status['values'].get('reasons', ''))
+
+
 def _master_case(loop: _Loop, detail: dict) -> list[str]:
     problems = []
     master = loop.procs['master']
@@ -410,10 +426,20 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     safe = loop.probe.wait(lambda: (lambda s: s is not None and s['values'].get('mode') == 'safe')(
         loop.probe.latest('controller')), 2.0)
     reacted = time.time() - stopped
-    time.sleep(0.5)
-    status = loop.probe.latest('controller')
+    first = loop.probe.latest('controller')
     detail['safe_after_s'] = round(reacted, 3)
+    detail['reason_when_safe'] = first['values'].get('reasons') if first else None
+    # the safe state may come first for another input (a controller or sim stall on a loaded
+    # machine: loaded run 38/c1/6); the stale master must be named while it stays silent, by
+    # its own watchdog, a step and a /diagnostics period, or later if the probe was starved
+    named = loop.probe.wait(lambda: _names_stale_master(loop.probe.latest('controller')),
+                            MASTER_NAMED_WAIT)
+    detail['master_named_after_s'] = round(time.time() - stopped, 3) if named else None
+    detail['reason_named'] = loop.probe.latest('controller')['values'].get('reasons') if named else None
+    time.sleep(max(0.0, stopped + 0.5 - time.time()))
+    status = loop.probe.latest('controller')
     detail['reason'] = status['values'].get('reasons') if status else None
+    detail['diagnostics_gap_max_s'] = loop.probe.diagnostics_gap_since(stopped)
     # the master's own watchdog (issue 13.2: 100 ms; this bound used the instrument's 30 ms
     # and left ~50 ms of slack for a stale master), two steps, a /diagnostics period (10 Hz)
     bound = source_timeouts(loop.params)['master'] + 2.0 / loop.params.expected_state_rate + \
@@ -421,8 +447,10 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     detail['bound_s'] = round(bound, 3)
     if not safe or reacted > bound:
         problems.append(f'safe after {reacted:.3f} s, bound {bound:.3f} s')
-    if not status or 'stale master' not in status['values'].get('reasons', ''):
-        problems.append('the reason does not name the stale master')
+    if not named:
+        problems.append(f'no safe status named the stale master within {MASTER_NAMED_WAIT} s '
+                        f'(reason when safe: {detail["reason_when_safe"]!r}; '
+                        f'at +0.5 s: {detail["reason"]!r})')
 
     def silent_states() -> list[float]:
         with loop.probe.lock:
