@@ -118,11 +118,11 @@ class _SilencedLoop:
     the sim's states of the silence (``current`` A) reaching the probe ``delay`` s after the
     pause (None: never)."""
 
-    def __init__(self, current: float, delay: float | None, reasons=(MASTER_REASON,)):
+    def __init__(self, current: float, delay: float | None, reasons=((0.0, MASTER_REASON),)):
         self.params = _TimeoutParams({name: 0.1 for name in TIMEOUT_PARAMS.values()})
         self.mode = 'grip'
         self.stopped = None
-        self.reasons = reasons           # ((s after the pause, reasons), ...) or (reasons,)
+        self.reasons = reasons           # ((s after the pause, reasons from then on), ...)
         self.probe = SimpleNamespace(lock=threading.Lock(), states=[], latest=self.latest,
                                      wait=lambda predicate, timeout: _Probe.wait(None, predicate, timeout),
                                      diagnostics_gap_since=lambda start: 0.1)
@@ -133,8 +133,7 @@ class _SilencedLoop:
         reasons = 'ok'
         if self.mode == 'safe':
             since = time.time() - self.stopped
-            reasons = [r if isinstance(r, str) else r[1] for r in self.reasons
-                       if isinstance(r, str) or r[0] <= since][-1]
+            reasons = [text for after, text in self.reasons if after <= since][-1]
         return {'values': {'mode': self.mode, 'reasons': reasons,
                            'current_command_A': '0.24' if self.mode == 'grip' else '0.0'}}
 
@@ -201,7 +200,7 @@ def test_the_master_case_names_the_master_after_a_safe_state_for_another_input()
     assert detail['reason_when_safe'] == stall
     assert 0.7 <= detail['master_named_after_s'] < 1.5
     assert MASTER_REASON in detail['reason_named']
-    problems = _master_case(_SilencedLoop(current=0.0, delay=0.0, reasons=(stall,)), detail := {})
+    problems = _master_case(_SilencedLoop(current=0.0, delay=0.0, reasons=((0.0, stall),)), detail := {})
     assert problems == [f"no safe status named the stale master within {dvrk.MASTER_NAMED_WAIT} s "
                         f"(reason when safe: {stall!r}; at +0.5 s: {stall!r})"]
     assert detail['master_named_after_s'] is None

@@ -166,7 +166,7 @@ class _Probe:
                     return status
         return None
 
-    def diagnostics_gap_since(self, start: float) -> float | None:
+    def diagnostics_gap_since(self, start: float) -> float:
         """Longest gap (s) between /diagnostics receipts from ``start`` (time.time()) to now."""
         with self.lock:
             times = [start] + [t for t, _ in self.diagnostics if t > start] + [time.time()]
@@ -352,14 +352,19 @@ def _kill_case(loop: _Loop, detail: dict) -> list[str]:
     return problems
 
 
+def _safe_naming(loop: _Loop, reason_part: str = '') -> bool:
+    """Tell whether the controller's newest status is safe with ``reason_part`` in its reasons."""
+    status = loop.probe.latest('controller')
+    return (status is not None and status['values'].get('mode') == 'safe'
+            and reason_part in status['values'].get('reasons', ''))
+
+
 def _disable_case(loop: _Loop, detail: dict) -> list[str]:
     problems = []
     if not loop.state_command('disable'):
         return ['ros2 topic pub of the disable failed']
     sent = time.time()
-    safe = loop.probe.wait(lambda: (lambda s: s is not None and s['values'].get('mode') == 'safe'
-                                    and 'DISABLED' in s['values'].get('reasons', ''))(
-        loop.probe.latest('controller')), 5.0)
+    safe = loop.probe.wait(lambda: _safe_naming(loop, 'DISABLED'), 5.0)
     if not safe:
         problems.append('the controller did not go safe naming the DISABLED arm')
     time.sleep(1.5)
@@ -412,19 +417,12 @@ def _units_case(loop: _Loop, detail: dict) -> list[str]:
     return problems
 
 
-def _names_stale_master(status: dict | None) -> bool:
-    """Tell whether a controller status is safe and names the stale master among its reasons."""
-    return (status is not None and status['values'].get('mode') == 'safe'
-            and 'stale master' in status['values'].get('reasons', ''))
-
-
 def _master_case(loop: _Loop, detail: dict) -> list[str]:
     problems = []
     master = loop.procs['master']
     stopped = time.time()
     master.pause()
-    safe = loop.probe.wait(lambda: (lambda s: s is not None and s['values'].get('mode') == 'safe')(
-        loop.probe.latest('controller')), 2.0)
+    safe = loop.probe.wait(lambda: _safe_naming(loop), 2.0)
     reacted = time.time() - stopped
     first = loop.probe.latest('controller')
     detail['safe_after_s'] = round(reacted, 3)
@@ -432,8 +430,7 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     # the safe state may come first for another input (a controller or sim stall on a loaded
     # machine: loaded run 38/c1/6); the stale master must be named while it stays silent, by
     # its own watchdog, a step and a /diagnostics period, or later if the probe was starved
-    named = loop.probe.wait(lambda: _names_stale_master(loop.probe.latest('controller')),
-                            MASTER_NAMED_WAIT)
+    named = loop.probe.wait(lambda: _safe_naming(loop, 'stale master'), MASTER_NAMED_WAIT)
     detail['master_named_after_s'] = round(time.time() - stopped, 3) if named else None
     detail['reason_named'] = loop.probe.latest('controller')['values'].get('reasons') if named else None
     time.sleep(max(0.0, stopped + 0.5 - time.time()))
