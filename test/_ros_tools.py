@@ -150,7 +150,7 @@ def start(*args: str, log: Path, cwd: Path | str | None = None,
     """Start a long-running command (``exec``-ed: the pid is the command's) in its own session.
 
     As the package's nodes (``nodes.processes.child_setup``): SIGINT at its default (a
-    background suite inherits it ignored), and SIGINT when pytest ends (a stopped loaded
+    background suite inherits it ignored), and SIGTERM when pytest ends (a stopped loaded
     series once left a test's nodes running through the next CI run).
     """
     out = open(log, 'w')

@@ -16,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+import weakref
 
 import pytest
 import rclpy
@@ -231,6 +232,48 @@ class _SignalsItselfWhileStarting(Node):
 
 def test_a_signal_before_the_spin_interrupts_the_start():
     assert run_node(_SignalsItselfWhileStarting, 'signals_while_starting', []) == 0
+    assert not rclpy.ok()
+
+
+class _SignalDiscardedWhileStarting(Node):
+    """A SIGTERM handled inside a weakref callback while the node starts.
+
+    Python discards what such a callback raises ("Exception ignored in"): the
+    KeyboardInterrupt of the start phase is lost, as a starting Python lost a parent-death
+    SIGINT inside importlib's ``_get_module_lock`` callback (stop 40). Should the node spin
+    anyway, its own timer ends the spin after 1 s and says so.
+    """
+
+    spun: list[bool] = []
+
+    def __init__(self):
+        super().__init__('signal_discarded_while_starting')
+
+        class Held:
+            pass
+
+        def when_collected(_ref):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(100_000):              # Python lines: the handler runs in here
+                pass
+        held = Held()
+        self._ref = weakref.ref(held, when_collected)
+        del held                                  # the callback runs now
+        self.finished = rclpy.task.Future()
+        self.create_timer(1.0, self._spun)
+
+    def _spun(self):
+        self.spun.append(True)
+        self.finished.set_result(None)
+
+
+def test_a_signal_whose_interrupt_python_discards_while_starting_still_stops_the_node(monkeypatch):
+    discarded = []
+    monkeypatch.setattr(sys, 'unraisablehook', lambda unraisable: discarded.append(unraisable.exc_type))
+    monkeypatch.setattr(_SignalDiscardedWhileStarting, 'spun', [])
+    assert run_node(_SignalDiscardedWhileStarting, 'signal_discarded_while_starting', []) == 0
+    assert discarded == [KeyboardInterrupt], discarded     # the start's interrupt was lost...
+    assert _SignalDiscardedWhileStarting.spun == [], 'the node spun after a stop was asked'
     assert not rclpy.ok()
 
 

@@ -247,9 +247,13 @@ class SignalStop:
     due, that is when the spin's slice (:data:`SPIN_SLICE`) ends.
 
     Phases: before the spin, a signal raises KeyboardInterrupt (a start that hangs can still
-    be interrupted); during it, it asks the stop; after it (the teardown, bounded by
-    :data:`TEARDOWN_LIMIT`), it is noted and ignored. :meth:`restore` puts the previous
-    handlers back (``run_node`` runs inside test processes too).
+    be interrupted) and asks the stop too, so the spin never starts: Python discards an
+    exception raised inside a weakref callback or finaliser ("Exception ignored in"), and an
+    import's ``_get_module_lock`` callback is where a signal came during start-up in 27 of
+    7200 trials (docs/reliability.md, twenty-fourth round). During the spin, it asks the stop;
+    after it (the teardown, bounded by :data:`TEARDOWN_LIMIT`), it is noted and ignored.
+    :meth:`restore` puts the previous handlers back (``run_node`` runs inside test processes
+    too).
     """
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -284,9 +288,9 @@ class SignalStop:
             signal.signal(signum, handler)
 
     def _handle(self, signum, frame) -> None:
+        self.requested = True
         if self.phase == 'starting':
             raise KeyboardInterrupt
-        self.requested = True
         if self._wake is not None:
             self._wake()
 

@@ -375,7 +375,7 @@ def _load_prctl() -> Callable[..., int] | None:
 _PRCTL = _load_prctl()
 
 
-def end_with_parent(sig: int = signal.SIGINT) -> bool:
+def end_with_parent(sig: int = signal.SIGTERM) -> bool:
     """Ask the kernel to send ``sig`` to this process when the thread that forked it ends.
 
     Call in a child (a ``preexec_fn``, or first thing in a worker). Linux's
@@ -385,11 +385,17 @@ def end_with_parent(sig: int = signal.SIGINT) -> bool:
     thread* ends, so a parent starts such a child only from a thread that lives as long as
     the child should (:func:`child_setup` does it for the main thread only).
 
+    The signal is sent once, so it must not be one a starting Python loses: SIGINT is (Python
+    handles it from its first line, and a KeyboardInterrupt raised inside an import's weakref
+    callback is discarded: 27 of 7200 SIGINTs sent in a child's first 30 ms, none of 3000
+    SIGTERMs; docs/reliability.md, twenty-fourth round). SIGTERM ends a process that has no
+    handler for it yet, and a node that has one (``nodes.common.SignalStop``) stops as on
+    Ctrl-C; ``ros2 launch`` handles it too.
+
     Parameters
     ----------
     sig : int
-        Signal to receive (SIGINT: a node shuts down as on Ctrl-C, and ``ros2 run`` /
-        ``ros2 launch`` pass it on; SIGKILL for a worker with nothing to clean up).
+        Signal to receive (SIGTERM, above; SIGKILL for a worker with nothing to clean up).
 
     Returns
     -------
@@ -551,15 +557,16 @@ def child_setup(preexec_fn: Callable[[], None] | None = None) -> Callable[[], No
     A parent started as a background job (``&``, nohup, a CI runner) has SIGINT ignored, and
     its children would inherit that: they could not be stopped with SIGINT, the first step of
     :meth:`NodeProcess.stop` (found by the suite run as a background job). A child started
-    from the main thread also ends with its parent (:func:`end_with_parent`); one started from
-    another thread (the fault check restarts the sim from a short-lived thread) does not.
+    from the main thread also ends with its parent (:func:`end_with_parent`, SIGTERM); one
+    started from another thread (the fault check restarts the sim from a short-lived thread)
+    does not.
     """
     from_main_thread = threading.current_thread() is threading.main_thread()
 
     def setup() -> None:
         signal.signal(signal.SIGINT, signal.SIG_DFL)
         if from_main_thread:
-            end_with_parent(signal.SIGINT)  # as stop() starts; a node shuts down on it
+            end_with_parent()   # SIGTERM: a node shuts down on it, a starting Python cannot lose it
         if preexec_fn is not None:
             preexec_fn()
     return setup
