@@ -74,6 +74,48 @@ def test_group_stops_a_process_that_ignores_sigint(tmp_path):
     assert 'up' in (tmp_path / 'stubborn.log').read_text()
 
 
+#: A child that, on SIGINT, writes when it got it, takes 1 s to end, and writes when it ends
+#: (CLOCK_MONOTONIC, the same clock in every process).
+SLOW_TO_END = ('import signal, sys, time\n'
+               'def bye(*_):\n'
+               '    print("signal", time.monotonic(), flush=True)\n'
+               '    time.sleep(1.0)\n'
+               '    print("exit", time.monotonic(), flush=True)\n'
+               '    sys.exit(0)\n'
+               'signal.signal(signal.SIGINT, bye)\n'
+               'print("up", flush=True)\n'
+               'time.sleep(60)\n')
+
+
+def _times(log: str) -> dict[str, float]:
+    lines = [line.split() for line in log.splitlines() if line.startswith(('signal', 'exit'))]
+    return {word: float(value) for word, value in lines}
+
+
+@pytest.mark.parametrize('one_at_a_time', [True, False])
+def test_group_stops_in_reverse_start_order_one_after_another_or_all_at_once(tmp_path, one_at_a_time):
+    """One after another: the first started gets SIGINT only once the last started has exited.
+
+    Stop 42: two nodes torn down at once hung one of them inside Fast DDS. All at once (as
+    ``ros2 launch``), the first started gets SIGINT while the other still takes its 1 s.
+    """
+    group = ProcessGroup(dict(os.environ), log_dir=tmp_path, grace=5.0, one_at_a_time=one_at_a_time)
+    with group:
+        first = group.start('first', [sys.executable, '-c', SLOW_TO_END])
+        last = group.start('last', [sys.executable, '-c', SLOW_TO_END])
+        assert wait_until(lambda: 'up' in first.log_tail() and 'up' in last.log_tail(), 30.0)
+        codes = group.stop()
+    assert codes == {'first': 0, 'last': 0}
+    first_t, last_t = _times(first.log_tail()), _times(last.log_tail())
+    if one_at_a_time:
+        assert first_t['signal'] >= last_t['exit'] + group.settle
+    else:
+        assert first_t['signal'] < last_t['exit']
+    # each took its 1 s from its signal to its exit, seen from the group
+    assert all(seconds >= 1.0 for seconds in group.stop_times.values()), group.stop_times
+    assert set(group.stop_times) == {'first', 'last'}
+
+
 def test_a_process_that_hangs_past_sigterm_writes_its_stacks_before_it_is_killed(tmp_path):
     """A node (faulthandler on STACK_DUMP_SIGNAL, as run_node) stuck past SIGINT and SIGTERM.
 

@@ -728,17 +728,29 @@ class NodeProcess:
 class ProcessGroup:
     """Processes that run together and are always stopped together.
 
-    Use as a context manager: on exit (normal, exception or Ctrl-C) every
-    process gets SIGINT, then ``grace`` seconds, then SIGTERM, then SIGKILL,
-    all at once at each step. Each process runs in its own session so that a
-    Ctrl-C at the terminal reaches only the orchestrator, which then stops the
-    nodes in order.
+    Use as a context manager: on exit (normal, exception or Ctrl-C) every process is
+    stopped, in reverse start order, one after another (``one_at_a_time``, the default):
+    SIGINT, up to ``grace`` seconds, SIGTERM, SIGKILL (:meth:`NodeProcess.stop`), and the
+    next one ``settle`` seconds after the previous one has exited. A participant is then never
+    torn down while another one's leaving reaches it: stop 42 caught the controller's
+    ``destroy_node`` stuck in Fast DDS's ``set_listener`` while a receive thread handling the
+    sim's leaving waited for the listener's mutex (both had SIGINT at once; docs/reliability.md,
+    twenty-sixth round). With ``one_at_a_time`` False every process gets each signal at once,
+    as ``ros2 launch`` does. Each process runs in its own session so that a Ctrl-C at the
+    terminal reaches only the orchestrator, which then stops the nodes in order.
     """
 
     env: dict[str, str]
     log_dir: Path | None = None
     grace: float = 3.0
     processes: list[NodeProcess] = field(default_factory=list)
+    one_at_a_time: bool = True
+    #: Pause (s) after a process has exited before the next one is signalled: time for the
+    #: others to take its participant's leaving (a few ms on a quiet machine).
+    settle: float = 0.1
+    #: Process label -> time (s) from its first stop signal to its exit, at the last stop that
+    #: found processes running.
+    stop_times: dict[str, float] = field(default_factory=dict)
 
     def start(self, name: str, argv: Sequence[str], *, label: str | None = None,
               rt_priority: int = 0) -> NodeProcess:
@@ -766,10 +778,12 @@ class ProcessGroup:
                                    + (f'; last output:\n{tail}' if tail else ''))
 
     def stop(self) -> dict[str, int | None]:
-        """Stop all processes (reverse start order): SIGINT, wait, SIGTERM, SIGKILL.
+        """Stop all processes, in reverse start order: SIGINT, wait, SIGTERM, SIGKILL.
 
-        A process still running at the SIGKILL step is first asked for its stacks
-        (:meth:`NodeProcess.dump_stacks`, in its log).
+        One after another (``one_at_a_time``) or each signal to all at once. A process still
+        running at the SIGKILL step is first asked for its stacks
+        (:meth:`NodeProcess.dump_stacks`, in its log). :attr:`stop_times` gets each one's time
+        from its first signal to its exit.
 
         Returns
         -------
@@ -777,6 +791,23 @@ class ProcessGroup:
             Process label -> exit code.
         """
         running = [p for p in reversed(self.processes) if p.alive()]
+        if not running:
+            return {p.name: p.popen.poll() for p in self.processes}
+        self.stop_times = {}
+        if self.one_at_a_time:
+            for index, proc in enumerate(running):
+                if index and self.settle > 0:
+                    time.sleep(self.settle)
+                began = time.monotonic()
+                proc.stop(grace=self.grace)
+                self.stop_times[proc.name] = time.monotonic() - began
+        else:
+            self._stop_together(running)
+        return {p.name: p.popen.poll() for p in self.processes}
+
+    def _stop_together(self, running: list[NodeProcess]) -> None:
+        """Each signal to every process in ``running`` at once (as ``ros2 launch`` does)."""
+        began = time.monotonic()
         for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
                           (signal.SIGKILL, 2.0)):
             if sig == signal.SIGKILL and any([p.dump_stacks() for p in running]):  # ask every one
@@ -785,12 +816,13 @@ class ProcessGroup:
                 p.signal(sig)
             deadline = time.monotonic() + wait
             while running and time.monotonic() < deadline:
+                for p in [p for p in running if not p.alive()]:
+                    self.stop_times[p.name] = time.monotonic() - began
                 running = [p for p in running if p.alive()]
                 if running:
-                    time.sleep(0.05)
+                    time.sleep(0.005)
             if not running:
                 break
-        return {p.name: p.popen.poll() for p in self.processes}
 
     def __enter__(self) -> 'ProcessGroup':
         return self
