@@ -13,7 +13,8 @@ teardown past 3 s) and the teardown times (first signal to exit)::
 
     .venv/bin/python tools/teardown_overlap.py --cycles 200 --out /tmp/overlap
 
-Every process runs with loopback discovery in its own ROS domain (``--domain-id``).
+Every process runs with loopback discovery in a ROS domain this tool holds (``--domain-id``, or
+the first free one: :func:`~grip_force_ros.nodes.processes.reserve_domains`).
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, ProcessGroup, master_rt_priority,
-                                            node_command, ros_environment, wait_until)
+                                            node_command, reserve_domains, ros_environment,
+                                            wait_until)
 
 #: The shipped default instrument.
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'paper_needle_driver.yaml'
@@ -81,15 +83,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--hold', type=float, default=1.0, help='running time (s) once all have logged')
     parser.add_argument('--rt-priority', type=int, default=DEFAULT_RT_PRIORITY,
                         help='SCHED_FIFO priority of the nodes where permitted (0: normal), as the demo')
-    parser.add_argument('--domain-id', type=int, default=223, help='ROS domain of the nodes')
+    parser.add_argument('--domain-id', type=int, help='ROS domain of the nodes (default: a free one)')
     parser.add_argument('--out', help='folder for the JSON lines and the logs of failed cycles')
     parser.add_argument('--keep-logs', action='store_true', help='keep every cycle\'s logs')
     args = parser.parse_args(argv)
     out = Path(args.out or tempfile.mkdtemp(prefix='teardown_overlap_'))
     out.mkdir(parents=True, exist_ok=True)
-    env = ros_environment(args.domain_id)
+    domain = reserve_domains(1, candidates=None if args.domain_id is None else [args.domain_id])
+    env = ros_environment(domain.domain_id)
     cycles = []
-    with open(out / 'cycles.jsonl', 'a') as record:
+    with domain, open(out / 'cycles.jsonl', 'a') as record:
         for index in range(args.cycles):
             mode = MODES[index % 2]
             log_dir = out / f'cycle{index:04d}'
