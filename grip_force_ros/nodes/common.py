@@ -209,11 +209,14 @@ def unfreeze_heap() -> None:
 #: :func:`~grip_force_ros.nodes.processes.watch_own_teardown`). A loaded run
 #: (stop 32) saw the master ignore ``ros2 launch``'s SIGINT and SIGTERM at a stop and get
 #: SIGKILLed 15 s later, with nothing in its log of where it was; a teardown stuck in the
-#: middleware (Fast DDS has an open deadlock of a participant's own threads,
-#: eProsima/Fast-DDS#6502, seen here once before) is deaf to every signal rclpy handles. The
-#: limit ends the process before this package's runners kill it (5 s after SIGINT) and
-#: before ``ros2 launch`` does (15 s), so the stacks reach the log; docs/reliability.md
-#: (sixteenth round) gives the teardown times it is set against.
+#: middleware is deaf to every signal rclpy handles: Fast DDS has an open deadlock of a
+#: participant's own threads (eProsima/Fast-DDS#6502, seen here once), and its
+#: ``set_listener(nullptr)``, the first step of rmw_fastrtps's ``destroy_participant``, spins
+#: for good when it starts while a discovery callback of that participant runs
+#: (eProsima/Fast-DDS#6513; tools/fast_dds_set_listener_spin.cpp, stop 43). The limit ends the
+#: process before this package's runners signal it again (SIGTERM 5 s after SIGINT) and before
+#: ``ros2 launch`` does (15 s), so the stacks reach the log; docs/reliability.md (sixteenth
+#: round) gives the teardown times it is set against.
 TEARDOWN_LIMIT = 4.0
 #: Fraction of :data:`TEARDOWN_LIMIT` after which a teardown still running has its native
 #: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).

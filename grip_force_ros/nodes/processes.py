@@ -742,7 +742,10 @@ class ProcessGroup:
 
     env: dict[str, str]
     log_dir: Path | None = None
-    grace: float = 3.0
+    #: Time (s) from SIGINT to SIGTERM. Past the nodes' own teardown limit (4 s,
+    #: ``common.TEARDOWN_LIMIT``): a SIGTERM at 3 s came while the teardown watch had gdb on
+    #: the node and cut its native stacks short (tools/teardown_overlap.py, stop 43).
+    grace: float = 5.0
     processes: list[NodeProcess] = field(default_factory=list)
     one_at_a_time: bool = True
     #: Pause (s) after a process has exited before the next one is signalled: time for the
