@@ -731,13 +731,15 @@ class ProcessGroup:
     Use as a context manager: on exit (normal, exception or Ctrl-C) every process is
     stopped, in reverse start order, one after another (``one_at_a_time``, the default):
     SIGINT, up to ``grace`` seconds, SIGTERM, SIGKILL (:meth:`NodeProcess.stop`), and the
-    next one ``settle`` seconds after the previous one has exited. A participant is then never
-    torn down while another one's leaving reaches it: stop 42 caught the controller's
-    ``destroy_node`` stuck in Fast DDS's ``set_listener`` while a receive thread handling the
-    sim's leaving waited for the listener's mutex (both had SIGINT at once; docs/reliability.md,
-    twenty-sixth round). With ``one_at_a_time`` False every process gets each signal at once,
-    as ``ros2 launch`` does. Each process runs in its own session so that a Ctrl-C at the
-    terminal reaches only the orchestrator, which then stops the nodes in order.
+    next one ``settle`` seconds after the previous one has exited. A participant is then not
+    torn down while another one's leaving reaches it: Fast DDS 2.14's ``set_listener``, the
+    first step of a participant's deletion, spins for good when a discovery callback is in
+    progress (eProsima/Fast-DDS#6513; tools/fast_dds_set_listener_spin.cpp). Stop 42 caught
+    the controller there, stopped at the same moment as the sim; tools/teardown_overlap.py
+    compares both ways (docs/reliability.md, twenty-sixth round). With ``one_at_a_time``
+    False every process gets each signal at once, as ``ros2 launch`` does. Each process runs
+    in its own session so that a Ctrl-C at the terminal reaches only the orchestrator, which
+    then stops the nodes in order.
     """
 
     env: dict[str, str]
@@ -748,8 +750,9 @@ class ProcessGroup:
     grace: float = 5.0
     processes: list[NodeProcess] = field(default_factory=list)
     one_at_a_time: bool = True
-    #: Pause (s) after a process has exited before the next one is signalled: time for the
-    #: others to take its participant's leaving (a few ms on a quiet machine).
+    #: Pause (s) after each process has exited, before the next one is signalled and before
+    #: ``stop`` returns (the caller may destroy its own nodes next): time for the others to
+    #: take its participant's leaving (a few ms on a quiet machine).
     settle: float = 0.1
     #: Process label -> time (s) from its first stop signal to its exit, at the last stop that
     #: found processes running.
@@ -798,12 +801,11 @@ class ProcessGroup:
             return {p.name: p.popen.poll() for p in self.processes}
         self.stop_times = {}
         if self.one_at_a_time:
-            for index, proc in enumerate(running):
-                if index and self.settle > 0:
-                    time.sleep(self.settle)
+            for proc in running:
                 began = time.monotonic()
                 proc.stop(grace=self.grace)
                 self.stop_times[proc.name] = time.monotonic() - began
+                time.sleep(self.settle)     # the others (and the caller's own nodes) take its leaving
         else:
             self._stop_together(running)
         return {p.name: p.popen.poll() for p in self.processes}
