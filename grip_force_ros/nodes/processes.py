@@ -821,9 +821,10 @@ class ProcessGroup:
                 p.signal(sig)
             deadline = time.monotonic() + wait
             while running and time.monotonic() < deadline:
-                for p in [p for p in running if not p.alive()]:
+                ended = [p for p in running if not p.alive()]   # asked once: none is missed
+                for p in ended:
                     self.stop_times[p.name] = time.monotonic() - began
-                running = [p for p in running if p.alive()]
+                running = [p for p in running if p not in ended]
                 if running:
                     time.sleep(0.005)
             if not running:
