@@ -7,6 +7,7 @@ controller executable for the parameter files), as ``grip-force faultcheck`` doe
 import math
 
 import pytest
+from hypothesis import given, strategies as st
 
 from grip_force_ros.faults.catalogue import (OUTCOMES, SOURCES, bad_params_text, burst, catalogue,
                                              duplicate_each, frozen_stamp, rename, resize, select,
@@ -343,7 +344,7 @@ def test_a_jump_received_after_a_gap_is_judged_on_the_controllers_step():
 def test_a_change_across_lost_commands_is_judged_on_the_steps_they_were():
     """CI of c68dacc: pytest's process stalled ~0.3 s, its reader fell behind and lost the
     controller's ramp (0.29 -> 0.19 -> 0.09 -> 0 A at 100 A/s), and the judge saw 0.29 -> 0 A
-    in one 1 ms step. DDS reports the loss (message-lost, ``note_lost``): a change across n
+    in one 1 ms step. The probe counts the loss (sequence gaps, ``note_lost``): a change across n
     lost commands spans n + 1 steps. A report far from the change (beyond LOSS_WINDOW)
     excuses nothing, and a jump bigger than the steps lost allow is still caught."""
     from grip_force_ros.faults.probe import LOSS_WINDOW, LimitMonitor
@@ -369,6 +370,30 @@ def test_a_change_across_lost_commands_is_judged_on_the_steps_they_were():
     assert len(far) == 1 and 'lost' not in far[0], far
     runaway = judged(-0.5, 0.2995, 3)                               # -0.79 A: beyond 4 steps
     assert len(runaway) == 1 and 'across 3 lost commands' in runaway[0], runaway
+
+
+def test_sequence_gaps_count_the_samples_a_reader_missed():
+    """The writer numbers its samples 1, 2, 3, ...: a jump of n + 1 is n samples missed (the
+    probe's count of lost commands since the message-lost event deadlocked, loaded run 44/1).
+    A number at or below the last is a restarted writer (nothing missed); a sample without
+    the number, or with rmw's "unsupported" (None), counts nothing."""
+    from grip_force_ros.faults.probe import SequenceGaps
+    gaps = SequenceGaps()
+    numbers = [1, 2, 3, 7, 8, 1, 2, 5, None, 6]
+    missed = [gaps.missed({'publication_sequence_number': n}) for n in numbers]
+    assert missed == [0, 0, 0, 3, 0, 0, 0, 2, 0, 0]
+    assert gaps.missed({}) == 0 and gaps.missed(None) == 0 and gaps.last == 6
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=300))
+def test_sequence_gaps_add_up_to_the_samples_dropped(received):
+    """Whatever subset of a writer's samples arrives, the gaps seen add up to the samples
+    dropped between the first and the last received."""
+    from grip_force_ros.faults.probe import SequenceGaps
+    gaps = SequenceGaps()
+    numbers = [k + 1 for k, got in enumerate(received) if got]
+    total = sum(gaps.missed({'publication_sequence_number': n}) for n in numbers)
+    assert total == (numbers[-1] - numbers[0] + 1 - len(numbers) if numbers else 0)
 
 
 def test_a_slew_step_is_judged_on_the_controllers_own_step_time():

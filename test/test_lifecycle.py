@@ -16,14 +16,13 @@ from pathlib import Path
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, log_errors, process_report,
                         require_ros_tools, retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
-from grip_force_ros.faults.probe import LimitMonitor
+from grip_force_ros.faults.probe import LimitMonitor, SequenceGaps
 from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
 from grip_force_ros.nodes.controller import ControllerNode
 from grip_force_ros.nodes.harness import RosRunner, wait_until
@@ -54,13 +53,14 @@ class Recorder(Node):
         # the controller's steps: (receipt s, its clock at the step s), from the estimate's stamp
         self.steps: list[tuple[float, float]] = []
         self.status: list[str] = []                            # the controller's messages
-        # commands DDS reports lost to this reader: (receipt s, how many); a stall of this
-        # process (pytest's) can leave it behind its writer (CI of c68dacc: a -0.29 A "step"
-        # between commands received 0.29 s late, the ramp between them never received)
+        # commands this reader missed: (receipt s of the sample after the gap, how many); a
+        # stall of this process (pytest's) can leave it behind its writer (CI of c68dacc: a
+        # -0.29 A "step" between commands received 0.29 s late, the ramp between them never
+        # received). Counted from the sequence numbers, not rmw's message-lost event, which
+        # deadlocked this process in loaded run 44/1 (SequenceGaps)
         self.commands_lost: list[tuple[float, int]] = []
-        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS,
-                                 event_callbacks=SubscriptionEventCallbacks(
-                                     message_lost=self._on_commands_lost))
+        self._command_gaps = SequenceGaps()
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_force, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, RECORD_QOS)
@@ -68,11 +68,11 @@ class Recorder(Node):
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_command(self, msg) -> None:
+    def _on_command(self, msg, info) -> None:
+        missed = self._command_gaps.missed(info)
+        if missed:
+            self.commands_lost.append((self.now(), missed))
         self.commands.append((self.now(), stamp_seconds(msg.header.stamp), float(msg.effort[0])))
-
-    def _on_commands_lost(self, info) -> None:
-        self.commands_lost.append((self.now(), info.total_count_change))
 
     def _on_force(self, msg) -> None:
         self.forces.append(msg.wrench.force.z)

@@ -20,7 +20,6 @@ from collections import deque
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
@@ -61,13 +60,45 @@ def to_time_msg(seconds: float):
 DELIVERY_JITTER = 1.0
 #: Control steps kept to judge slew steps on (about 2 s at 1 kHz).
 STEP_RECORDS = 2000
-#: How far (s, receipt times) a loss of commands reported by DDS may lie from a change it
-#: spans (LimitMonitor.note_lost). A reader that falls behind (its process stalled) loses
-#: the samples its writer's history (KEEP_LAST 10) or the shared-memory port dropped; rmw
-#: reports them as message-lost events, which arrive within ~10 ms of the first sample after
-#: the gap (measured: a reader SIGSTOPped 1 s, 490 samples lost, events 1 ms before and
-#: 5 ms after that sample, split in several counts). Also how long a slew step waits for such a report.
+#: How far (s, receipt times) a loss of commands may lie from a change it spans
+#: (LimitMonitor.note_lost). A reader that falls behind (its process stalled) loses the samples
+#: its writer's history (KEEP_LAST 10) or the shared-memory port dropped. The probe counts them
+#: from the gaps in the writer's sequence numbers (:class:`SequenceGaps`), with the sample after
+#: the gap: the change it spans, received at the same moment. (Until stop 44 they came from
+#: rmw's message-lost event, within ~10 ms of that sample, hence the window; the event is gone:
+#: :class:`SequenceGaps`.) Also how long a slew step waits for such a report.
 LOSS_WINDOW = 0.1
+
+
+class SequenceGaps:
+    """Count the samples a reader missed, from its writer's publication sequence numbers.
+
+    rclpy gives a subscription callback of two arguments each sample's MessageInfo, whose
+    ``publication_sequence_number`` numbers the writer's samples 1, 2, 3, ...: a jump of
+    ``n + 1`` is ``n`` samples this reader never received. One writer per topic is assumed (the
+    controller on its command topic); a number at or below the last one is a new writer (a
+    restarted controller) and starts the count again. A sample without the number (an rmw that
+    does not give it) counts nothing.
+
+    Why not rmw's message-lost event, which says the same: with the rmw_fastrtps of the Jazzy
+    wheels (8.4.3), taking that event (the event's mutex, then the DataReader's) and Fast DDS
+    reporting a loss (the DataReader's mutex, then the event's) lock the same two mutexes in
+    opposite order and can deadlock (ros2/rmw_fastrtps#890, fixed upstream in 2026); rclpy holds
+    the GIL in ``take_event``, so the whole process stops. Loaded run 44/1 hung so for 30 min
+    (docs/reliability.md; tools/rmw_message_lost_deadlock.py reproduces it).
+    """
+
+    def __init__(self):
+        self.last: int | None = None     # the last sequence number received
+
+    def missed(self, info) -> int:
+        """Return the samples missed just before the one whose MessageInfo (a dict) is ``info``."""
+        number = (info or {}).get('publication_sequence_number')
+        if not isinstance(number, int) or number <= 0:
+            return 0
+        gap = number - self.last - 1 if self.last is not None and number > self.last else 0
+        self.last = number
+        return gap
 
 
 class LimitMonitor:
@@ -257,9 +288,8 @@ class FaultProbe(Node):
                 self.create_subscription(msg_type, f'{relay}/{_TOPICS[source]}',
                                          lambda msg, s=source: self._on_relayed(s, msg),
                                          STATE_SUB_QOS if source == 'actuator' else RECORD_QOS)
-        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS,
-                                 event_callbacks=SubscriptionEventCallbacks(
-                                     message_lost=self._on_commands_lost))
+        self.command_gaps = SequenceGaps()
+        self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.TARGET_FORCE, self._on_target, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, RECORD_QOS)
@@ -446,14 +476,13 @@ class FaultProbe(Node):
         """
         return stamp_nanoseconds(msg.header.stamp) * 1e-9
 
-    def _on_command(self, msg: JointState) -> None:
+    def _on_command(self, msg: JointState, info) -> None:
+        # commands this reader missed (a stall of the probe's process): the change they span
+        self.limits.note_lost(self.now(), self.command_gaps.missed(info))
         value = float(msg.effort[0]) if len(msg.effort) else math.nan
         self.command = value if math.isfinite(value) else 0.0
         self.limits.check(value, self.now())
         self.commands.append((self.now(), self._stamp(msg), value))
-
-    def _on_commands_lost(self, info) -> None:
-        self.limits.note_lost(self.now(), info.total_count_change)
 
     def _on_target(self, msg: WrenchStamped) -> None:
         f = msg.wrench.force.z
