@@ -284,3 +284,27 @@ def test_a_stopped_loadcheck_stops_its_run_and_what_the_run_started(tmp_path):
     gone, alive = psutil.wait_procs(procs + workers, timeout=30)
     assert not alive, [p.cmdline() for p in alive]
     assert (tmp_path / 'teardown').read_text() == 'ran'     # SIGINT first: fixtures torn down
+
+
+def test_a_run_that_does_not_answer_is_killed_with_the_processes_it_started(tmp_path, monkeypatch):
+    """Loaded run 44/1: pytest deadlocked in rmw with the GIL held, answered no signal, and the
+    timeout's SIGKILL to its session left the nodes its test had started (each in a session of
+    its own) running beside the next run. A run past its timeout that ignores SIGINT: it and
+    the process it started in another session are both gone when ``run_once`` returns."""
+    (tmp_path / 'test_stuck.py').write_text(textwrap.dedent(f"""
+        import os, signal, subprocess, time
+
+        def test_stuck():
+            node = subprocess.Popen(['sleep', '300'], start_new_session=True)
+            open({str(tmp_path / 'pids')!r}, 'w').write(f'{{os.getpid()}} {{node.pid}}')
+            signal.signal(signal.SIGINT, signal.SIG_IGN)      # deaf, as a deadlocked process
+            time.sleep(300)
+    """))
+    monkeypatch.setattr(loadcheck, 'STOP_GRACE', 1.0)
+    result = loadcheck.run_once(1, tmp_path, workers=0, select='not nothing',
+                                files=[str(tmp_path / 'test_stuck.py')], timeout=10.0)
+    assert result['timed_out'] and result['exit_code'] == -signal.SIGKILL, result
+    pids = [int(p) for p in (tmp_path / 'pids').read_text().split()]
+    gone, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)],
+                                    timeout=10)
+    assert not alive, [p.cmdline() for p in alive]

@@ -34,6 +34,8 @@ import xml.etree.ElementTree as ET
 from collections import defaultdict
 from pathlib import Path
 
+import psutil
+
 from grip_force_ros.bench.load import LoadGenerator
 
 #: pytest selection of the ROS tests (the marker of every test that starts real nodes).
@@ -134,18 +136,34 @@ STOP_GRACE = 15.0
 
 
 def stop_session(proc: subprocess.Popen) -> None:
-    """Stop a pytest run and its session: SIGINT (its fixtures stop their nodes), then SIGKILL."""
+    """Stop a pytest run, its session and every process it started: SIGINT, then SIGKILL.
+
+    The tests start their nodes in sessions of their own (``test/_ros_tools.start``), which a
+    signal to pytest's session does not reach; its fixtures stop them after SIGINT. A run
+    whose pytest does not answer (loaded run 44/1: deadlocked in rmw, the GIL held) would
+    leave them running beside the next runs, so the processes it started, found before the
+    signal, are killed with it.
+    """
+    try:
+        started = psutil.Process(proc.pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        started = []
     try:
         os.killpg(proc.pid, signal.SIGINT)
         proc.wait(timeout=STOP_GRACE)
     except subprocess.TimeoutExpired:
         pass
     except ProcessLookupError:
-        return
+        pass
     try:
         os.killpg(proc.pid, signal.SIGKILL)
     except ProcessLookupError:
         pass
+    for child in started:
+        try:
+            child.kill()
+        except psutil.NoSuchProcess:
+            pass
 
 
 def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float = 1.0,
