@@ -1,4 +1,4 @@
-"""Reproduce rmw_fastrtps's message-lost deadlock, and show the sequence-number count avoids it.
+"""Provoke rmw_fastrtps's message-lost deadlock: the event way of counting losses, and the new one.
 
 Loaded run 44/1 hung for 30 min in ``test_lifecycle.py``: the test's recording node had a
 subscription with a ``message_lost`` event callback. Its executor thread was in
@@ -9,8 +9,8 @@ event's mutex: an AB-BA inversion (ros2/rmw_fastrtps#890, fixed upstream in 2026
 wheels' rmw_fastrtps 8.4.3 has it). rclpy does not release the GIL around ``take_event``, so
 the whole process stopped, its timeouts too.
 
-This tool floods a small best-effort topic from one process and reads it, slowly, in another,
-so that the reader loses samples all the time, and watches the reader's heartbeat (a line
+This tool floods a depth-1 topic (reliable unless asked) from one process and reads it, slowly,
+in another, so that the reader loses samples all the time, and watches its heartbeat (a line
 from a timer; a deadlocked executor writes none). Two ways of counting the losses:
 
 * ``event``: a ``message_lost`` event callback (what the test and the fault probe had);
@@ -22,8 +22,12 @@ from a timer; a deadlocked executor writes none). Two ways of counting the losse
     .venv/bin/python tools/rmw_message_lost_deadlock.py --runs 6 --seconds 60
 
 Per run it says whether the reader stalled (no heartbeat for ``--stall`` s: its native stacks
-are then written beside the report when gdb is there) and how many losses it counted. Every
-process runs with loopback discovery in a ROS domain this tool holds.
+are then written beside the report when gdb is there) and how many losses it counted. The
+race is narrow: the event way ran 16 runs of 20-40 s here without a stall (stop 44), so a
+clean run shows little; the hang's own stacks are in docs/reliability.md. The two ways also
+count different things: the event only samples DDS gave up on, the sequence gaps every sample
+the callback never saw (also those a newer one replaced in the reader's depth-1 history).
+Every process runs with loopback discovery in a ROS domain this tool holds.
 """
 from __future__ import annotations
 

@@ -85,7 +85,7 @@ class SequenceGaps:
     reporting a loss (the DataReader's mutex, then the event's) lock the same two mutexes in
     opposite order and can deadlock (ros2/rmw_fastrtps#890, fixed upstream in 2026); rclpy holds
     the GIL in ``take_event``, so the whole process stops. Loaded run 44/1 hung so for 30 min
-    (docs/reliability.md; tools/rmw_message_lost_deadlock.py reproduces it).
+    (its stacks: docs/reliability.md; tools/rmw_message_lost_deadlock.py provokes the race).
     """
 
     def __init__(self):
