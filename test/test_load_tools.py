@@ -183,8 +183,9 @@ def test_code_fingerprint_ignores_documentation_and_nothing_else(tmp_path):
     assert source_revision(tmp_path / 'nowhere') == {'commit': None, 'fingerprint': None, 'dirty': None}
 
 
-def write_run(folder, index, failed=(), tests=3, record=None):
-    """A run's junit file (``failed``: test names) and, given ``record``, its run record."""
+def write_run(folder, index, failed=(), tests=3, record=None, junit=True):
+    """A run's junit file (``failed``: test names) and, given ``record``, its run record;
+    ``junit=False``: the record only (a run killed at its timeout writes no junit file)."""
     folder.mkdir(exist_ok=True)
     cases = ''.join(f'<testcase classname="test.test_x" name="t{k}" time="1.0"/>'
                     for k in range(tests - len(failed)))
@@ -197,12 +198,16 @@ def write_run(folder, index, failed=(), tests=3, record=None):
         (folder / f'run{index}.json').write_text(json.dumps(
             {'run': index, 'seconds': 700.5, 'load_average_mean': 4.1,
              **parse_junit(folder / f'run{index}.xml'), **record}))
+    if not junit:
+        (folder / f'run{index}.xml').unlink()
 
 
 def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
     """Two series of one code (one by an older loadcheck without run records, its code given)
     and one of another: clean of complete per code; a run stopped midway (exit code 2, or
-    fewer tests than its folder's others without a record) is neither clean nor failed."""
+    fewer tests than its folder's others without a record, or no record where the others
+    have one: its loadcheck stopped) is neither clean nor failed; a run killed at its timeout,
+    which leaves only its record, is a failure (loaded run 44/1 went uncounted so)."""
     same = {'commit': 'a' * 40, 'fingerprint': 'f1', 'dirty': False}
     docs_later = {'commit': 'b' * 40, 'fingerprint': 'f1', 'dirty': False}
     other = {'commit': 'c' * 40, 'fingerprint': 'f2', 'dirty': False}
@@ -211,7 +216,9 @@ def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
     write_run(new, 2, failed=['test_race'], record={'exit_code': 1, 'code': docs_later})
     write_run(new, 3, tests=2, record={'exit_code': 2, 'code': docs_later})     # stopped
     write_run(new, 4, record={'exit_code': 0, 'code': other})
-    write_run(new, 5, record={'exit_code': 1, 'timed_out': True, 'code': other})  # hung
+    write_run(new, 5, record={'exit_code': -9, 'timed_out': True, 'code': other,
+                              'failed': [{'test': '(session)'}]}, junit=False)       # hung
+    write_run(new, 6)                                       # all its tests; its loadcheck stopped
     write_run(old, 1)
     write_run(old, 2, tests=1)                                                     # stopped
     write_run(old, 3, failed=['test_race'])
@@ -219,11 +226,11 @@ def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
     table = tally([new, old], {old: 'old-label'})
     assert [(r['run'], r['status']) for r in table['runs']] == [
         (1, 'clean'), (2, 'failed'), (3, 'incomplete'), (4, 'clean'), (5, 'failed'),
-        (1, 'clean'), (2, 'incomplete'), (3, 'failed')]
+        (6, 'incomplete'), (1, 'clean'), (2, 'incomplete'), (3, 'failed')]
     assert table['by_code'] == {
         'f1': {'commits': ['a' * 40, 'b' * 40], 'runs': 2, 'clean': 1,
                'failed': [f'{new}/run2: test/test_x.py::test_race']},
-        'f2': {'commits': ['c' * 40], 'runs': 2, 'clean': 1, 'failed': [f'{new}/run5: (exit code 1)']},
+        'f2': {'commits': ['c' * 40], 'runs': 2, 'clean': 1, 'failed': [f'{new}/run5: (session)']},
         'old-label': {'commits': ['old-label'], 'runs': 2, 'clean': 1,
                       'failed': [f'{old}/run3: test/test_x.py::test_race']}}
     text = render_tally(table)

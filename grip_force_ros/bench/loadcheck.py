@@ -282,50 +282,56 @@ def loadcheck(runs: int, out_dir: Path, progress=None, **run_options) -> dict:
     return report
 
 
-_RUN_XML = re.compile(r'run(\d+)\.xml$')
+_RUN_FILE = re.compile(r'run(\d+)\.(xml|json)')
 
 
 def read_series(folder: Path) -> list[dict]:
-    """Read the runs of one loadcheck folder that left a junit file, in run order.
+    """Read the runs of one loadcheck folder, in run order.
 
-    Its ``run<k>.json`` adds the code, load and exit code; a folder of an older loadcheck
-    has none (those fields are None).
+    A run is there with its record (``run<k>.json``, written when the run ends; the only file
+    of a run killed at its timeout, which leaves no junit file), its junit file, or both.
+    ``recorded`` says whether it has a record. A junit file without one is of an older
+    loadcheck, which wrote none (the record's fields are then None), or of a run whose
+    loadcheck was stopped midway.
     """
+    folder = Path(folder)
+    indices = sorted({int(m.group(1)) for path in folder.iterdir()
+                      if (m := _RUN_FILE.fullmatch(path.name))})
     runs = []
-    for junit in Path(folder).glob('run*.xml'):
-        match = _RUN_XML.search(junit.name)
-        if not match:
-            continue
-        index = int(match.group(1))
-        record = junit.with_suffix('.json')
+    for index in indices:
+        record, junit = folder / f'run{index}.json', folder / f'run{index}.xml'
         if record.is_file():
-            run = json.loads(record.read_text())
+            run = {**json.loads(record.read_text()), 'recorded': True}
         else:
             suite = ET.parse(junit).getroot().find('testsuite')
             run = {'run': index, 'exit_code': None, 'load_average_mean': None,
-                   'code': {'commit': None, 'dirty': None},
+                   'code': {'commit': None, 'dirty': None}, 'recorded': False,
                    'seconds': float(suite.get('time')) if suite is not None else None,
                    **parse_junit(junit)}
         run['folder'] = str(folder)
         runs.append(run)
-    return sorted(runs, key=lambda r: r['run'])
+    return runs
 
 
 #: pytest's exit code of a session stopped by SIGINT (its junit file holds the tests done).
 INTERRUPTED = 2
 
 
-def run_status(run: dict, most_tests: int) -> str:
+def run_status(run: dict, most_tests: int, folder_recorded: bool = False) -> str:
     """Judge one run of a series: ``clean``, ``failed`` or ``incomplete`` (stopped midway).
 
-    ``most_tests``: the largest test count of the run's folder. Without a run record (an
-    older loadcheck) the exit code is unknown, and a run with fewer tests than that was
-    stopped midway.
+    ``most_tests``: the largest test count of the run's folder; ``folder_recorded``: whether
+    any run of the folder has a record. A failure, or a timeout, is a failure whatever else
+    is known. Without a record the exit code is unknown: in a folder of an older loadcheck
+    (no records) a run with fewer tests than the others was stopped midway; in a folder with
+    records, the run's loadcheck was stopped before it could write one.
     """
     if run['failed'] or run.get('timed_out'):
         return 'failed'
     code = run.get('exit_code')
     if code is None:
+        if folder_recorded:
+            return 'incomplete'
         return 'clean' if run['tests'] == most_tests else 'incomplete'
     if code == 0:
         return 'clean'
@@ -345,7 +351,7 @@ def tally(folders: list[Path], given_codes: dict | None = None) -> dict:
     Returns
     -------
     dict
-        ``runs``: one row per run with a junit file (folder, run, commit, code, seconds,
+        ``runs``: one row per run (:func:`read_series`) (folder, run, commit, code, seconds,
         load average, tests, ``status`` from :func:`run_status`, failed tests); ``by_code``:
         per code (the fingerprint; the commit when it has none, ``unknown`` without either;
         ``+dirty`` for a modified checkout) its commits, the complete runs, the clean ones,
@@ -356,6 +362,7 @@ def tally(folders: list[Path], given_codes: dict | None = None) -> dict:
     for folder in folders:
         series = read_series(Path(folder))
         most_tests = max((r['tests'] for r in series), default=0)
+        recorded = any(r['recorded'] for r in series)
         given = (given_codes or {}).get(folder)
         given_code = ({'commit': given, 'fingerprint': code_fingerprint(repo, given), 'dirty': None}
                       if given else None)
@@ -368,7 +375,7 @@ def tally(folders: list[Path], given_codes: dict | None = None) -> dict:
             if code.get('dirty'):
                 key += '+dirty'
             failed = [f['test'] for f in r['failed']]
-            status = run_status(r, most_tests)
+            status = run_status(r, most_tests, recorded)
             rows.append({'folder': r['folder'], 'run': r['run'], 'commit': commit, 'code': key,
                          'seconds': r.get('seconds'), 'load_average_mean': r.get('load_average_mean'),
                          'tests': r['tests'], 'status': status, 'failed': failed})
