@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, log_errors, process_report,
                         require_ros_tools, retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
-from grip_force_ros.faults.probe import LimitMonitor, SequenceGaps
+from grip_force_ros.faults.probe import LimitMonitor
 from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
 from grip_force_ros.nodes.controller import ControllerNode
 from grip_force_ros.nodes.harness import RosRunner, wait_until
@@ -53,13 +53,6 @@ class Recorder(Node):
         # the controller's steps: (receipt s, its clock at the step s), from the estimate's stamp
         self.steps: list[tuple[float, float]] = []
         self.status: list[str] = []                            # the controller's messages
-        # commands this reader missed: (receipt s of the sample after the gap, how many); a
-        # stall of this process (pytest's) can leave it behind its writer (CI of c68dacc: a
-        # -0.29 A "step" between commands received 0.29 s late, the ramp between them never
-        # received). Counted from the sequence numbers, not rmw's message-lost event, which
-        # deadlocked this process in loaded run 44/1 (SequenceGaps)
-        self.commands_lost: list[tuple[float, int]] = []
-        self._command_gaps = SequenceGaps()
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_force, RECORD_QOS)
@@ -68,10 +61,7 @@ class Recorder(Node):
     def now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_command(self, msg, info) -> None:
-        missed = self._command_gaps.missed(info)
-        if missed:
-            self.commands_lost.append((self.now(), missed))
+    def _on_command(self, msg) -> None:
         self.commands.append((self.now(), stamp_seconds(msg.header.stamp), float(msg.effort[0])))
 
     def _on_force(self, msg) -> None:
@@ -256,24 +246,23 @@ def wait_gripping(probe, timeout=60.0):
                       and abs(probe.forces[-1] - target) < 0.1 * target, timeout)
 
 
-def slew_violations(commands, steps, lost=()):
+def slew_violations(commands, steps, missed=None):
     """Every command against the limits, judged as the fault probe judges them live.
 
     ``commands`` are (receipt s, stamp s, A), ``steps`` the controller's steps (receipt s,
-    its clock at the step s), ``lost`` the commands DDS reported lost (receipt s, how many:
-    a change across them spans more steps). A command carries the stamp of the state it answers (the
-    sim's clock), or the controller's own for a step on its timer or of the deactivation
-    ramp: those stamps mix two sources and can run backwards, so they do not give the
-    controller's step times. The stamps of its estimate do (its clock at each step): the
-    monitor bounds a step's change by the slew limit over the step that sent it. With
-    violations, the commands and steps received around each step beyond one period's slew
-    follow them ((receipt, stamp, A) and (receipt, stamp), times from the first of them).
+    its clock at the step s). Commands the recorder lost (steps received between two commands)
+    widen the bound by the steps they were; ``missed``, a list, gets their count appended. A
+    command carries the stamp of the state it answers (the sim's clock), or the controller's
+    own for a step on its timer or of the deactivation ramp: those stamps mix two sources and
+    can run backwards, so they do not give the controller's step times. The stamps of its
+    estimate do (its clock at each step): the monitor bounds a step's change by the slew limit
+    over the step that sent it. With violations, the commands and steps received around each
+    step beyond one period's slew follow them ((receipt, stamp, A) and (receipt, stamp), times
+    from the first of them).
     """
     period = 1.0 / PARAMS.expected_state_rate
     monitor = LimitMonitor(PARAMS.max_current, PARAMS.max_current_slew * period, period,
                            PARAMS.watchdog_timeout)
-    for receipt, count in lost:
-        monitor.note_lost(receipt, count)
     # in order of receipt; a step's estimate goes out after its command (a tie: command first)
     events = sorted([(r, 0, s, a) for r, s, a in commands] + [(r, 1, s, None) for r, s in steps],
                     key=lambda e: (e[0], e[1]))
@@ -283,6 +272,8 @@ def slew_violations(commands, steps, lost=()):
         else:
             monitor.check(value, receipt)
     found = list(monitor.violations)
+    if missed is not None:
+        missed.append(monitor.commands_missed)
     if not found:
         return found
     for k in range(1, len(commands)):
@@ -378,11 +369,11 @@ def test_deactivate_ramps_to_zero_and_activate_resumes(rig):
     # so one slew step at most (0.1 A, below the 0.2-0.3 A the needle grip held)
     assert abs(first) <= PARAMS.max_current_slew / PARAMS.expected_state_rate + 1e-12, first
     assert len(probe.steps) > len(probe.commands) // 2, (len(probe.steps), len(probe.commands))
-    found = slew_violations(probe.commands, probe.steps, probe.commands_lost)
-    assert found == [], (found[:6], 'commands lost (receipt s, count):', probe.commands_lost[:20])
-    if probe.commands_lost:
-        print(f'commands lost to the test\'s reader: {sum(n for _, n in probe.commands_lost)} '
-              f'in {len(probe.commands_lost)} reports')
+    missed = []
+    found = slew_violations(probe.commands, probe.steps, missed)
+    assert found == [], (found[:6], 'commands lost to the recorder:', missed)
+    if missed[0]:
+        print(f"commands lost to the test's reader: {missed[0]}")
     assert ctl.poll() is None, rig.log('controller')
 
     # cleanup releases the topics: back to unconfigured, no publisher on the drive's topic

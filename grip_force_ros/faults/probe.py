@@ -60,45 +60,6 @@ def to_time_msg(seconds: float):
 DELIVERY_JITTER = 1.0
 #: Control steps kept to judge slew steps on (about 2 s at 1 kHz).
 STEP_RECORDS = 2000
-#: How far (s, receipt times) a loss of commands may lie from a change it spans
-#: (LimitMonitor.note_lost). A reader that falls behind (its process stalled) loses the samples
-#: its writer's history (KEEP_LAST 10) or the shared-memory port dropped. The probe counts them
-#: from the gaps in the writer's sequence numbers (:class:`SequenceGaps`), with the sample after
-#: the gap: the change it spans, received at the same moment. (Until stop 44 they came from
-#: rmw's message-lost event, within ~10 ms of that sample, hence the window; the event is gone:
-#: :class:`SequenceGaps`.) Also how long a slew step waits for such a report.
-LOSS_WINDOW = 0.1
-
-
-class SequenceGaps:
-    """Count the samples a reader missed, from its writer's publication sequence numbers.
-
-    rclpy gives a subscription callback of two arguments each sample's MessageInfo, whose
-    ``publication_sequence_number`` numbers the writer's samples 1, 2, 3, ...: a jump of
-    ``n + 1`` is ``n`` samples this reader never received. One writer per topic is assumed (the
-    controller on its command topic); a number at or below the last one is a new writer (a
-    restarted controller) and starts the count again. A sample without the number (an rmw that
-    does not give it) counts nothing.
-
-    Why not rmw's message-lost event, which says the same: with the rmw_fastrtps of the Jazzy
-    wheels (8.4.3), taking that event (the event's mutex, then the DataReader's) and Fast DDS
-    reporting a loss (the DataReader's mutex, then the event's) lock the same two mutexes in
-    opposite order and can deadlock (ros2/rmw_fastrtps#890, fixed upstream in 2026); rclpy holds
-    the GIL in ``take_event``, so the whole process stops. Loaded run 44/1 hung so for 30 min
-    (its stacks: docs/reliability.md; tools/rmw_message_lost_deadlock.py provokes the race).
-    """
-
-    def __init__(self):
-        self.last: int | None = None     # the last sequence number received
-
-    def missed(self, info) -> int:
-        """Return the samples missed just before the one whose MessageInfo (a dict) is ``info``."""
-        number = (info or {}).get('publication_sequence_number')
-        if not isinstance(number, int) or number <= 0:
-            return 0
-        gap = number - self.last - 1 if self.last is not None and number > self.last else 0
-        self.last = number
-        return gap
 
 
 class LimitMonitor:
@@ -133,9 +94,11 @@ class LimitMonitor:
         # the target force each step publishes after its command; and the command steps
         # beyond one period's slew, to be judged on the controller's own step times (resolve)
         self.steps: deque = deque(maxlen=STEP_RECORDS)
-        self.pending: list[tuple[float, float]] = []
-        # commands the probe's reader lost: (receipt s of the report, how many)
-        self.lost: deque = deque(maxlen=STEP_RECORDS)
+        self.pending: list[tuple[float, float, int]] = []   # (receipt s, change A, lost)
+        # control steps noted since the last command checked, and the commands this reader
+        # missed so far (see resolve)
+        self._steps_since_command = 0
+        self.commands_missed = 0
 
     @property
     def violations(self) -> list[str]:
@@ -143,18 +106,10 @@ class LimitMonitor:
         self.resolve(final=True)
         return self._violations
 
-    def note_lost(self, t: float, count: int) -> None:
-        """Record ``count`` commands lost before they reached the probe, reported at ``t`` (s).
-
-        A change received across lost commands spans that many more controller steps:
-        :meth:`resolve` bounds it so (commands lost within :data:`LOSS_WINDOW` of it).
-        """
-        if count > 0:
-            self.lost.append((t, count))
-
     def note_step(self, t: float, controller_stamp: float) -> None:
         """Record a control step: received at ``t`` (s), the controller's clock at it (s)."""
         self.steps.append((t, controller_stamp))
+        self._steps_since_command += 1
         if self.pending:
             self.resolve()
 
@@ -170,25 +125,30 @@ class LimitMonitor:
         (delivery order across two topics). The longest of these intervals, plus
         :data:`DELIVERY_JITTER` periods, bounds the change; an interval beyond
         ``max_period`` is a stall after which the controller restarts from the measured
-        current (not bounded). Commands lost on the way (:meth:`note_lost`, within
-        :data:`LOSS_WINDOW`) were steps too: with ``n`` of them the change spans ``n + 1``
-        steps. Steps not yet followed by two control steps, and by :data:`LOSS_WINDOW` s of
-        steps, wait, unless ``final``.
+        current (not bounded). Commands this reader lost on the way (a stall of its process
+        that let the writer's history run over) were steps too: each step publishes its
+        command, then its target force, so ``k > 1`` steps received between two commands
+        are ``k - 1`` commands lost (counted by :meth:`check`), and the change spans ``k``
+        steps. Steps not yet followed by two control steps wait, unless ``final``.
+
+        (Until stop 44 the losses came from rmw's message-lost event, which can deadlock
+        with the rmw_fastrtps of the Jazzy wheels, ros2/rmw_fastrtps#890: loaded run 44/1
+        hung so; the message's sequence numbers, the other way, do not reach a callback
+        under the EventsExecutor of these wheels: docs/reliability.md.)
         """
         if not self.pending:
             return
         steps = list(self.steps)
         receipts = [r for r, _ in steps]
         still = []
-        for t, change in self.pending:
+        for t, change, lost in self.pending:
             first = bisect.bisect_left(receipts, t)
-            if not final and (len(steps) - first < 2 or receipts[-1] < t + LOSS_WINDOW):
-                still.append((t, change))
+            if not final and len(steps) - first < 2:
+                still.append((t, change, lost))
                 continue
             intervals = [steps[j][1] - steps[j - 1][1] for j in (first - 1, first, first + 1)
                          if 1 <= j < len(steps)]
             longest = max((d for d in intervals if d == d), default=self.period)
-            lost = sum(n for r, n in self.lost if abs(r - t) <= LOSS_WINDOW)
             allowed = self.max_step * ((lost + 1) * longest / self.period + DELIVERY_JITTER)
             if longest > self.max_period or abs(change) <= allowed * (1 + 1e-6) + 1e-12:
                 continue
@@ -205,6 +165,9 @@ class LimitMonitor:
         ``period`` and ``t`` is given; otherwise it is judged against ``max_step`` now.
         """
         self.count += 1
+        lost = max(self._steps_since_command - 1, 0) if self.previous is not None else 0
+        self._steps_since_command = 0
+        self.commands_missed += lost
         why = None
         if not math.isfinite(command):
             why = f'non-finite command {command!r}'
@@ -213,7 +176,7 @@ class LimitMonitor:
         elif self.previous is not None and \
                 abs(command - self.previous) > self.max_step * (1 + 1e-6) + 1e-12:
             if self.period and t == t:
-                self.pending.append((t, command - self.previous))   # judged by resolve
+                self.pending.append((t, command - self.previous, lost))   # judged by resolve
             else:
                 why = (f'command step {command - self.previous:+.6f} A beyond the slew limit '
                        f'{self.max_step:.6f} A of one period')
@@ -288,7 +251,6 @@ class FaultProbe(Node):
                 self.create_subscription(msg_type, f'{relay}/{_TOPICS[source]}',
                                          lambda msg, s=source: self._on_relayed(s, msg),
                                          STATE_SUB_QOS if source == 'actuator' else RECORD_QOS)
-        self.command_gaps = SequenceGaps()
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.TARGET_FORCE, self._on_target, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_estimate, RECORD_QOS)
@@ -476,9 +438,7 @@ class FaultProbe(Node):
         """
         return stamp_nanoseconds(msg.header.stamp) * 1e-9
 
-    def _on_command(self, msg: JointState, info) -> None:
-        # commands this reader missed (a stall of the probe's process): the change they span
-        self.limits.note_lost(self.now(), self.command_gaps.missed(info))
+    def _on_command(self, msg: JointState) -> None:
         value = float(msg.effort[0]) if len(msg.effort) else math.nan
         self.command = value if math.isfinite(value) else 0.0
         self.limits.check(value, self.now())
