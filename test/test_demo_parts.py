@@ -146,6 +146,30 @@ def test_a_process_that_hangs_past_sigterm_writes_its_stacks_before_it_is_killed
     assert 'in stuck_in_teardown' in (tmp_path / 'alone.log').read_text()
 
 
+def test_a_process_that_answers_no_sigint_writes_its_stacks_before_sigterm_ends_it(tmp_path):
+    """A node that ignores SIGINT and dies on SIGTERM (an installed controller once did, with
+    no line in its log that said why): its log says where it was, alone and in a group."""
+    deaf = ('import faulthandler, signal, time\n'
+            'faulthandler.register(signal.SIGUSR1, all_threads=True)\n'
+            'signal.signal(signal.SIGINT, signal.SIG_IGN)\n'
+            'def deaf_to_sigint():\n'
+            '    time.sleep(60)\n'
+            'print("up", flush=True)\n'
+            'deaf_to_sigint()\n')
+    alone = NodeProcess('deaf', command=[sys.executable, '-c', deaf], log_path=tmp_path / 'alone.log')
+    assert wait_until(lambda: 'up' in alone.log_tail(), 30.0)
+    assert alone.stop(grace=0.5) == -signal.SIGTERM
+    assert 'in deaf_to_sigint' in (tmp_path / 'alone.log').read_text()
+    for one_at_a_time in (True, False):
+        group = ProcessGroup(dict(os.environ), log_dir=tmp_path / str(one_at_a_time), grace=0.5,
+                             one_at_a_time=one_at_a_time)
+        with group:
+            proc = group.start('deaf', [sys.executable, '-c', deaf])
+            assert wait_until(lambda: 'up' in proc.log_tail(), 30.0)
+        assert proc.popen.returncode == -signal.SIGTERM
+        assert 'in deaf_to_sigint' in proc.log_tail(50)
+
+
 def test_group_reports_a_dead_process_with_its_output(tmp_path):
     group = ProcessGroup(dict(os.environ), log_dir=tmp_path)
     with group:

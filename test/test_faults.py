@@ -201,6 +201,63 @@ def test_a_stall_of_the_test_process_over_a_silence_window_spoils_the_trial_not_
         session.close()
 
 
+def test_the_main_threads_innermost_frame_is_read_from_faulthandler_output():
+    from grip_force_ros.faults.runner import main_thread_frame
+    stacks = """Thread 0x00007f1 (most recent call first):
+  File "/usr/lib/python3.11/threading.py", line 324 in wait
+  File "/usr/lib/python3.11/threading.py", line 1002 in _bootstrap
+
+Current thread 0x00007f0 (most recent call first):
+  File "/x/rclpy/executors.py", line 713 in _wait_for_ready_callbacks
+  File "/x/rclpy/__init__.py", line 244 in spin
+  File "/x/lib/grip_force_ros/sim_instrument", line 33 in <module>
+"""
+    assert main_thread_frame(stacks) == 'File "/x/rclpy/executors.py", line 713 in _wait_for_ready_callbacks'
+    assert main_thread_frame('no stacks here') == ''
+    assert main_thread_frame(stacks.split('Current')[0]) == ''    # no main thread among them
+
+
+@pytest.mark.ros
+def test_a_restarted_sim_that_runs_but_is_never_heard_spoils_the_trial_which_is_redone(monkeypatch):
+    """The CI failure of ``sim_restart@sim_instrument`` (30 s with no state from the new
+    process), made on purpose: the first new process publishes its states where the probe
+    does not listen. The trial is spoiled with what the runner saw (the process alive, none
+    publishers known on its topics, its main thread's frame), a new process replaces it, and
+    the redone trial passes. A process that dies instead is the case's own failure."""
+    from grip_force_ros.faults import runner
+    from grip_force_ros.faults.probe import relay_remaps
+    from grip_force_ros.nodes.processes import NodeProcess, node_command
+    from grip_force_ros.params.files import instrument_path
+
+    monkeypatch.setattr(runner, 'PROCESS_READY_TIMEOUT', 8.0)
+    case = next(c for c in catalogue() if c.name == 'sim_restart')
+    session = runner.Session(instrument_path(None), plant='sim_instrument')
+    try:
+        start_sim = session._start_sim
+        deaf = []
+
+        def start_elsewhere():     # the first restart: a process the probe never hears
+            if deaf:
+                return start_sim()
+            deaf.append(NodeProcess('sim_instrument', command=node_command(
+                'sim_instrument', session.config, remaps=relay_remaps('/faultcheck_elsewhere')),
+                log_path=session.sim.log_path))
+            return deaf[0]
+
+        monkeypatch.setattr(session, '_start_sim', start_elsewhere)
+        detail = runner.run_case_redoing_spoiled(session, case)
+        assert deaf and not deaf[0].alive(), 'the unheard process was not replaced'
+        assert detail['passed'], detail
+        assert len(detail['spoiled_trials']) == 1, detail
+        cause = detail['spoiled_trials'][0]
+        assert f'(pid {deaf[0].pid}) ran, but none of its states came in 8 s' in cause
+        assert 'publishers on its 4 topics' in cause and 'in <module>' not in cause
+        assert 'File "' in cause, cause      # its Python stacks were taken
+        assert detail['sim_process']['states_relayed'] > 0 and detail['sim_process']['alive']
+    finally:
+        session.close()
+
+
 def test_the_first_safe_step_is_found_by_the_controllers_stamp_up_to_the_recovery():
     """A loaded run: a 60 ms window held 12 steps, all gripping as received; the safe ones
     reached the probe after the window. What counts is what the controller did, by its own

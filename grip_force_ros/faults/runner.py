@@ -181,6 +181,17 @@ class Session:
         self._restarting.start()
         return done
 
+    def replace_sim(self) -> int | None:
+        """Stop the ``sim_instrument`` process (SIGINT, then harder) and start a new one.
+
+        Returns the old process's exit code (None without a sim process).
+        """
+        if self.sim is None:
+            return None
+        code = self.sim.stop(grace=2.0)
+        self.sim = self._start_sim()
+        return code
+
     def close(self) -> None:
         from grip_force_ros.nodes.common import shutdown_once, unfreeze_heap
         self._stop = True
@@ -330,11 +341,18 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             done.wait(case.ticks * probe.period * 20 + 2.0)
         detail['attempts'] = attempts
     t1 = probe.now()
+    relayed_before = probe.relayed   # the killed process's last states are in by now
     recovered = wait_until(lambda: session.gripping(t1), session.recovery_timeout)
     t2 = probe.now()                 # gripping again (or the recovery timed out)
     if case.kind == 'restart' and session.sim is not None:   # the real process, killed and new
         detail['sim_process'] = {'killed_pid': session.killed['pid'],
-                                 'exit_code': session.killed['exit_code'], 'new_pid': session.sim.pid}
+                                 'exit_code': session.killed['exit_code'], 'new_pid': session.sim.pid,
+                                 'alive': session.sim.alive(),
+                                 'states_relayed': probe.relayed - relayed_before}
+        if not recovered:
+            unheard = _unheard_sim(session, detail['sim_process']['states_relayed'])
+            if unheard is not None:   # the middleware's doing, not the controller's: redone
+                detail['spoiled'] = unheard
     pattern = re.compile(case.reason, re.I) if case.reason else None
     if pattern is not None:   # /diagnostics may come at a lower rate: give it time
         wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
@@ -464,6 +482,58 @@ def _watchdog_trial_spoiled(steps: int | None, own_reason_seen: bool, diagnostic
     if steps != 0 and own_reason_seen:
         return None
     return _machine_cause(diagnostics, silenced, until)
+
+
+def _unheard_sim(session: Session, states_relayed: int) -> str | None:
+    """Say why a restarted ``sim_instrument`` process that runs was never heard, or None.
+
+    A new process that runs (it has not crashed) but none of whose states reached this
+    process (the probe relayed none) tells nothing about the controller, which rightly stays
+    safe without instrument states: the trial is spoiled. Seen once in CI
+    (``sim_restart@sim_instrument``, 30 s without a state; not reproduced here in 270
+    restarts, tools/shm_crash_restart.py); Fast DDS 2.14's shared-memory transport is known
+    to lose a restarted participant that reuses a killed one's port (eProsima/Fast-DDS#5053,
+    #4728). The process is asked for its Python stacks (in its log), and the cause names how
+    many publishers this process knows on its topics and where its main thread was; then a
+    new process replaces it, for the trial that is redone. A process that has died, or has
+    been heard, is the case's own failure (None).
+    """
+    from grip_force_ros.faults.probe import relay_remaps
+    from grip_force_ros.nodes.processes import STACK_DUMP_WAIT
+    sim = session.sim
+    if states_relayed or not sim.alive():
+        return None
+    topics_seen = {topic: session.probe.count_publishers(topic)
+                   for topic in relay_remaps(RELAY_PREFIX).values()}
+    if sim.dump_stacks():
+        time.sleep(STACK_DUMP_WAIT)
+    log = sim.log_tail(200)
+    kept = sim.log_path.with_suffix(f'.unheard_{sim.pid}.log')
+    kept.write_text(log)
+    pid = sim.pid
+    session.replace_sim()
+    return (f'the new sim_instrument process (pid {pid}) ran, but none of its states came in '
+            f'{session.recovery_timeout:g} s; this process knew {sum(topics_seen.values())} '
+            f'publishers on its {len(topics_seen)} topics (a killed one stays known until its '
+            f'lease ends, 20 s); its main thread in: {main_thread_frame(log)} (its log: {kept})')
+
+
+def main_thread_frame(stacks: str) -> str:
+    """Return the innermost frame of the main thread in ``faulthandler`` output ('' if none).
+
+    The main thread is the one whose outermost frame is a module's top level.
+    """
+    blocks, block = [], []
+    for line in stacks.splitlines():
+        if line.startswith(('Thread 0x', 'Current thread 0x')):
+            block = []
+            blocks.append(block)
+        elif line.startswith('  File ') and blocks:
+            block.append(line.strip())
+    for frames in reversed(blocks):
+        if frames and frames[-1].endswith('in <module>'):
+            return frames[0]
+    return ''
 
 
 def _scheduling_stall(reason: str) -> bool:

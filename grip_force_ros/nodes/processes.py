@@ -698,6 +698,10 @@ class NodeProcess:
     def stop(self, grace: float = 5.0) -> int:
         """SIGINT (a clean rclpy shutdown), SIGTERM after ``grace`` s, SIGKILL after 2 s more.
 
+        Before SIGTERM and before SIGKILL the process is asked for its Python stacks
+        (:meth:`dump_stacks`, in its log): where a process that did not answer was (a
+        controller once answered no SIGINT in 5 s and left no line that said why).
+
         Returns
         -------
         int
@@ -708,7 +712,7 @@ class NodeProcess:
         for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
             if not self.alive():
                 break
-            if sig == signal.SIGKILL and self.dump_stacks():
+            if sig != signal.SIGINT and self.dump_stacks():
                 time.sleep(STACK_DUMP_WAIT)          # where it hung, in its log
             self.signal(sig)
             try:
@@ -787,7 +791,7 @@ class ProcessGroup:
         """Stop all processes, in reverse start order: SIGINT, wait, SIGTERM, SIGKILL.
 
         One after another (``one_at_a_time``) or each signal to all at once. A process still
-        running at the SIGKILL step is first asked for its stacks
+        running at the SIGTERM or the SIGKILL step is first asked for its stacks
         (:meth:`NodeProcess.dump_stacks`, in its log). :attr:`stop_times` gets each one's time
         from its first signal to its exit.
 
@@ -815,7 +819,7 @@ class ProcessGroup:
         began = time.monotonic()
         for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
                           (signal.SIGKILL, 2.0)):
-            if sig == signal.SIGKILL and any([p.dump_stacks() for p in running]):  # ask every one
+            if sig != signal.SIGINT and any([p.dump_stacks() for p in running]):  # ask every one
                 time.sleep(STACK_DUMP_WAIT)          # where they hung, in their logs
             for p in running:
                 p.signal(sig)
