@@ -217,6 +217,34 @@ Current thread 0x00007f0 (most recent call first):
     assert main_thread_frame(stacks.split('Current')[0]) == ''    # no main thread among them
 
 
+def test_a_bad_parameter_file_case_whose_node_is_still_running_says_where_it_was(monkeypatch):
+    """A loaded run: the controller on a bad file had written nothing after 30 s. The case
+    now asks the process for its Python stacks before it kills it and says where its main
+    thread was (here a stand-in that hangs in a function of its own)."""
+    import sys
+
+    from grip_force_ros.faults import runner
+    from grip_force_ros.params.files import instrument_path
+
+    hangs = ('import faulthandler, signal, sys, time\n'
+             'faulthandler.register(signal.SIGUSR1, all_threads=True)\n'
+             'def stuck_starting():\n'
+             '    time.sleep(60)\n'
+             'print("starting", file=sys.stderr, flush=True)\n'
+             'stuck_starting()\n')
+    monkeypatch.setattr(runner, 'isolated_controller_command',
+                        lambda path: [sys.executable, '-c', hangs])
+    case = next(c for c in catalogue() if c.name == 'file_cable_overstressed')
+    [detail] = runner.run_param_file_cases([case], instrument_path(None), timeout=5.0)
+    assert not detail['passed'] and detail['exit_code'] is None
+    assert 'in stuck_starting' in detail['main_thread_at_timeout'], detail
+    assert 'still running after 5 s; its main thread in: File' in detail['why'], detail
+    assert detail['stderr'] == 'starting'           # its own output, without the stacks
+    assert runner.split_stacks('a\nb\n') == ('a\nb\n', '')
+    assert runner.split_stacks('a\nThread 0x1 (most recent call first):\n  File "x"\n') == (
+        'a\n', 'Thread 0x1 (most recent call first):\n  File "x"\n')
+
+
 @pytest.mark.ros
 def test_a_restarted_sim_that_runs_but_is_never_heard_spoils_the_trial_which_is_redone(monkeypatch):
     """The CI failure of ``sim_restart@sim_instrument`` (30 s with no state from the new

@@ -46,6 +46,13 @@ def report():
     print(f'{time.time():.3f} subscribers={state.get_subscription_count()} '
           f'commands={received[0]}', flush=True)
 node.create_timer(1.0, report)
+if len(sys.argv) > 1 and sys.argv[1] == 'flood':    # publish as fast as it can, from a thread
+    import threading
+    def flood():
+        msg = UInt64(data=0)
+        while True:
+            state.publish(msg)
+    threading.Thread(target=flood, daemon=True).start()
 try:
     rclpy.spin(node)
 except (KeyboardInterrupt, ExternalShutdownException):
@@ -98,9 +105,9 @@ class Survivor:
         self.node.destroy_node()
 
 
-def start_child(log: Path, env: dict) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, '-c', CHILD], env=env, stdout=open(log, 'w'),
-                            stderr=subprocess.STDOUT)
+def start_child(log: Path, env: dict, flood: bool = False) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, '-c', CHILD] + (['flood'] if flood else []), env=env,
+                            stdout=open(log, 'w'), stderr=subprocess.STDOUT)
 
 
 def wait_for(predicate, timeout: float) -> float | None:
@@ -122,6 +129,8 @@ def main(argv=None) -> int:
     parser.add_argument('--run', type=float, default=1.0, help='s the loop runs before the kill')
     parser.add_argument('--gap', type=float, default=0.15, help='s between the kill and the new child')
     parser.add_argument('--deaf-after', type=float, default=20.0)
+    parser.add_argument('--flood', action='store_true',
+                        help='the children publish as fast as they can (killed mid-push more often)')
     parser.add_argument('--domain', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', '57')))
     parser.add_argument('--out', type=Path, default=Path(tempfile.mkdtemp(prefix='shm_crash_')))
     args = parser.parse_args(argv)
@@ -131,7 +140,7 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     survivor = Survivor()
     heard, deaf = [], []
-    child = start_child(args.out / 'child_0.log', env)
+    child = start_child(args.out / 'child_0.log', env, args.flood)
     first = wait_for(lambda: survivor.heard_since(0.0), args.deaf_after)
     if first is None:
         print('the first child was never heard', file=sys.stderr)
@@ -144,7 +153,7 @@ def main(argv=None) -> int:
             time.sleep(args.gap)
             t_start = time.monotonic()
             log = args.out / f'child_{cycle}.log'
-            child = start_child(log, env)
+            child = start_child(log, env, args.flood)
             latency = wait_for(lambda: survivor.heard_since(t_start), args.deaf_after)
             if latency is None:
                 record = {'cycle': cycle, 'child_pid': child.pid, 'child_alive': child.poll() is None,

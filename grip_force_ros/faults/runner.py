@@ -35,6 +35,7 @@ from grip_force_ros.control.controller import CONTROLLER_STALLED
 from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
 from grip_force_ros.faults.catalogue import (SOURCES, FaultCase, bad_params_text, catalogue,
                                              redo_spoiled)
+from grip_force_ros.nodes.processes import STACK_DUMP_WAIT, request_stacks
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
@@ -499,7 +500,6 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
     been heard, is the case's own failure (None).
     """
     from grip_force_ros.faults.probe import relay_remaps
-    from grip_force_ros.nodes.processes import STACK_DUMP_WAIT
     sim = session.sim
     if states_relayed or not sim.alive():
         return None
@@ -516,6 +516,12 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
             f'{session.recovery_timeout:g} s; this process knew {sum(topics_seen.values())} '
             f'publishers on its {len(topics_seen)} topics (a killed one stays known until its '
             f'lease ends, 20 s); its main thread in: {main_thread_frame(log)} (its log: {kept})')
+
+
+def split_stacks(text: str) -> tuple[str, str]:
+    """Split a process's output into what it wrote and the ``faulthandler`` stacks after it."""
+    match = re.search(r'^(Current thread|Thread) 0x', text, re.M)
+    return (text, '') if match is None else (text[:match.start()], text[match.start():])
 
 
 def main_thread_frame(stacks: str) -> str:
@@ -691,6 +697,17 @@ def run_param_set_case(session: Session, case: FaultCase) -> dict:
     return detail
 
 
+def isolated_controller_command(params_file: Path) -> list[str]:
+    """Command line of the controller executable on ``params_file``, in :data:`ISOLATION_NS`.
+
+    In a namespace of its own, /diagnostics too: a node that wrongly starts must not drive
+    the plant of the in-process cases that run meanwhile.
+    """
+    return [sys.executable, '-m', 'grip_force_ros.nodes.controller', '--ros-args',
+            '--params-file', str(params_file), '-r', f'__ns:={ISOLATION_NS}',
+            '-r', f'{topics.DIAGNOSTICS}:={ISOLATION_NS}/diagnostics']
+
+
 def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 30.0) -> list[dict]:
     """Start the controller executable with each bad parameter file (in parallel)."""
     base = read_params_yaml(config)
@@ -699,31 +716,35 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
     for case in cases:
         path = tmp / f'{case.name}.yaml'
         path.write_text(bad_params_text(base, case.params))
-        # In a namespace of its own, /diagnostics too: a node that wrongly starts must not
-        # drive the plant of the in-process cases that run meanwhile.
-        cmd = [sys.executable, '-m', 'grip_force_ros.nodes.controller', '--ros-args',
-               '--params-file', str(path), '-r', f'__ns:={ISOLATION_NS}',
-               '-r', f'{topics.DIAGNOSTICS}:={ISOLATION_NS}/diagnostics']
-        procs.append((case, subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                             text=True, env=dict(os.environ))))
+        procs.append((case, subprocess.Popen(isolated_controller_command(path), stdout=subprocess.PIPE,
+                                             stderr=subprocess.PIPE, text=True, env=dict(os.environ))))
     details = []
     deadline = time.monotonic() + timeout
     for case, proc in procs:
         detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
                   'description': case.description}
+        stuck_in = None
         try:
             out, err = proc.communicate(timeout=max(0.1, deadline - time.monotonic()))
             code = proc.returncode
         except subprocess.TimeoutExpired:
+            # where it was, from its Python stacks (a process with no line on stderr after
+            # 30 s was seen once under load: starting, or stuck?)
+            if request_stacks(proc.pid):
+                time.sleep(STACK_DUMP_WAIT)
             proc.kill()
             out, err = proc.communicate()
+            err, stacks = split_stacks(err or '')
+            stuck_in = main_thread_frame(stacks) or 'no Python stacks'
             code = None
         lines = [ln for ln in (err or '').splitlines() if ln.strip()]
         detail['exit_code'] = code
         detail['stderr'] = lines[-1][:300] if lines else ''
         problems = []
         if code is None:
-            problems.append('the node started with this file (still running)')
+            detail['main_thread_at_timeout'] = stuck_in
+            problems.append(f'the node started with this file (still running after {timeout:g} s; '
+                            f'its main thread in: {stuck_in})')
         elif code == 0:
             problems.append('exit code 0')
         if case.reason and not re.search(case.reason, err or '', re.I):
