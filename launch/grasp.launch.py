@@ -32,6 +32,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from grip_force_ros.nodes.launch_actions import PACKAGE, controller_actions
+from grip_force_ros.nodes.processes import leave_after_environment
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 
@@ -44,12 +45,17 @@ def _nodes(context):
     profile = {'interface': arg('interface'), 'arm': arg('arm'), 'master': arg('master')}
     controller = {**profile, 'request_enable': arg('request_enable').lower() == 'true'}
 
-    def node(exe):
+    def node(exe, leave_after=()):
         return Node(package=PACKAGE, executable=exe, name=exe, namespace=arg('namespace'),
-                    parameters=[params, profile], output='screen')
-    return [node('sim_instrument'),
+                    parameters=[params, profile], output='screen',
+                    additional_env=leave_after_environment(leave_after))
+
+    # Ctrl-C reaches the three at once; they leave one after another, the master first, so
+    # that none is torn down while another one's leaving reaches it (Fast DDS's spinning
+    # set_listener, eProsima/Fast-DDS#6513: common.wait_for_peers_to_leave).
+    return [node('sim_instrument', leave_after=('controller', 'master')),
             *controller_actions(arg('namespace'), [params, controller],
-                                arg('autostart').lower() == 'true'),
+                                arg('autostart').lower() == 'true', leave_after=('master',)),
             node('master')]
 
 

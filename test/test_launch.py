@@ -106,6 +106,31 @@ def _named(text: str) -> str:
     return f'{known_deadlock(text) or "no known deadlock in the log"}\n{text}'
 
 
+#: A node's line as it stops after its peers (``common.leave_after``), in a launch log.
+_LEAVING = re.compile(r'\[(?:INFO|WARN)\] \[(?P<stamp>[\d.]+)\] \[(?:\w+\.)*(?P<node>\w+)\]: '
+                      r'leaving (?P<how>after|with) (?P<rest>.*)')
+
+
+def _leaving_order(text: str) -> list[tuple[str, str]]:
+    """(node, how it left) of each node that waited for its peers, in the order of its line."""
+    lines = sorted((float(m['stamp']), m['node'], m['how'] + ' ' + m['rest'])
+                   for m in _LEAVING.finditer(text))
+    return [(node, how) for _, node, how in lines]
+
+
+def _assert_left_in_order(text: str) -> None:
+    """Ctrl-C reached all three; the controller left after the master, the sim after both.
+
+    The order the launch file sets (GRIP_FORCE_LEAVE_AFTER): no participant is torn down while
+    another one's leaving reaches it (Fast DDS's spinning set_listener, eProsima/Fast-DDS#6513;
+    a fresh-clone CI run had the controller hang there, killed with -9).
+    """
+    order = _leaving_order(text)
+    assert [node for node, _ in order] == ['controller', 'sim_instrument'], (order, text)
+    assert order[0][1].startswith('after master ('), (order, text)
+    assert order[1][1].startswith('after controller, master ('), (order, text)
+
+
 def _stop_launch(proc, log, env):
     try:
         code = stop_launch(proc, log)     # SIGINT to the launch process only
@@ -144,6 +169,7 @@ def test_grasp_launch_echo_param_and_clean_exit(tmp_path):
     assert code == 0, text
     assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
     assert not log_errors(text), text
+    _assert_left_in_order(text)
 
 
 def test_grasp_launch_namespace_and_instrument(tmp_path):
@@ -178,6 +204,7 @@ def test_grasp_launch_namespace_and_instrument(tmp_path):
         code, text = _stop_launch(proc, log, env)
     assert code == 0, text
     assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
+    _assert_left_in_order(text)
 
 
 def test_launch_rejects_unknown_interface_and_instrument(tmp_path):
@@ -224,6 +251,7 @@ def test_grasp_launch_dvrk_profile_as_psm2_and_mtmr(tmp_path):
     assert code == 0, text
     assert launch_exit_codes(text) == {name: 0 for name in NODES}, _named(text)
     assert 'asked arm PSM2 to enable' in text and not log_errors(text), text
+    _assert_left_in_order(text)
 
 
 def test_controller_launch_alone(tmp_path):
@@ -284,3 +312,4 @@ def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
     for seen in ('controller: unconfigured -> configuring', 'controller: inactive -> activating'):
         assert seen in text, text
     assert not log_errors(text), text
+    _assert_left_in_order(text)

@@ -222,6 +222,113 @@ def test_a_signal_inside_a_callback_ends_the_spin_after_that_callback(monkeypatc
     assert not rclpy.ok()
 
 
+class _Graph:
+    """A stand-in node for :func:`common.wait_for_peers_to_leave`: who is up when (monotonic s)."""
+
+    def __init__(self, namespace: str, up_until: dict):
+        self.namespace, self.up_until, self.looks = namespace, up_until, 0
+
+    def get_namespace(self):
+        return self.namespace
+
+    def get_node_names_and_namespaces(self):
+        self.looks += 1
+        now = time.monotonic()
+        return [name_ns for name_ns, until in self.up_until.items() if now < until]
+
+
+def test_a_stopping_node_waits_for_its_peers_to_leave_then_settles():
+    start = time.monotonic()
+    graph = _Graph('/psm1', {('master', '/psm1'): start + 0.3, ('controller', '/psm1'): start + 0.2,
+                             ('master', '/'): float('inf')})     # another namespace: not a peer
+    assert common.wait_for_peers_to_leave(graph, ('controller', 'master'), timeout=10.0,
+                                          settle=0.2) == ()
+    # gone at 0.3 s, then the settle (0.2 s): no sooner; 10 s would be a wait for /master
+    assert 0.5 <= time.monotonic() - start < 10.0
+
+
+def test_a_stopping_node_whose_peers_are_gone_still_settles():
+    # gone a moment ago: the callback that took its leaving may still run
+    graph = _Graph('/', {('sim_instrument', '/'): float('inf')})
+    start = time.monotonic()
+    assert common.wait_for_peers_to_leave(graph, ('master',), timeout=10.0, settle=0.2) == ()
+    assert graph.looks == 1                     # one look at the graph, then the settle
+    assert 0.2 <= time.monotonic() - start < 10.0
+
+
+def test_a_node_with_no_peers_to_leave_after_does_not_wait():
+    graph = _Graph('/', {('master', '/'): float('inf')})
+    assert common.wait_for_peers_to_leave(graph, (), timeout=10.0, settle=10.0) == ()
+    assert common.wait_for_peers_to_leave(None, ('master',), timeout=10.0, settle=10.0) == ()
+    assert graph.looks == 0
+
+
+def test_a_peer_still_up_at_the_timeout_is_left_behind_and_named():
+    graph = _Graph('/', {('master', '/'): float('inf'), ('controller', '/'): 0.0})
+    start = time.monotonic()
+    assert common.wait_for_peers_to_leave(graph, ('controller', 'master'), timeout=0.3) == ('master',)
+    assert time.monotonic() - start >= 0.3
+
+
+def test_the_peers_to_leave_after_come_from_the_environment():
+    from grip_force_ros.nodes.processes import leave_after_environment, leave_after_peers
+    env = leave_after_environment(('controller', 'master'))
+    assert leave_after_peers(env) == ('controller', 'master')
+    assert leave_after_peers({'GRIP_FORCE_LEAVE_AFTER': ' master, ,'}) == ('master',)
+    assert leave_after_peers({}) == () == leave_after_peers(leave_after_environment(()))
+
+
+class _SignalsItselfOnceItSeesItsPeer(Node):
+    """Sends SIGINT to its own process once node ``leaves_first`` is in its graph."""
+
+    def __init__(self):
+        super().__init__('leaves_second')
+        self.signalled = False
+        self.create_timer(0.01, self._tick)
+
+    def _tick(self):
+        if not self.signalled and ('leaves_first', '/') in self.get_node_names_and_namespaces():
+            self.signalled = True
+            os.kill(os.getpid(), signal.SIGINT)
+
+
+def test_a_node_stopped_by_a_signal_is_torn_down_after_its_peer_has_left(monkeypatch):
+    """The real graph: a peer node (its own context, its own participant) that leaves 1 s after
+    the signal; the stopping node's teardown starts after that, not at the signal."""
+    monkeypatch.setenv('GRIP_FORCE_LEAVE_AFTER', 'leaves_first')
+    peer_context = Context()
+    rclpy.init(context=peer_context)
+    peer = Node('leaves_first', context=peer_context)
+    events = {}
+    real_close = common.close_node
+
+    def recording_close(executor, *nodes):
+        events['teardown'] = time.monotonic()
+        real_close(executor, *nodes)
+    monkeypatch.setattr(common, 'close_node', recording_close)
+    real_handle = common.SignalStop._handle
+
+    def handle_then_let_the_peer_leave_later(self, signum, frame):
+        real_handle(self, signum, frame)
+        if 'signal' not in events:
+            events['signal'] = time.monotonic()
+            threading.Timer(1.0, leave).start()
+
+    def leave():
+        peer.destroy_node()
+        events['peer left'] = time.monotonic()
+        rclpy.try_shutdown(context=peer_context)
+    monkeypatch.setattr(common.SignalStop, '_handle', handle_then_let_the_peer_leave_later)
+    try:
+        assert run_node(_SignalsItselfOnceItSeesItsPeer, 'leaves_second', []) == 0
+    finally:
+        if rclpy.ok(context=peer_context):
+            peer.destroy_node()
+            rclpy.try_shutdown(context=peer_context)
+    assert events['peer left'] < events['teardown'], events
+    assert events['teardown'] - events['signal'] >= 1.0 + common.PEER_LEAVE_SETTLE, events
+
+
 class _SignalsItselfWhileStarting(Node):
     def __init__(self):
         super().__init__('signals_while_starting')

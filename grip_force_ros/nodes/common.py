@@ -24,6 +24,7 @@ import math
 import os
 import signal
 import sys
+import time
 from typing import Callable, Iterable, Sequence
 
 import rclpy
@@ -35,7 +36,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
-from grip_force_ros.nodes.processes import stop_watch, watch_own_teardown
+from grip_force_ros.nodes.processes import leave_after_peers, stop_watch, watch_own_teardown
 
 
 def state_qos(depth: int) -> QoSProfile:
@@ -346,6 +347,14 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         if not shutdown_follows():
             raise
     finally:
+        # Stopped by a signal, which may have reached its peers at the same moment (``ros2
+        # launch``'s Ctrl-C): they leave first, in a fixed order, so that no participant is
+        # deleted while another one's leaving reaches it. A node that ended itself waits for none.
+        if stop.requested:
+            try:
+                leave_after(node, leave_after_peers())
+            except Exception as exc:  # noqa: BLE001 - the teardown below must run whatever
+                print(f'[{node_name}] not waiting for peers to leave: {exc!r}', file=sys.stderr)
         # A teardown that never ends (a process deaf to SIGINT and SIGTERM, killed by whoever
         # started it, with nothing in its log) ends here instead: its native stacks (where in
         # the middleware it waits), then its Python stacks and SIGKILL at the limit, counted
@@ -365,6 +374,91 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
             stop_watch(watcher)
             stop.restore()
     return 0
+
+
+#: Longest a node's stop waits for the peers it leaves after (s; ``LEAVE_AFTER_ENV``) before its
+#: own teardown starts anyway. The sim waits for the controller, which waits for the master:
+#: two teardowns in a row, each 0.23 s (p50), 0.78 s (p99), 1.09 s (max) from signal to exit
+#: on a loaded machine (stop 43, docs/reliability.md, twenty-sixth round), and a settle. With
+#: the teardown's own limit after it (:data:`TEARDOWN_LIMIT`) a stop still ends before ``ros2
+#: launch``'s SIGKILL (10 s after SIGINT; its SIGTERM at 5 s is ignored while stopping).
+PEER_LEAVE_WAIT = 3.0
+#: Time (s) after the last of those peers has left the graph, for the discovery callback that
+#: took its leaving to end (the graph is updated inside it); as ``ProcessGroup.settle``.
+PEER_LEAVE_SETTLE = 0.1
+#: Interval (s) at which the graph is looked at while waiting.
+PEER_LEAVE_POLL = 0.01
+
+
+def wait_for_peers_to_leave(node, peers: Sequence[str], timeout: float = PEER_LEAVE_WAIT,
+                            settle: float = PEER_LEAVE_SETTLE,
+                            poll: float = PEER_LEAVE_POLL) -> tuple[str, ...]:
+    """Wait until no node named in ``peers`` (in ``node``'s namespace) is in the ROS graph.
+
+    Fast DDS 2.14's ``set_listener(nullptr)``, the first step of rmw_fastrtps's
+    ``destroy_participant``, spins for good when it starts while a discovery callback of that
+    participant runs (eProsima/Fast-DDS#6513, open; tools/fast_dds_set_listener_spin.cpp), and
+    a stop of several nodes at once brings exactly that callback: another participant leaving.
+    ``ProcessGroup`` stops its nodes one after another; ``ros2 launch`` sends SIGINT to all at
+    once (a fresh-clone CI run, stop 45: the controller hung there and was killed). So a node
+    launched with :data:`~grip_force_ros.nodes.processes.LEAVE_AFTER_ENV` stops after the
+    nodes it names: in the package's launch files the master leaves first, then the
+    controller, then the sim (the reverse start order of the demo). The pause ``settle`` follows
+    even when no peer is in the graph any more at the first look: one that left a moment before
+    may still be in the callback that took its leaving (the master, stopped at the same moment,
+    is mostly gone before the controller looks: tools/teardown_overlap.py). A peer still there
+    after ``timeout`` s (not stopping, or stuck) is left behind, and its name returned.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node or None
+        The stopping node, its executor already ended (None: nothing to wait for).
+    peers : sequence of str
+        Plain node names, resolved in ``node``'s namespace.
+    timeout : float
+        Longest wait (s) for the peers to leave.
+    settle : float
+        Pause (s) once none of the peers is in the graph.
+    poll : float
+        Interval (s) between looks at the graph.
+
+    Returns
+    -------
+    tuple of str
+        The peers still in the graph at ``timeout`` (empty when none is there any more).
+    """
+    if node is None or not peers:
+        return ()
+    namespace = node.get_namespace()
+
+    def present() -> tuple[str, ...]:
+        try:
+            graph = set(node.get_node_names_and_namespaces())
+        except (_RCLError, RuntimeError):     # the context is already down: nobody to wait for
+            return ()
+        return tuple(name for name in peers if (name, namespace) in graph)
+
+    if not wait_until(lambda: not present(), timeout, poll):
+        return present()
+    time.sleep(settle)
+    return ()
+
+
+def leave_after(node, peers: Sequence[str]) -> None:
+    """Wait for ``peers`` to leave (:func:`wait_for_peers_to_leave`) and log how it went.
+
+    One line in the node's log: INFO with the time waited, or WARN naming the peers still up.
+    """
+    if node is None or not peers:
+        return
+    started = time.monotonic()
+    still_up = wait_for_peers_to_leave(node, peers)
+    waited = time.monotonic() - started
+    if still_up:
+        node.get_logger().warning(f'leaving with {", ".join(still_up)} still up after '
+                                  f'{waited:.2f} s')
+    else:
+        node.get_logger().info(f'leaving after {", ".join(peers)} (waited {waited:.2f} s)')
 
 
 def close_node(executor, *nodes) -> None:

@@ -15,6 +15,8 @@ from launch.actions import LogInfo, OpaqueFunction, RegisterEventHandler
 from launch_ros.actions import LifecycleNode, Node
 from launch_ros.event_handlers import OnStateTransition
 
+from grip_force_ros.nodes.processes import leave_after_environment
+
 PACKAGE = 'grip_force_ros'
 
 
@@ -24,7 +26,8 @@ def _log_transition(context):
                         f'({event.transition})')]
 
 
-def controller_actions(namespace: str, parameters: list, autostart: bool) -> list:
+def controller_actions(namespace: str, parameters: list, autostart: bool,
+                       leave_after: tuple[str, ...] = ()) -> list:
     """Return the launch actions of the controller node.
 
     Parameters
@@ -35,12 +38,16 @@ def controller_actions(namespace: str, parameters: list, autostart: bool) -> lis
         Its parameter files and dicts, in order (``autostart`` is added last).
     autostart : bool
         True: a plain node that brings itself up; False: a managed LifecycleNode that waits.
+    leave_after : tuple of str
+        Nodes of the same launch (names in ``namespace``) whose leaving the controller waits
+        for at Ctrl-C before its own teardown (``processes.LEAVE_AFTER_ENV``).
     """
     parameters = list(parameters) + [{'autostart': autostart}]
+    common = dict(executable='controller', name='controller', namespace=namespace,
+                  parameters=parameters, output='screen',
+                  additional_env=leave_after_environment(leave_after))
     if autostart:
-        return [Node(package=PACKAGE, executable='controller', name='controller',
-                     namespace=namespace, parameters=parameters, output='screen')]
-    node = LifecycleNode(package=PACKAGE, executable='controller', name='controller',
-                         namespace=namespace, parameters=parameters, output='screen')
+        return [Node(package=PACKAGE, **common)]
+    node = LifecycleNode(package=PACKAGE, **common)
     return [node, RegisterEventHandler(OnStateTransition(
         target_lifecycle_node=node, entities=[OpaqueFunction(function=_log_transition)]))]

@@ -97,6 +97,25 @@ def ensure_local_discovery(env: MutableMapping[str, str] | None = None) -> Mutab
     return env
 
 
+#: Environment variable of a node process: the names of the nodes (comma-separated, in the
+#: node's namespace) whose leaving the node waits for when a signal stops it
+#: (``common.wait_for_peers_to_leave``). ``ros2 launch`` sends SIGINT to every node at once;
+#: the package's launch files set it so that the master leaves first, then the controller,
+#: then the sim (:func:`leave_after_environment`).
+LEAVE_AFTER_ENV = 'GRIP_FORCE_LEAVE_AFTER'
+
+
+def leave_after_environment(peers: Sequence[str]) -> dict[str, str]:
+    """Return the environment entry that makes a node stop after ``peers`` (node names)."""
+    return {LEAVE_AFTER_ENV: ','.join(peers)}
+
+
+def leave_after_peers(env: Mapping[str, str] | None = None) -> tuple[str, ...]:
+    """Return the node names in :data:`LEAVE_AFTER_ENV` of ``env`` (default ``os.environ``)."""
+    text = (os.environ if env is None else env).get(LEAVE_AFTER_ENV, '')
+    return tuple(name.strip() for name in text.split(',') if name.strip())
+
+
 def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | None = None,
                     base: Mapping[str, str] | None = None) -> dict[str, str]:
     """Environment of a ROS child process.
