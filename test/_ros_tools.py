@@ -269,11 +269,24 @@ def native_stacks(pid: int, timeout: float = 60.0) -> str:
 FAST_DDS_6502 = ('check_remote_participant_liveliness', 'unregister_timer')
 
 
+#: Fast DDS's spinning ``set_listener`` (eProsima/Fast-DDS#6513, open): rmw_fastrtps's
+#: ``destroy_participant`` begins with ``set_listener(nullptr)``, whose wait for the listener
+#: callbacks in progress busy-waits for good when one runs (another participant's leaving).
+#: Stop 42's controller, reproduced by tools/fast_dds_set_listener_spin.cpp (twenty-sixth round).
+FAST_DDS_6513 = ('destroy_participant', 'set_listener')
+#: ... and the callback it waits for: a receive thread inside one of these, on the listener's mutex.
+FAST_DDS_6513_CALLBACKS = ('onParticipantDiscovery', 'onWriterDiscovery', 'onReaderDiscovery')
+
+
 def known_deadlock(native: str) -> str | None:
     """Name a known deadlock seen in gdb's stacks of one process, or None."""
     if all(frame in native for frame in FAST_DDS_6502):
         return ('Fast DDS deadlock eProsima/Fast-DDS#6502: the event thread in '
                 'check_remote_participant_liveliness, a receive thread in unregister_timer')
+    if (all(frame in native for frame in FAST_DDS_6513)
+            and any(frame in native for frame in FAST_DDS_6513_CALLBACKS)):
+        return ('Fast DDS eProsima/Fast-DDS#6513: the participant\'s deletion spinning in '
+                'set_listener while a discovery callback of it waits')
     return None
 
 

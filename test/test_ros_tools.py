@@ -183,6 +183,26 @@ Thread 7 (Thread 0x7f83fd9fa6c0 (LWP 25207) "dds.ev.0"):
 """
 
 
+#: gdb's stacks of stop 42's controller, past 3 s in its teardown (a loaded run), two of its 16
+#: threads, frames cut to their names.
+_SPINNING_SET_LISTENER = """\
+Thread 10 (Thread 0x7fbc52f136c0 (LWP 31783) "dds.udp.13164"):
+#3  ___pthread_mutex_lock (mutex=0x2c2312d0) at ./nptl/pthread_mutex_lock.c:93
+#4  0x00007fbc71670c86 in eprosima::...::MyRTPSParticipantListener::onParticipantDiscovery(...) ()
+#5  0x00007fbc717efbab in eprosima::fastrtps::rtps::PDP::actions_on_remote_participant_removed(...) ()
+Thread 1 (Thread 0x7fbc72c44740 (LWP 31759) "controller"):
+#0  0x00007fbc72f66b46 in clock_gettime ()
+#3  0x00007fbc71688dfb in eprosima::fastdds::dds::DomainParticipant::set_listener(...) ()
+#5  0x00007fbc71f57c84 in rmw_fastrtps_shared_cpp::destroy_participant(CustomParticipantInfo*) ()
+"""
+
+
+def test_fast_dds_s_spinning_set_listener_is_named_in_a_report():
+    assert 'eProsima/Fast-DDS#6513' in known_deadlock(_SPINNING_SET_LISTENER)
+    deleting_alone = _SPINNING_SET_LISTENER.split('Thread 1 ')[1]   # no callback waits: no hang
+    assert known_deadlock(deleting_alone) is None
+
+
 def test_fast_dds_s_open_deadlock_is_named_in_a_report():
     assert 'eProsima/Fast-DDS#6502' in known_deadlock(_DEADLOCKED)
     one_thread = _DEADLOCKED.split('Thread 7')[0]        # a receive thread waiting alone: no deadlock
