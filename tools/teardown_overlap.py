@@ -28,16 +28,20 @@ from pathlib import Path
 
 import numpy as np
 
-from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, ProcessGroup, master_rt_priority,
-                                            node_command, reserve_domains, ros_environment,
-                                            wait_until)
+from grip_force_ros.nodes.processes import (DEFAULT_RT_PRIORITY, LEAVE_AFTER_ENV, ProcessGroup,
+                                            master_rt_priority, node_command, reserve_domains,
+                                            ros_environment, wait_until)
 
 #: The shipped default instrument.
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'paper_needle_driver.yaml'
 NODES = ('sim_instrument', 'controller', 'master')
 #: What the teardown watch writes when a teardown runs past its native-stacks time.
 WATCH_RECORD = '[teardown] pid'
-MODES = ('together', 'one_at_a_time')
+MODES = ('together', 'one_at_a_time', 'together_ordered')
+#: ``together_ordered``: each signal to all at once, as ``ros2 launch``, but each node leaves
+#: after the ones grasp.launch.py names for it (GRIP_FORCE_LEAVE_AFTER): the master first,
+#: then the controller, then the sim.
+LEAVE_AFTER = {'sim_instrument': ('controller', 'master'), 'controller': ('master',)}
 
 
 def one_cycle(mode: str, env: dict[str, str], log_dir: Path, hold: float,
@@ -47,14 +51,19 @@ def one_cycle(mode: str, env: dict[str, str], log_dir: Path, hold: float,
     with group:
         for name in NODES:
             priority = master_rt_priority(rt_priority) if name == 'master' else rt_priority
-            group.start(name, node_command(name, CONFIG), rt_priority=priority)
+            argv = node_command(name, CONFIG)
+            if mode == 'together_ordered':      # the same process (exec), its variable set
+                argv = ['env', f'{LEAVE_AFTER_ENV}={",".join(LEAVE_AFTER.get(name, ()))}', *argv]
+            group.start(name, argv, rt_priority=priority)
         up = wait_until(lambda: all('[INFO]' in p.log_tail(200) for p in group.processes), 60.0, 0.05)
         group.check_alive()
         time.sleep(hold)
         codes = group.stop()
     logs = {p.name: (log_dir / f'{p.name}.log').read_text(errors='replace') for p in group.processes}
     return {'mode': mode, 'up': up, 'codes': codes, 'stop_times': dict(group.stop_times),
-            'watch_records': [name for name, text in logs.items() if WATCH_RECORD in text]}
+            'watch_records': [name for name, text in logs.items() if WATCH_RECORD in text],
+            # together_ordered: nodes that stopped before their peers had left (waited 3 s)
+            'left_with_peers_up': [name for name, text in logs.items() if ': leaving with ' in text]}
 
 
 def summary(cycles: list[dict]) -> dict:
@@ -62,6 +71,8 @@ def summary(cycles: list[dict]) -> dict:
     out = {}
     for mode in MODES:
         mine = [c for c in cycles if c['mode'] == mode]
+        if not mine:
+            continue
         times = np.array([t for c in mine for t in c['stop_times'].values()])
         per_node = {name: np.array([c['stop_times'][name] for c in mine if name in c['stop_times']])
                     for name in NODES}
@@ -69,6 +80,7 @@ def summary(cycles: list[dict]) -> dict:
             'cycles': len(mine),
             'not_exit_0': sum(code != 0 for c in mine for code in c['codes'].values()),
             'watch_records': sum(len(c['watch_records']) for c in mine),
+            'left_with_peers_up': sum(len(c.get('left_with_peers_up', ())) for c in mine),
             'stop_time_s': ({'p50': float(np.percentile(times, 50)), 'p99': float(np.percentile(times, 99)),
                              'max': float(times.max()), 'over_1s': int((times > 1.0).sum())}
                             if times.size else {}),
@@ -80,6 +92,8 @@ def summary(cycles: list[dict]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cycles', type=int, default=100, help='start/stop cycles (the ways alternate)')
+    parser.add_argument('--modes', nargs='+', choices=MODES, default=list(MODES[:2]),
+                        help='ways of stopping, taken in turn (default: together one_at_a_time)')
     parser.add_argument('--hold', type=float, default=1.0, help='running time (s) once all have logged')
     parser.add_argument('--rt-priority', type=int, default=DEFAULT_RT_PRIORITY,
                         help='SCHED_FIFO priority of the nodes where permitted (0: normal), as the demo')
@@ -94,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     cycles = []
     with domain, open(out / 'cycles.jsonl', 'a') as record:
         for index in range(args.cycles):
-            mode = MODES[index % 2]
+            mode = args.modes[index % len(args.modes)]
             log_dir = out / f'cycle{index:04d}'
             cycle = one_cycle(mode, env, log_dir, args.hold, args.rt_priority)
             cycle['index'] = index
