@@ -221,7 +221,7 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
     except subprocess.TimeoutExpired:
         pass
     launched = [int(started['pid']) for started in _STARTED.finditer(log.read_text(errors='replace'))]
-    stuck = [pid for pid in launched if request_stacks(pid)]   # a live process that handles it
+    stuck = [pid for pid in launched if request_stacks(pid, wait=0.0)]   # a live one that handles it
     native = {pid: named_native_stacks(pid) for pid in stuck}   # before launch's SIGTERM comes
     code = stop(proc, None, timeout=timeout)      # no second SIGINT: launch goes on as it would
     with open(log, 'a') as out:                   # launch has ended: the log is ours
@@ -374,10 +374,10 @@ def process_report(proc: subprocess.Popen, log: Path) -> str:
             command = Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ')[:160]
         except OSError:
             continue                                        # ended meanwhile
-        asked = 'asked into the log' if request_stacks(pid) else 'not handled'
+        asked = 'asked into the log' if request_stacks(pid, wait=0.0) else 'not handled'
         lines.append(f'--- pid {pid} {command.decode(errors="replace")}: Python stacks {asked}; '
                      f'native stacks (gdb): {named_native_stacks(pid)}')
-    time.sleep(STACK_DUMP_WAIT)
+    time.sleep(STACK_DUMP_WAIT)                             # once, for every process asked
     lines += ['--- log:', log.read_text(errors='replace')]
     return '\n'.join(lines)
 

@@ -35,7 +35,7 @@ from grip_force_ros.control.controller import CONTROLLER_STALLED
 from grip_force_ros.control.inputs import INSTRUMENT_SOURCES, source_timeouts
 from grip_force_ros.faults.catalogue import (SOURCES, FaultCase, bad_params_text, catalogue,
                                              redo_spoiled)
-from grip_force_ros.nodes.processes import STACK_DUMP_WAIT, request_stacks
+from grip_force_ros.nodes.processes import STACK_THREAD_HEADER, request_stacks
 from grip_force_ros.params import load_params_file, read_params_yaml
 from grip_force_ros.params.files import instrument_path
 
@@ -182,16 +182,12 @@ class Session:
         self._restarting.start()
         return done
 
-    def replace_sim(self) -> int | None:
-        """Stop the ``sim_instrument`` process (SIGINT, then harder) and start a new one.
-
-        Returns the old process's exit code (None without a sim process).
-        """
+    def replace_sim(self) -> None:
+        """Stop the ``sim_instrument`` process (SIGINT, then harder) and start a new one."""
         if self.sim is None:
-            return None
-        code = self.sim.stop(grace=2.0)
+            return
+        self.sim.stop(grace=2.0)
         self.sim = self._start_sim()
-        return code
 
     def close(self) -> None:
         from grip_force_ros.nodes.common import shutdown_once, unfreeze_heap
@@ -491,13 +487,13 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
     A new process that runs (it has not crashed) but none of whose states reached this
     process (the probe relayed none) tells nothing about the controller, which rightly stays
     safe without instrument states: the trial is spoiled. Seen once in CI
-    (``sim_restart@sim_instrument``, 30 s without a state; not reproduced here in 270
-    restarts, tools/shm_crash_restart.py); Fast DDS 2.14's shared-memory transport is known
-    to lose a restarted participant that reuses a killed one's port (eProsima/Fast-DDS#5053,
-    #4728). The process is asked for its Python stacks (in its log), and the cause names how
-    many publishers this process knows on its topics and where its main thread was; then a
-    new process replaces it, for the trial that is redone. A process that has died, or has
-    been heard, is the case's own failure (None).
+    (``sim_restart@sim_instrument``, 30 s without a state; not reproduced here in 324
+    restarts: faultcheck and tools/shm_crash_restart.py, stop 45); Fast DDS 2.14's
+    shared-memory transport is known to lose a restarted participant that reuses a killed
+    one's port (eProsima/Fast-DDS#5053, #4728). The process is asked for its Python stacks (in
+    its log, kept beside it), and the cause names how many publishers this process knows on
+    its topics and where its main thread was. A process that has died, or has been heard, is
+    the case's own failure (None).
     """
     from grip_force_ros.faults.probe import relay_remaps
     sim = session.sim
@@ -505,8 +501,7 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
         return None
     topics_seen = {topic: session.probe.count_publishers(topic)
                    for topic in relay_remaps(RELAY_PREFIX).values()}
-    if sim.dump_stacks():
-        time.sleep(STACK_DUMP_WAIT)
+    sim.dump_stacks()
     log = sim.log_tail(200)
     kept = sim.log_path.with_suffix(f'.unheard_{sim.pid}.log')
     kept.write_text(log)
@@ -520,7 +515,7 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
 
 def split_stacks(text: str) -> tuple[str, str]:
     """Split a process's output into what it wrote and the ``faulthandler`` stacks after it."""
-    match = re.search(r'^(Current thread|Thread) 0x', text, re.M)
+    match = STACK_THREAD_HEADER.search(text)
     return (text, '') if match is None else (text[:match.start()], text[match.start():])
 
 
@@ -531,7 +526,7 @@ def main_thread_frame(stacks: str) -> str:
     """
     blocks, block = [], []
     for line in stacks.splitlines():
-        if line.startswith(('Thread 0x', 'Current thread 0x')):
+        if STACK_THREAD_HEADER.match(line):
             block = []
             blocks.append(block)
         elif line.startswith('  File ') and blocks:
@@ -730,8 +725,7 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
         except subprocess.TimeoutExpired:
             # where it was, from its Python stacks (a process with no line on stderr after
             # 30 s was seen once under load: starting, or stuck?)
-            if request_stacks(proc.pid):
-                time.sleep(STACK_DUMP_WAIT)
+            request_stacks(proc.pid)
             proc.kill()
             out, err = proc.communicate()
             err, stacks = split_stacks(err or '')

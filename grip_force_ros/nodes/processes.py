@@ -430,6 +430,9 @@ def end_with_parent(sig: int = signal.SIGTERM) -> bool:
 STACK_DUMP_SIGNAL = signal.SIGUSR1
 #: Time given to a process to write its stacks before it is killed (s).
 STACK_DUMP_WAIT = 0.3
+#: The line ``faulthandler`` begins each thread's stack with (``Thread 0x...``, and ``Current
+#: thread 0x...`` for the thread that handled the signal).
+STACK_THREAD_HEADER = re.compile(r'^(?:Current thread|Thread) 0x', re.M)
 
 
 def catches_signal(pid: int, sig: int) -> bool:
@@ -447,11 +450,12 @@ def catches_signal(pid: int, sig: int) -> bool:
     return False
 
 
-def request_stacks(pid: int) -> bool:
+def request_stacks(pid: int, wait: float = STACK_DUMP_WAIT) -> bool:
     """Ask process ``pid`` for its threads' stacks in its log (:data:`STACK_DUMP_SIGNAL`).
 
     Only a process that handles that signal gets it (for any other its default action would
-    end the process): True when it was sent.
+    end the process): True when it was sent, and then ``wait`` s have passed for the process
+    to write them (0: the caller waits once for several processes).
     """
     if not catches_signal(pid, STACK_DUMP_SIGNAL):
         return False
@@ -459,6 +463,7 @@ def request_stacks(pid: int) -> bool:
         os.kill(pid, STACK_DUMP_SIGNAL)
     except ProcessLookupError:
         return False
+    time.sleep(wait)
     return True
 
 
@@ -687,13 +692,12 @@ class NodeProcess:
             return ''
         return '\n'.join(self.log_path.read_text(errors='replace').splitlines()[-lines:])
 
-    def dump_stacks(self) -> bool:
-        """Ask the process for its threads' stacks in its log (:data:`STACK_DUMP_SIGNAL`).
+    def dump_stacks(self, wait: float = STACK_DUMP_WAIT) -> bool:
+        """Ask the process for its threads' stacks in its log (:func:`request_stacks`).
 
-        Only a process that handles that signal gets it (for any other its default action
-        would end the process): True when it was sent.
+        True when it was sent, and then ``wait`` s have passed for the process to write them.
         """
-        return self.alive() and request_stacks(self.pid)
+        return self.alive() and request_stacks(self.pid, wait)
 
     def signal(self, sig: int) -> None:
         """Send ``sig`` to the process (to its process group when it has its own session)."""
@@ -731,8 +735,8 @@ class NodeProcess:
         for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 2.0), (signal.SIGKILL, 2.0)):
             if not self.alive():
                 break
-            if sig != signal.SIGINT and self.dump_stacks():
-                time.sleep(STACK_DUMP_WAIT)          # where it hung, in its log
+            if sig != signal.SIGINT:
+                self.dump_stacks()                   # where it hung, in its log
             self.signal(sig)
             try:
                 self.popen.wait(wait)
@@ -838,8 +842,8 @@ class ProcessGroup:
         began = time.monotonic()
         for sig, wait in ((signal.SIGINT, self.grace), (signal.SIGTERM, 2.0),
                           (signal.SIGKILL, 2.0)):
-            if sig != signal.SIGINT and any([p.dump_stacks() for p in running]):  # ask every one
-                time.sleep(STACK_DUMP_WAIT)          # where they hung, in their logs
+            if sig != signal.SIGINT and any([p.dump_stacks(wait=0.0) for p in running]):
+                time.sleep(STACK_DUMP_WAIT)          # asked every one: where they hung, in their logs
             for p in running:
                 p.signal(sig)
             deadline = time.monotonic() + wait
