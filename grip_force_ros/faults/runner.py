@@ -350,6 +350,7 @@ def run_message_case(session: Session, case: FaultCase) -> dict:
             unheard = _unheard_sim(session, detail['sim_process']['states_relayed'])
             if unheard is not None:   # the middleware's doing, not the controller's: redone
                 detail['spoiled'] = unheard
+                session.replace_sim()     # with a new process
     pattern = re.compile(case.reason, re.I) if case.reason else None
     if pattern is not None:   # /diagnostics may come at a lower rate: give it time
         wait_until(lambda: any(pattern.search(d[1]) for d in probe.diagnostics), 0.5)
@@ -505,9 +506,7 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
     log = sim.log_tail(200)
     kept = sim.log_path.with_suffix(f'.unheard_{sim.pid}.log')
     kept.write_text(log)
-    pid = sim.pid
-    session.replace_sim()
-    return (f'the new sim_instrument process (pid {pid}) ran, but none of its states came in '
+    return (f'the new sim_instrument process (pid {sim.pid}) ran, but none of its states came in '
             f'{session.recovery_timeout:g} s; this process knew {sum(topics_seen.values())} '
             f'publishers on its {len(topics_seen)} topics (a killed one stays known until its '
             f'lease ends, 20 s); its main thread in: {main_thread_frame(log)} (its log: {kept})')
