@@ -123,7 +123,7 @@ class _SilencedLoop:
         self.mode = 'grip'
         self.stopped = None
         self.reasons = reasons           # ((s after the pause, reasons from then on), ...)
-        self.probe = SimpleNamespace(lock=threading.Lock(), states=[], latest=self.latest,
+        self.probe = SimpleNamespace(lock=threading.Lock(), states=[], commands=[], latest=self.latest,
                                      wait=lambda predicate, timeout: _Probe.wait(None, predicate, timeout),
                                      diagnostics_gap_since=lambda start: 0.1)
         self.procs = {'master': SimpleNamespace(pause=lambda: self.paused(current, delay),
@@ -136,6 +136,9 @@ class _SilencedLoop:
             reasons = [text for after, text in self.reasons if after <= since][-1]
         return {'values': {'mode': self.mode, 'reasons': reasons,
                            'current_command_A': '0.24' if self.mode == 'grip' else '0.0'}}
+
+    def log(self, name, since):
+        return f'[WARN] [{since + 0.03:.6f}] [{name}]: no command for 30.4 ms (a stand-in line)'
 
     def paused(self, current, delay):
         self.mode, stopped = 'safe', time.time()
@@ -164,7 +167,12 @@ def test_the_master_case_waits_for_the_states_of_the_silence(monkeypatch):
     state. They are waited for, as in the kill case, and their absence is told apart."""
     assert _master_case(_SilencedLoop(current=0.0, delay=1.5), detail := {}) == []
     assert detail['states_while_silent'] == 10 and detail['largest_current_while_silent_A'] == 0.0
-    assert _master_case(_SilencedLoop(current=0.2, delay=0.0), {}) == ['the current did not ramp to 0']
+    held = _master_case(_SilencedLoop(current=0.2, delay=0.0), detail := {})
+    assert held == ['the current did not ramp to 0']
+    # a failed case keeps what the probe saw around the pause, and the sim's lines since
+    assert [i for _, i in detail['states_around_pause']] == [0.2] * 10
+    assert detail['states_around_pause'][0][0] == 0.41 and detail['commands_around_pause'] == []
+    assert 'no command for 30.4 ms' in detail['sim_log_after_pause']
     monkeypatch.setattr(dvrk, 'KILL_STATE_WAIT', 0.5)
     problems = _master_case(_SilencedLoop(current=0.0, delay=None), detail := {})
     assert problems == ['no instrument state stamped 0.4 s after the master went silent within 0.5 s']

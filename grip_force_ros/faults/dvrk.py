@@ -464,10 +464,34 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
                         f'went silent within {KILL_STATE_WAIT} s')
     elif max(map(abs, late)) >= _zero_current(loop):
         problems.append('the current did not ramp to 0')
+    if problems:      # what the next failure tells (loaded run 46/1: 0.15 A on 3 states, why?)
+        _record_silence(loop, detail, stopped)
     master.resume()
     if not loop.probe.wait(lambda: _gripping(loop.probe), 10.0):
         problems.append('no grip again after the master came back')
     return problems
+
+
+#: States and commands kept in a failed master case's detail, around the pause (s).
+SILENCE_RECORD = (-0.3, 1.5)
+
+
+def _record_silence(loop: _Loop, detail: dict, stopped: float) -> None:
+    """Keep what the probe saw around the master's pause (``stopped``, time.time() s).
+
+    ``states_around_pause``: (stamp - stopped s, measured current A) of every sim state in
+    :data:`SILENCE_RECORD`; ``commands_around_pause``: receipt times of the controller's
+    commands there (s from the pause); ``sim_log_after_pause``: the sim's lines since (its
+    drive cuts, with how long it went unscheduled). A starved sim, a controller that commands
+    again, or a probe that lags show apart in them.
+    """
+    first, last = (stopped + bound for bound in SILENCE_RECORD)
+    with loop.probe.lock:
+        states = [(round(t - stopped, 4), round(i, 4)) for t, i in loop.probe.states if first <= t <= last]
+        commands = [round(t - stopped, 4) for t in loop.probe.commands if first <= t <= last]
+    detail['states_around_pause'] = states
+    detail['commands_around_pause'] = commands
+    detail['sim_log_after_pause'] = loop.log('sim_instrument', stopped)[-2000:]
 
 
 _RUN = {'controller_sigkill_crtk': ('crtk', _kill_case),
