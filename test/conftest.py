@@ -37,15 +37,20 @@ settings.register_profile('ci', deadline=None, derandomize=True, print_blob=True
 settings.load_profile('ci' if os.environ.get('CI') else 'dev')
 
 
-# A CPU load for the whole session (`./dev test --with-load ...`): one busy process per
+# A load for the whole session (`./dev test --with-load ...`): one busy process per
 # core (or --load-workers), stopped at the end of the session whatever happens
-# (grip_force_ros/bench/load.py). `grip-force loadcheck` runs the ROS tests K times so.
+# (grip_force_ros/bench/load.py); `--load-kind disk` the disk pressure instead (fsync
+# writers, page-cache eviction of the package's files; grip_force_ros/bench/pressure.py),
+# `both` the two. `grip-force loadcheck` runs the ROS tests K times so.
 def pytest_addoption(parser):
     group = parser.getgroup('grip_force_ros')
     group.addoption('--with-load', action='store_true',
-                    help='run the session under a bounded CPU load (one busy process per core)')
+                    help='run the session under a bounded load (default: one busy process per core)')
     group.addoption('--load-workers', type=int, default=None,
                     help='busy processes of --with-load (default: one per core)')
+    group.addoption('--load-kind', choices=('cpu', 'disk', 'both'), default='cpu',
+                    help='the load of --with-load: cpu (default), disk (fsync writers, page-cache '
+                         'eviction) or both')
 
 
 @pytest.fixture(scope='session', autouse=True)
@@ -54,8 +59,10 @@ def cpu_load(request):
     if not request.config.getoption('--with-load'):
         yield None
         return
-    from grip_force_ros.bench.load import MAX_SECONDS, LoadGenerator
-    with LoadGenerator(request.config.getoption('--load-workers'), seconds=MAX_SECONDS) as load:
+    from grip_force_ros.bench.load import MAX_SECONDS
+    from grip_force_ros.bench.pressure import make_pressure
+    with make_pressure(request.config.getoption('--load-kind'), seconds=MAX_SECONDS,
+                       workers=request.config.getoption('--load-workers')) as load:
         yield load
 
 

@@ -1,4 +1,4 @@
-"""The suite's own tooling for loaded runs: domain reservation, the load generator, loadcheck.
+"""The suite's own tooling for loaded runs: domain reservation, the CPU load, the disk pressure, loadcheck.
 
 No rclpy: the domain locks, the busy processes and the junit tables are plain processes
 and files.
@@ -16,6 +16,8 @@ import pytest
 
 from grip_force_ros.bench.load import LoadError, LoadGenerator
 from grip_force_ros.bench import loadcheck
+from grip_force_ros.bench import pressure as pressure_module
+from grip_force_ros.bench.pressure import DIR_PREFIX, DiskPressure, PressureError, make_pressure
 from grip_force_ros.bench.loadcheck import (code_fingerprint, parse_junit, render_tally, source_revision,
                                             tabulate, tally)
 from grip_force_ros.nodes.processes import (ProcessError, domain_locked, held_domains,
@@ -315,3 +317,150 @@ def test_a_run_that_does_not_answer_is_killed_with_the_processes_it_started(tmp_
     gone, alive = psutil.wait_procs([psutil.Process(p) for p in pids if psutil.pid_exists(p)],
                                     timeout=10)
     assert not alive, [p.cmdline() for p in alive]
+
+
+# ---------------------------------------------------------------- disk and memory pressure
+def _tree_bytes(path):
+    """Bytes of the files under ``path`` (0 once it is gone)."""
+    total = 0
+    for root, _dirs, files in os.walk(path):
+        for name in files:
+            try:
+                total += os.path.getsize(os.path.join(root, name))
+            except OSError:
+                pass
+    return total
+
+
+def test_disk_pressure_refuses_values_beyond_its_bounds(tmp_path):
+    for kwargs in ({'writers': -1}, {'writers': 10_000}, {'seconds': 0.0}, {'seconds': 1e9},
+                   {'file_mb': 0.0}, {'file_mb': 1e7}, {'writers': 16, 'file_mb': 4096},
+                   {'fsync_mb': 0.0}, {'rate_mb_s': -1.0}, {'evict_rate': -1.0},
+                   {'memory_mb': -1.0}, {'memory_mb': 1e9},
+                   {'writers': 0, 'evict_rate': 0.0, 'memory_mb': 0.0}):
+        with pytest.raises(PressureError):
+            DiskPressure(**{'writers': 1, 'file_mb': 1.0, 'directory': tmp_path, **kwargs})
+    assert issubclass(PressureError, LoadError)
+    with pytest.raises(PressureError):
+        make_pressure('sideways')
+
+
+def test_disk_pressure_writes_fsyncs_evicts_within_its_size_bound_and_cleans_up(tmp_path):
+    """A tiny run: one writer of a 2 MB file at 4 MB/s, the evictor, 8 MB of memory."""
+    pressure = DiskPressure(writers=1, seconds=60.0, file_mb=2.0, fsync_mb=0.5, rate_mb_s=4.0,
+                            evict_rate=200.0, memory_mb=8.0, directory=tmp_path)
+    largest = 0
+    with pressure:
+        assert pressure.not_ready == [] and pressure.running() == 3
+        directory = pressure.directory
+        assert directory.parent == tmp_path and directory.name.startswith(DIR_PREFIX)
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            largest = max(largest, _tree_bytes(directory))
+            time.sleep(0.05)
+    summary = pressure.last_summary
+    assert 0 < largest <= pressure.bytes_limit == 2 * 2**20
+    assert summary['kind'] == 'disk' and summary['bytes_limit'] == pressure.bytes_limit
+    assert summary['bytes_written'] > 0 and summary['fsyncs'] > 0
+    assert 0 < summary['largest_file_bytes'] <= pressure.bytes_limit
+    assert summary['files_evicted'] > 0 and summary['evict_targets'] > 0
+    assert summary['memory_touched_bytes'] > 0
+    assert summary['wall_s'] > 0 and summary['drop_caches'] == 0     # never unless asked
+    assert sorted(c['role'] for c in summary['children']) == ['evictor', 'memory', 'writer']
+    assert all(c['ended_by'] == 'SIGTERM' for c in summary['children']), summary['children']
+    assert summary['cleaned'] and not directory.exists() and list(tmp_path.iterdir()) == []
+    json.dumps(summary)                             # a plain dict, as the commands print it
+
+
+def test_disk_pressure_stops_at_its_deadline_and_removes_its_files_itself(tmp_path):
+    pressure = DiskPressure(writers=1, seconds=1.0, file_mb=1.0, rate_mb_s=2.0, evict_rate=50.0,
+                            directory=tmp_path).start()
+    try:
+        deadline = time.monotonic() + 30.0
+        while pressure.running() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert pressure.running() == 0, 'a child outlived its deadline'
+        assert list(tmp_path.iterdir()) == []       # before stop(): the children cleaned up
+    finally:
+        summary = pressure.stop()
+    assert summary['bytes_written'] > 0
+    assert [c['ended_by'] for c in summary['children']] == ['deadline', 'deadline']
+
+
+def test_disk_pressure_leaves_no_file_when_its_parent_is_killed(tmp_path):
+    """The parent is SIGKILLed (no clean-up runs in it): its children remove the files."""
+    code = textwrap.dedent(f"""
+        import time
+        from grip_force_ros.bench.pressure import DiskPressure
+        p = DiskPressure(writers=2, seconds=120, file_mb=2, rate_mb_s=2, evict_rate=50,
+                         memory_mb=8, directory={str(tmp_path)!r}).start()
+        print(p.directory, ' '.join(str(q.pid) for _, q in p.procs), flush=True)
+        time.sleep(120)
+    """)
+    parent = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True)
+    directory, *pids = parent.stdout.readline().split()
+    children = [psutil.Process(int(p)) for p in pids]
+    assert len(children) == 4
+    deadline = time.monotonic() + 30.0
+    while _tree_bytes(directory) == 0:              # the writers have begun
+        assert time.monotonic() < deadline, 'no file written'
+        time.sleep(0.05)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    gone, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive, [p.pid for p in alive]
+    deadline = time.monotonic() + 5.0
+    while os.path.exists(directory) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not os.path.exists(directory), list(os.walk(directory))
+    assert list(tmp_path.iterdir()) == []
+
+
+class _CountedChild:
+    """A stand-in for a pressure child's stop condition: done after ``ticks`` checks."""
+
+    def __init__(self, ticks):
+        self.ticks = ticks
+        self.deadline = time.monotonic() + 60.0
+
+    def done(self):
+        self.ticks -= 1
+        return self.ticks < 0
+
+    def sleep(self, seconds):
+        pass
+
+
+def test_the_evictor_advises_each_file_and_says_why_drop_caches_was_refused(tmp_path, monkeypatch):
+    files = []
+    for k in range(3):
+        files.append(tmp_path / f'f{k}')
+        files[-1].write_bytes(b'x' * 4096)
+    monkeypatch.setattr(pressure_module, 'DROP_CACHES', tmp_path / 'nowhere' / 'drop_caches')
+    out = pressure_module.evict_loop(_CountedChild(1), rate=80.0, drop_caches=True,
+                                     targets=files + [tmp_path / 'missing'])
+    assert out['files_evicted'] == 3 and out['evict_refused'] == 1 and out['evict_passes'] == 1
+    assert out['bytes_evicted'] == 3 * 4096
+    assert out['drop_caches'] == 0 and 'FileNotFoundError' in out['drop_caches_refused']
+    targets = pressure_module.evict_targets()
+    names = {p.name for p in targets}
+    assert 'pressure.py' in names and any('.so' in n for n in names)      # the package, libraries
+    assert len(targets) <= pressure_module.MAX_EVICT_FILES
+
+
+def test_make_pressure_builds_each_kind():
+    assert make_pressure('none').stop() == {'kind': 'none'}
+    assert isinstance(make_pressure('cpu', seconds=1.0, workers=1), LoadGenerator)
+    assert isinstance(make_pressure('disk', seconds=1.0, writers=1, file_mb=1.0), DiskPressure)
+    both = make_pressure('both', seconds=1.0, workers=1, writers=1, file_mb=1.0)
+    assert both.kind == 'both' and set(both.generators) == {'cpu', 'disk'}
+
+
+def test_pressure_commands_refuse_values_beyond_their_bounds(capsys):
+    from grip_force_ros.cli import main
+    assert main(['load', '--kind', 'disk', '--file-mb', '1e7']) == 2
+    assert 'file_mb' in capsys.readouterr().err
+    assert main(['bench', '--pressure', 'disk', '--disk-file-mb', '1e7', '--parts', 'model']) == 2
+    assert 'file_mb' in capsys.readouterr().err
+    assert main(['demo', '--pressure', 'disk', '--disk-memory-mb', '1e9']) == 2
+    assert 'memory_mb' in capsys.readouterr().err

@@ -16,7 +16,8 @@ Workers are plain Python busy loops at normal priority (they compete for the cor
 another user's job would), ``duty`` of every :data:`DUTY_PERIOD` busy, the rest asleep.
 
 Used by ``grip-force load`` (``./dev load --seconds 600``), the suite's ``--with-load``
-option (test/conftest.py) and ``grip-force loadcheck`` (:mod:`.loadcheck`).
+option (test/conftest.py) and ``grip-force loadcheck`` (:mod:`.loadcheck`). The disk and
+memory pressure beside it is :mod:`.pressure` (``--kind disk``, ``--kind both``).
 """
 from __future__ import annotations
 
@@ -112,6 +113,7 @@ class LoadGenerator:
         self.started = None          # time.monotonic() at start
         self.load_before = None      # 1-minute load average at start
         self._cpu0 = 0.0
+        self.last_summary = None     # what :meth:`stop` returned last
 
     def start(self) -> 'LoadGenerator':
         """Start the workers (returns self)."""
@@ -142,6 +144,7 @@ class LoadGenerator:
             p.wait()
         summary = self.summary()
         self.procs = []
+        self.last_summary = summary
         try:
             atexit.unregister(self.stop)
         except Exception:  # noqa: BLE001 - nothing registered
@@ -149,9 +152,9 @@ class LoadGenerator:
         return summary
 
     def summary(self) -> dict:
-        """Workers, duty, the wall time so far (s), the CPU the finished workers used (s)."""
+        """Kind ('cpu'), workers, duty, the wall time so far (s), the CPU the finished workers used (s)."""
         wall = time.monotonic() - self.started if self.started is not None else 0.0
-        return {'workers': self.workers, 'duty': self.duty, 'seconds_limit': self.seconds,
+        return {'kind': 'cpu', 'workers': self.workers, 'duty': self.duty, 'seconds_limit': self.seconds,
                 'wall_s': round(wall, 2), 'worker_cpu_s': round(_children_cpu() - self._cpu0, 2),
                 'load_average_before': self.load_before,
                 'load_average_now': round(os.getloadavg()[0], 2)}

@@ -4,7 +4,9 @@
 ``python -m pytest -m ros test/`` (every test marked ``ros``: real nodes over DDS) in
 its own process, its own ROS domain (test/conftest.py), while a
 :class:`~grip_force_ros.bench.load.LoadGenerator` keeps every core busy (one busy
-process per core by default, started before and stopped after each run). The junit XML
+process per core by default, started before and stopped after each run; ``--kind disk``
+the :class:`~grip_force_ros.bench.pressure.DiskPressure` instead, ``--kind both`` the
+two). The junit XML
 of each run says which tests failed, erred or skipped and why; the report groups them by
 test over the runs. A test that fails in some runs only is a race: its message and the
 runs it failed in are what to start from.
@@ -37,6 +39,7 @@ from pathlib import Path
 import psutil
 
 from grip_force_ros.bench.load import LoadGenerator
+from grip_force_ros.bench.pressure import make_pressure
 
 #: pytest selection of the ROS tests (the marker of every test that starts real nodes).
 ROS_MARKER = 'ros'
@@ -168,7 +171,8 @@ def stop_session(proc: subprocess.Popen) -> None:
 
 def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float = 1.0,
              select: str = ROS_MARKER, files: list[str] | None = None,
-             pytest_args: list[str] | None = None, timeout: float = RUN_TIMEOUT) -> dict:
+             pytest_args: list[str] | None = None, timeout: float = RUN_TIMEOUT,
+             kind: str = 'cpu', disk_options: dict | None = None) -> dict:
     """One pytest run of the selected tests under load; its outcome as a dict.
 
     Parameters
@@ -189,6 +193,12 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
         Further pytest arguments.
     timeout : float
         Longest run (s); a run that takes longer is killed and counted as failed.
+    kind : str
+        The load: 'cpu' (the :class:`LoadGenerator`, default), 'disk' (the
+        :class:`~grip_force_ros.bench.pressure.DiskPressure`: fsync writers, page-cache
+        eviction, optional memory) or 'both'; ``workers=0`` leaves the CPU part out.
+    disk_options : dict, optional
+        Keywords of the :class:`~grip_force_ros.bench.pressure.DiskPressure`.
     """
     tests = test_dir()
     junit = out_dir / f'run{index}.xml'
@@ -202,7 +212,14 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
            *(pytest_args or [])]
     env = dict(os.environ)
     env.pop('ROS_DOMAIN_ID', None)     # each run reserves its own (test/conftest.py)
-    load = LoadGenerator(workers, seconds=timeout + 60.0, duty=duty) if workers != 0 else None
+    if workers == 0:        # no CPU part: a quiet reference, or the disk pressure alone
+        kind = {'cpu': 'none', 'both': 'disk'}.get(kind, kind)
+    load = None
+    if kind == 'cpu':
+        load = LoadGenerator(workers, seconds=timeout + 60.0, duty=duty)
+    elif kind != 'none':
+        load = make_pressure(kind, seconds=timeout + 60.0, workers=workers, duty=duty,
+                             **(disk_options or {}))
     start = time.monotonic()
     if load is not None:
         load.start()

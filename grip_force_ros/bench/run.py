@@ -52,24 +52,57 @@ def parse_domains(text: str | None) -> list[int] | None:
     return out
 
 
+#: Time the loop part may take beyond its three measurement windows (s): the processes'
+#: start and stop; the bound of the pressure generator's deadline.
+LOOP_OVERHEAD = 300.0
+
+
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
-             product_executor: str | None = None, rt_priority: int = 0, say=None) -> dict:
-    """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios."""
+             product_executor: str | None = None, rt_priority: int = 0, say=None,
+             pressure: str = 'none', pressure_options: dict | None = None) -> dict:
+    """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios.
+
+    Parameters
+    ----------
+    seconds : float
+        Measurement window of each of the three runs (s).
+    domains, config, variant, product_executor, rt_priority, say
+        As :func:`run_bench`.
+    pressure : str
+        Load during the three runs, the same for floor and product:
+        'none' (default), 'cpu' (:class:`~grip_force_ros.bench.load.LoadGenerator`, one busy
+        process per core), 'disk' (:class:`~grip_force_ros.bench.pressure.DiskPressure`:
+        fsync writers, page-cache eviction of the package's files) or 'both'; its summary
+        is ``pressure`` in the result.
+    pressure_options : dict, optional
+        Keywords of :func:`~grip_force_ros.bench.pressure.make_pressure` (the disk
+        pressure's sizes and rates, the CPU load's workers and duty).
+    """
+    from grip_force_ros.bench.load import MAX_SECONDS
+    from grip_force_ros.bench.pressure import describe, make_pressure
+
     say = say or (lambda msg: None)
     variant = replace(variant, rt_priority=rt_priority)
     contract = replace(variant, sensors=True)
+    load = make_pressure(pressure, seconds=min(3 * seconds + LOOP_OVERHEAD, MAX_SECONDS),
+                         **(pressure_options or {}))
     with DomainLock(domains) as domain:
-        say(f'loop: floor ping-pong, {seconds:g} s, ROS_DOMAIN_ID {domain} ({variant.label()})')
-        floor = run_floor(seconds, domain, variant)
-        say(f'loop: contract floor, {seconds:g} s ({contract.label()})')
-        contract_floor = run_floor(seconds, domain, contract)
-        say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
-        product = run_product(seconds, domain, config, executor=product_executor, rt_priority=rt_priority)
+        if pressure != 'none':
+            say(f'loop: under pressure, {describe(load)}')
+        with load:
+            say(f'loop: floor ping-pong, {seconds:g} s, ROS_DOMAIN_ID {domain} ({variant.label()})')
+            floor = run_floor(seconds, domain, variant)
+            say(f'loop: contract floor, {seconds:g} s ({contract.label()})')
+            contract_floor = run_floor(seconds, domain, contract)
+            say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
+            product = run_product(seconds, domain, config, executor=product_executor,
+                                  rt_priority=rt_priority)
     out = compare(floor, product, contract_floor)
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
                 'floor_lost_fraction': floor['lost_fraction'],
                 'product_fallback_commands': product['other_commands'],
-                'product_executor': product['executor'], 'rt_priority': rt_priority})
+                'product_executor': product['executor'], 'rt_priority': rt_priority,
+                'pressure': load.last_summary})
     return out
 
 
@@ -92,7 +125,8 @@ def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> l
 def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str | None = None,
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
               variant_seconds: float | None = None, product_executor: str | None = None,
-              rt_priority: int = 0, say=None) -> dict:
+              rt_priority: int = 0, pressure: str = 'none', pressure_options: dict | None = None,
+              say=None) -> dict:
     """Everything ``grip-force bench`` measures, as the nested JSON dict.
 
     Parameters
@@ -118,6 +152,11 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
         Executor of the product's nodes ('events' or 'single'); default theirs.
     rt_priority : int
         0, or SCHED_FIFO priority of the 1 kHz processes of the floor and the product alike.
+    pressure : str
+        'none', 'cpu', 'disk' or 'both': the load under which the loop part's floor and
+        product run (:func:`run_loop`; the model and diagnosis parts run without it).
+    pressure_options : dict, optional
+        Keywords of :func:`~grip_force_ros.bench.pressure.make_pressure`.
     say : callable, optional
         ``say(message)`` before each step.
 
@@ -140,7 +179,8 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
                                  other_configs=(str(nonlinear),) if nonlinear.is_file() else ())
     if 'loop' in parts:
         out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor,
-                               rt_priority=rt_priority, say=say)
+                               rt_priority=rt_priority, say=say, pressure=pressure,
+                               pressure_options=pressure_options)
     if variants:
         out['variants'] = run_variants(variant_seconds or seconds, domains, say=say)
     if 'diagnosis' in parts:

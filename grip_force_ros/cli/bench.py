@@ -37,6 +37,13 @@ def add_arguments(parser) -> None:
                              '(1..99, like chrt -f N; needs CAP_SYS_NICE; default 0 = normal)')
     parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
                         help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
+    parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
+                        help='run the loop part (floor and product alike) under a bounded load: '
+                             'cpu (one busy process per core), disk (fsync writers, page-cache '
+                             "eviction of the package's files; the --disk-* options), both "
+                             '(default none)')
+    from grip_force_ros.cli.load import add_pressure_arguments
+    add_pressure_arguments(parser, prefix='disk-')
 
 
 def _f(value, fmt='.3g') -> str:
@@ -100,6 +107,17 @@ def render(result: dict) -> str:
                      f"{_f(loop['floor_timer_missed_fraction'] * 100)} %, product "
                      f"{_f(loop['timer_missed_fraction'] * 100)} %; controller timer-fallback commands "
                      f"{loop.get('product_fallback_commands', 'n/a')}")
+        pressure = loop.get('pressure') or {}
+        for part in ([pressure] if pressure.get('kind') != 'both' else [pressure['cpu'], pressure['disk']]):
+            if part.get('kind') == 'disk':
+                lines.append(f"  under disk pressure: {part['bytes_written'] / 2**20:.0f} MB written, "
+                             f"{part['fsyncs']} fsyncs, {part['files_evicted']} files evicted, "
+                             f"{part['memory_touched_bytes'] / 2**20:.0f} MB of memory touched in "
+                             f"{part['wall_s']:.0f} s")
+            elif part.get('kind') == 'cpu':
+                lines.append(f"  under cpu load: {part['workers']} busy process(es) at duty "
+                             f"{part['duty']:g}, {part['worker_cpu_s']:.0f} s of CPU in "
+                             f"{part['wall_s']:.0f} s")
         cpu = loop['cpu_percent']
         lines.append('  cpu % of one core: floor '
                      + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
@@ -161,13 +179,24 @@ def run(args) -> int:
     except FileNotFoundError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)
         return 2
+    pressure_options = {}
+    if args.pressure in ('disk', 'both'):
+        from grip_force_ros.bench.load import LoadError
+        from grip_force_ros.bench.pressure import make_pressure
+        from grip_force_ros.cli.load import pressure_options as disk_options
+        pressure_options = disk_options(args)
+        try:        # its bounds checked before any measurement
+            make_pressure('disk', seconds=args.seconds, **pressure_options)
+        except (LoadError, OSError) as exc:
+            print(f'grip-force bench: {exc}', file=sys.stderr)
+            return 2
     say = (lambda msg: print(f'[bench] {msg}', file=sys.stderr, flush=True))
     try:
         result = run_bench(args.seconds, parts, domains=parse_domains(args.domain_ids), config=config,
                            log_minutes=args.log_minutes, model_size=args.model_size,
                            variants=args.variants, variant_seconds=args.variant_seconds,
                            product_executor=args.product_executor, rt_priority=args.rt_priority,
-                           say=say)
+                           pressure=args.pressure, pressure_options=pressure_options, say=say)
     except BenchError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)
         return 1

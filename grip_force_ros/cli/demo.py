@@ -18,6 +18,8 @@ from pathlib import Path
 
 #: Length of the demo's needle grasp (s): the scripted task at half speed.
 DEMO_DURATION = 10.0
+#: Hard stop of the --pressure generator (s): a demo that runs longer goes on without it.
+PRESSURE_SECONDS = 3600.0
 
 HELP = 'run the closed-loop needle-grasp demo over ROS 2 (or --compare-instruments)'
 
@@ -57,6 +59,13 @@ def add_arguments(parser) -> None:
                              '(default 50 where the machine permits it, as ros2_control runs its '
                              'loop; else normal scheduling, said in the JSON "scheduling"; '
                              '0 = normal scheduling)')
+    parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
+                        help='run the demo under a bounded load, stopped when it ends: cpu (one '
+                             'busy process per core), disk (fsync writers, page-cache eviction of '
+                             "the package's files; the --disk-* options), both (default none); "
+                             'its summary is "pressure" in the JSON')
+    from grip_force_ros.cli.load import add_pressure_arguments
+    add_pressure_arguments(parser, prefix='disk-')
 
 
 def _default_out(kind: str) -> Path:
@@ -120,7 +129,17 @@ def print_report(result: dict, stream=sys.stdout) -> None:
     w(f"plot              {result['plot']}\n")
 
 
+def _pressure(args):
+    """Build the --pressure generator of ``args`` (not started); LoadError beyond its bounds."""
+    from grip_force_ros.bench.pressure import make_pressure
+    from grip_force_ros.cli.load import pressure_options
+    options = pressure_options(args) if args.pressure in ('disk', 'both') else {}
+    return make_pressure(args.pressure, seconds=PRESSURE_SECONDS, **options)
+
+
 def run(args) -> int:
+    from grip_force_ros.bench.load import LoadError
+    from grip_force_ros.bench.pressure import describe
     from grip_force_ros.demo.recorder import interrupt_behind
     from grip_force_ros.nodes.processes import ProcessError, reserve_domains
     from grip_force_ros.params import ParameterError, load_params_file
@@ -138,6 +157,13 @@ def run(args) -> int:
         print(f'error: --out {args.out} is not empty; choose a new directory', file=sys.stderr)
         return 2
     try:
+        load = _pressure(args)
+    except (LoadError, OSError) as exc:
+        print(f'error: --pressure: {exc}', file=sys.stderr)
+        return 2
+    if args.pressure != 'none' and not args.quiet:
+        sys.stderr.write(f'grip-force demo: under pressure, {describe(load)}\n')
+    try:
         if args.compare_instruments and args.interface != 'crtk':
             print('error: --compare-instruments runs the crtk profile only', file=sys.stderr)
             return 2
@@ -145,11 +171,14 @@ def run(args) -> int:
             from grip_force_ros.demo.compare import TASK_DURATION, compare_instruments
             out = Path(args.out) if args.out else _default_out('compare')
             configs = [instrument_path(c) for c in args.configs] if args.configs else None
-            report = compare_instruments(
-                out, configs=configs, plant_error=args.plant_error,
-                parallel=args.parallel, domain_id=args.domain_id,
-                task_duration=args.duration or TASK_DURATION,
-                log=None if args.quiet else sys.stderr, rt_priority=args.rt_priority)
+            with load:
+                report = compare_instruments(
+                    out, configs=configs, plant_error=args.plant_error,
+                    parallel=args.parallel, domain_id=args.domain_id,
+                    task_duration=args.duration or TASK_DURATION,
+                    log=None if args.quiet else sys.stderr, rt_priority=args.rt_priority)
+            if args.pressure != 'none':
+                report['pressure'] = load.last_summary
             if args.json:
                 print(json.dumps(report, indent=1))
             else:
@@ -173,17 +202,23 @@ def run(args) -> int:
             sys.stderr.write(f'grip-force demo: {params.instrument_name}, {args.interface} '
                              f'interface, ROS domain {domain}, output {out}\n')
         try:
-            result = run_task(spec, out, domain, progress=progress)
+            with load:
+                result = run_task(spec, out, domain, progress=progress)
         finally:
             if progress is not None:
                 progress.close()
         report = result.as_dict()
         report['instrument'] = params.instrument_name
+        if args.pressure != 'none':
+            report['pressure'] = load.last_summary
         (out / 'results.json').write_text(json.dumps(report, indent=1))
         if args.json:
             print(json.dumps(report, indent=1))
         else:
             print_report(report)
+            if args.pressure != 'none':
+                from grip_force_ros.cli.load import say_summary
+                say_summary(report['pressure'])
         return 0
     except KeyboardInterrupt:
         return _interrupted_exit()

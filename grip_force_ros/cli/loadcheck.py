@@ -1,14 +1,20 @@
-"""`grip-force loadcheck`: the ROS test files K times under a CPU load, failures tabulated."""
+"""`grip-force loadcheck`: the ROS test files K times under a load, failures tabulated."""
 from __future__ import annotations
 
-HELP = 'run the ROS tests K times under a bounded CPU load and tabulate the failures'
+HELP = 'run the ROS tests K times under a bounded CPU (or disk) load and tabulate the failures'
 
 
 def add_arguments(parser) -> None:
+    from grip_force_ros.cli.load import add_pressure_arguments
     parser.add_argument('--runs', type=int, default=3, help='pytest runs (default 3; the bar is 20)')
     parser.add_argument('--workers', type=int, default=None,
                         help='busy processes during each run (default: one per core; 0 = no load)')
     parser.add_argument('--duty', type=float, default=1.0, help='busy share of each worker (default 1)')
+    parser.add_argument('--kind', choices=('cpu', 'disk', 'both'), default='cpu',
+                        help='the load of each run: cpu (busy processes, default), disk (fsync '
+                             "writers, page-cache eviction of the package's files, optional "
+                             'memory), both')
+    add_pressure_arguments(parser, prefix='disk-')
     parser.add_argument('--select', default='ros',
                         help="pytest -m expression of the tests (default 'ros': every test with real nodes)")
     parser.add_argument('--files', nargs='*', metavar='FILE',
@@ -30,7 +36,10 @@ def run(args) -> int:
     import time
     from pathlib import Path
 
+    from grip_force_ros.bench.load import LoadError
     from grip_force_ros.bench.loadcheck import loadcheck, render, render_tally, tally
+    from grip_force_ros.bench.pressure import make_pressure
+    from grip_force_ros.cli.load import pressure_options
 
     if args.tally:
         folders = [Path(f.partition('=')[0]) for f in args.tally]
@@ -45,6 +54,13 @@ def run(args) -> int:
     if args.runs < 1:
         print('error: --runs must be >= 1', file=sys.stderr)
         return 2
+    disk_options = pressure_options(args) if args.kind != 'cpu' else None
+    if args.kind != 'cpu':
+        try:        # its bounds checked before the first run, not after it
+            make_pressure('disk', seconds=args.timeout + 60.0, **disk_options)
+        except (LoadError, OSError) as exc:
+            print(f'error: {exc}', file=sys.stderr)
+            return 2
     out = Path(args.out or f"out/loadcheck/{time.strftime('%Y%m%d-%H%M%S')}")
 
     def progress(r):
@@ -57,7 +73,8 @@ def run(args) -> int:
 
     signal.signal(signal.SIGTERM, stopped)
     report = loadcheck(args.runs, out, progress=progress, workers=args.workers, duty=args.duty,
-                       select=args.select, files=args.files, timeout=args.timeout)
+                       select=args.select, files=args.files, timeout=args.timeout,
+                       kind=args.kind, disk_options=disk_options)
     if args.json:
         print(json.dumps(report, indent=1))
     else:
