@@ -39,6 +39,7 @@ def test_calibrated_sensorless_spread_on_three_instruments_with_plants_20_percen
     assert scales == {(0.8, 1.2), (1.2, 0.8)}                  # every plant 20 % off
     assert not report['runs_still_spoiled'], (
         f'spoiled {ATTEMPTS} times: ' + '; '.join(report['runs_still_spoiled']))
+    assert not report['runs_not_completed'], '; '.join(report['runs_not_completed'])
     ratios = {i['name']: i['runs']['controlled']['steady_ratio'] for i in report['instruments']}
     fits = {i['name']: i['calibration']['fitted']['pulley_friction_coefficient']
             for i in report['instruments']}

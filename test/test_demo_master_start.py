@@ -9,13 +9,16 @@ started exactly once, whatever is lost.
 """
 from __future__ import annotations
 
+import threading
+import time
+
 import pytest
 from rcl_interfaces.msg import SetParametersResult
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.demo.run import HOLD_MASTER, ProcessError, set_parameters_confirmed
+from grip_force_ros.demo.run import HOLD_MASTER, NoAnswer, ProcessError, set_parameters_confirmed
 
 TASK = {'trajectory': 'needle_grasp', 'trajectory_file': '', 'time_scale': 1.0}
 WAIT = 0.05          # s, answer wait of these tests (the product's: ANSWER_WAIT)
@@ -25,11 +28,13 @@ class LossyMaster:
     """The master's parameter services, with chosen losses.
 
     ``lose`` lists, in order, what happens to each set request: 'answer' (taken, the
-    answer lost), 'request' (never arrives), 'ok' (taken and answered); after the list,
-    'ok'. ``lose_reads`` reads lose their answer first.
+    answer lost), 'request' (never arrives), 'late' (taken, answered after ``late`` s),
+    'ok' (taken and answered); after the list, 'ok'. ``lose_reads`` reads lose their
+    answer first.
     """
 
-    def __init__(self, lose=(), lose_reads=0, refuse=None):
+    def __init__(self, lose=(), lose_reads=0, refuse=None, late=0.0):
+        self.late = late
         self.held = dict(HOLD_MASTER)
         self.plan = list(lose)
         self.lose_reads = lose_reads
@@ -50,9 +55,13 @@ class LossyMaster:
             return future
         self.held.update({p.name: p.value for p in parameters})
         self.task_starts += 1
+        answer = SetParametersAtomically.Response(result=SetParametersResult(successful=True))
         if fate == 'ok':
-            future.set_result(SetParametersAtomically.Response(
-                result=SetParametersResult(successful=True)))
+            future.set_result(answer)
+        elif fate == 'late':
+            timer = threading.Timer(self.late, future.set_result, (answer,))
+            timer.daemon = True
+            timer.start()
         return future
 
     def get_parameters(self, names):
@@ -154,3 +163,50 @@ def test_an_answer_that_came_wins_over_a_finished_master():
     master = LossyMaster()
     assert set_parameters_confirmed(master, TASK, alive, timeout=5.0, answer_wait=WAIT,
                                     finished=lambda: True) == 'answered'
+
+
+# ---------------------------------------------------------------- bounded retry
+def test_a_late_answer_to_the_first_set_is_taken_after_reads_went_unanswered():
+    # issue 46: "no answer to setting [...] within 15 s": each request was awaited 2 s and
+    # dropped; an answer that came after its wait (behind the recorder's backlog) was lost
+    master = LossyMaster(lose=['late'], lose_reads=1000, late=6 * WAIT)
+    assert set_parameters_confirmed(master, TASK, alive, timeout=5.0,
+                                    answer_wait=WAIT) == 'answered'
+    assert (master.sets, master.task_starts) == (1, 1) and master.reads >= 1
+
+
+def test_a_master_that_ignores_its_first_requests_is_asked_again_until_it_answers():
+    # the set and the first two reads go unanswered; the third read shows the set lost
+    master = LossyMaster(lose=['request'], lose_reads=2)
+    assert set_parameters_confirmed(master, TASK, alive, timeout=5.0,
+                                    answer_wait=WAIT) == 'sent again'
+    assert (master.sets, master.reads, master.task_starts) == (2, 3, 1)
+    assert master.held == TASK
+
+
+def test_the_retry_is_bounded_in_requests_and_says_what_it_waited_for():
+    master = LossyMaster(lose=['request'] * 1000, lose_reads=1000)
+    started = time.monotonic()
+    with pytest.raises(NoAnswer) as caught:
+        set_parameters_confirmed(master, TASK, alive, timeout=60.0, answer_wait=WAIT,
+                                 attempts=4, whom="the master's parameter services")
+    waited = time.monotonic() - started
+    error = caught.value
+    assert master.sets + master.reads == 4 and (error.sets, error.reads) == (1, 3)
+    assert waited < 2.0 and error.waited == pytest.approx(waited, abs=0.1)
+    text = str(error)
+    assert text.startswith("no answer to setting ['trajectory', 'trajectory_file', 'time_scale'] "
+                           "from the master's parameter services: 1 set request(s) and 3 "
+                           'read(s) sent over '), text
+    assert isinstance(error, ProcessError) and master.task_starts == 0
+
+
+def test_the_retry_is_bounded_in_time():
+    master = LossyMaster(lose=['request'] * 1000, lose_reads=1000)
+    started = time.monotonic()
+    with pytest.raises(NoAnswer, match='no answer to setting'):
+        set_parameters_confirmed(master, TASK, alive, timeout=0.4, answer_wait=WAIT,
+                                 attempts=1000)
+    assert time.monotonic() - started < 0.4 + 0.2
+    # each unanswered request doubled the next one's wait: a few requests, not one per WAIT
+    assert master.sets + master.reads <= 5

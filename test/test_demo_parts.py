@@ -640,7 +640,8 @@ def test_a_run_the_bag_does_not_hold_is_spoiled_not_an_error(monkeypatch, tmp_pa
     streams = {topic: {'t': fast, **{f: np.ones(fast.shape) for f in fields}}
                for topic, fields in FIELDS.items()}
     streams[topics.MASTER_JS] = {'t': t[::4], 'master_angle': trajectory.angle(t[::4] - 100.0)}
-    monkeypatch.setattr(series_module, 'read_bag_series', lambda bag, recorded: (streams, []))
+    monkeypatch.setattr(series_module, 'read_bag_series',
+                        lambda bag, recorded, clocks=None: (streams, []))
     result = analyse_run(RunResult(spec, tmp_path, tmp_path / 'bag', 0, {}, {}, trajectory),
                          plot=False)
     assert result.problems[0] == ('no force samples in the steady hold window: the recording '
@@ -666,3 +667,77 @@ def test_the_recording_has_caught_up_when_every_received_stream_reaches_the_time
     assert recording_caught_up(Recorder(), ['a', 'c'], 10.0)
     assert not recording_caught_up(Recorder(), ['a', 'b', 'c'], 10.0)
     assert recording_caught_up(Recorder(), ['a', 'b'], 9.5)
+
+
+def test_a_comparison_run_that_cannot_be_completed_is_reported_and_the_rest_is_written(
+        tmp_path, monkeypatch):
+    """Issue 46: ``--compare-instruments`` ended with "no answer to setting [...]", exit 1, no
+    figure. A run no attempt completes is reported (which instrument, which run, why); the
+    other runs, the JSON and compare.png are still written. No nodes: a stand-in run_task."""
+    import json
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from grip_force_ros import identify, logs
+    from grip_force_ros.demo import compare
+    from grip_force_ros.demo import run as demo_run
+    from grip_force_ros.demo.run import NoAnswer
+    from grip_force_ros.nodes.processes import ProcessError
+
+    calls = []
+
+    class Done:
+        def __init__(self, spec, out_dir):
+            self.spec, self.out_dir, self.problems = spec, out_dir, []
+
+        def as_dict(self):
+            ratio = 1.0 + 0.01 * len(calls)
+            return {'label': self.spec.label, 'metrics': {'steady_ratio': ratio,
+                                                          'target_force': 4.0},
+                    'plot': str(self.out_dir / 'summary.png'), 'bag': str(self.out_dir / 'bag'),
+                    'problems': [], 'late_inputs': {}, 'scheduling': {},
+                    'safe_state_entries': []}
+
+    def fake_run_task(spec, out_dir, domain_id, analyse=True, plot=True):
+        calls.append(spec.label)
+        name, _, condition = spec.label.partition('/')
+        if condition == 'sensor' and name == names[1]:
+            raise NoAnswer("setting ['trajectory', 'trajectory_file', 'time_scale']",
+                           "the master's parameter services", 2, 6, 30.0, 2.0, 8.0)
+        if condition == 'calibration' and name == names[0]:
+            raise ProcessError('timed out after 30 s waiting for the master')
+        return Done(spec, Path(out_dir))
+
+    fit = SimpleNamespace(as_dict=lambda: {'fitted': {'pulley_friction_coefficient': 0.1}},
+                          before={'pulley_friction_coefficient': 0.1},
+                          values={'pulley_friction_coefficient': 0.1},
+                          std_errors={'pulley_friction_coefficient': 0.001})
+    monkeypatch.setattr(demo_run, 'run_task', fake_run_task)
+    monkeypatch.setattr(identify, 'fit_instrument', lambda params, log: fit)
+    monkeypatch.setattr(identify, 'calibrated_yaml', lambda config, fit, bag: 'x: 1\n')
+    monkeypatch.setattr(logs, 'read_log', lambda path: {})
+    monkeypatch.setattr(compare, 'calibration_problems', lambda result: [])
+    from grip_force_ros.demo import comparison_configs
+    from grip_force_ros.params import load_params_file
+    configs = comparison_configs()
+    names = [load_params_file(c).instrument_name for c in configs]
+    report = compare.compare_instruments(tmp_path / 'cmp', configs=configs, domain_id=58)
+    first, second = report['instruments'][0], report['instruments'][1]
+    assert not first['calibration']['completed']
+    assert not first['runs']['controlled']['completed']          # no calibration, not run
+    assert first['runs']['uncalibrated']['completed'] and first['runs']['sensor']['completed']
+    assert not second['runs']['sensor']['completed']
+    assert second['runs']['sensor']['steady_ratio'] is None
+    assert calls.count(f'{names[1]}/sensor') == compare.ATTEMPTS     # redone, then reported
+    assert f'{names[0]}/controlled' not in calls
+    lost = [r for r in report['runs_not_completed'] if r.startswith(f'{names[1]}/sensor')]
+    assert lost and 'no answer to setting' in lost[0] and 'from the master' in lost[0] \
+        and '2 set request(s) and 6 read(s)' in lost[0], report['runs_not_completed']
+    assert any(r.startswith(f'{names[0]}/calibration') and 'waiting for the master' in r
+               for r in report['runs_not_completed'])
+    assert report['runs_still_spoiled'] == []
+    assert report['spread_sensor'] is None and report['spread_uncalibrated'] is not None
+    assert Path(report['plot']).read_bytes()[:4] == b'\x89PNG'
+    written = json.loads((tmp_path / 'cmp' / 'compare.json').read_text())
+    assert written['runs_not_completed'] == report['runs_not_completed']
+    assert 'NOT COMPLETED' in compare.format_report(report)

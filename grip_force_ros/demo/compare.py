@@ -97,25 +97,54 @@ ATTEMPTS = 3
 
 
 def _run_worker(job: dict[str, Any]) -> dict[str, Any]:
-    """One run (again if the machine spoiled it). Returns a JSON-able summary."""
+    """One run (again if the machine spoiled it or it could not be completed); a JSON-able summary.
+
+    A run that raises :class:`~grip_force_ros.nodes.processes.ProcessError` (a node that
+    died or never came up, a master that answered none of the requests to start its task,
+    each after its own bounded retry) counts as a spoiled attempt and is done again. When
+    no attempt completed, the summary says so (``completed`` false, ``problems``: why)
+    instead of raising: the comparison goes on with the other runs.
+    """
     from grip_force_ros.demo.run import RunSpec, run_task
+    from grip_force_ros.nodes.processes import ProcessError
     spec = RunSpec(**job['spec'])
     t0 = time.monotonic()
     spoiled = []
+    result = error = None
     for attempt in range(1, ATTEMPTS + 1):
         out_dir = Path(job['out_dir'] if attempt == 1 else f"{job['out_dir']}_retry{attempt - 1}")
-        result = run_task(spec, out_dir, job['domain_id'], analyse=job['analyse'],
-                          plot=job['plot'])
+        try:
+            done = run_task(spec, out_dir, job['domain_id'], analyse=job['analyse'],
+                            plot=job['plot'])
+        except ProcessError as exc:
+            error = str(exc)
+            spoiled.append({'out_dir': str(out_dir), 'problems': [f'not completed: {error}']})
+            continue
+        result = done
         problems = result.problems or (calibration_problems(result) if job.get('calibration')
                                        else [])
         if not problems:
             break
         result.problems = problems
         spoiled.append({'out_dir': str(out_dir), 'problems': problems})
-    out = result.as_dict()
+    if result is None:
+        out = not_completed(job, f'not completed in {ATTEMPTS} attempts: {error}')
+    else:
+        out = result.as_dict()
+        out['completed'] = True
     out['spoiled_attempts'] = spoiled
     out['wall_time'] = time.monotonic() - t0
     return out
+
+
+def not_completed(job: dict[str, Any], reason: str) -> dict[str, Any]:
+    """Return the summary of a run that could not be completed, saying why (``problems``)."""
+    spec = job['spec']
+    return {'label': spec.get('label', ''), 'config': str(spec.get('config')),
+            'controller': spec.get('controller', 'controller'), 'completed': False,
+            'out_dir': job['out_dir'], 'bag': None, 'plot': None, 'metrics': None,
+            'safe_state_entries': [], 'late_inputs': {}, 'scheduling': {},
+            'problems': [reason], 'spoiled_attempts': [], 'wall_time': 0.0}
 
 
 def calibration_problems(result) -> list[str]:
@@ -158,6 +187,8 @@ def _run_all(jobs: list[dict], parallel: bool, log: TextIO | None) -> list[dict]
 
 def _done(job: dict, result: dict) -> str:
     ratio = (result.get('metrics') or {}).get('steady_ratio')
+    if not result.get('completed', True):
+        return f"  {job['spec']['label']}: NOT COMPLETED ({result['problems'][0]})"
     text = f"  {job['spec']['label']}: done ({result['wall_time']:.1f} s"
     if ratio is not None:
         text += f', steady hold force / target {ratio:.3f}'
@@ -217,7 +248,9 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         ``instruments`` (per-instrument details) and ``spread_controlled``,
         ``spread_uncalibrated``, ``spread_sensor``, ``spread_naive``; the same over the
         runs no starved node spoiled (``spread_<condition>_unspoiled``, None when fewer
-        than two) and ``runs_still_spoiled``.
+        than two), ``runs_still_spoiled`` and ``runs_not_completed`` (a run no attempt
+        completed, or not run for want of its calibration: which instrument and run, why;
+        its ratio is None and the spreads leave it out as they do a missing one).
     """
     from grip_force_ros.identify import calibrated_yaml, fit_instrument
     from grip_force_ros.nodes.processes import reserve_domains
@@ -269,14 +302,26 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                      'domain_id': domains[k], 'analyse': False, 'plot': False,
                      'calibration': True})
     calib_runs = _run_all(jobs, parallel, log)
-    calibrated, calibrations = [], []
+    calibrated: list[Path | None] = []
+    calibrations = []
     for k, (config, run) in enumerate(zip(configs, calib_runs)):
         params = load_params_file(config)
-        fit = fit_instrument(params, read_log(run['bag']))
+        try:
+            if not run.get('completed', True):
+                raise ValueError(run['problems'][0])
+            fit = fit_instrument(params, read_log(run['bag']))
+        except ValueError as exc:      # no calibration: its 'controlled' run is not done
+            calibrated.append(None)
+            calibrations.append({'completed': False, 'bag': run['bag'],
+                                 'problems': [f'no calibration: {exc}'],
+                                 'spoiled_attempts': run['spoiled_attempts']})
+            _log(log, f'  {names[k]}: NO CALIBRATION ({exc})')
+            continue
         path = out_dir / names[k] / f'{names[k]}_calibrated.yaml'
         path.write_text(calibrated_yaml(config, fit, run['bag']))
         calibrated.append(path)
-        calibrations.append({**fit.as_dict(), 'yaml': str(path), 'bag': run['bag'],
+        calibrations.append({**fit.as_dict(), 'completed': True, 'yaml': str(path),
+                             'bag': run['bag'],
                              'problems': run.get('problems', []),
                              'spoiled_attempts': run['spoiled_attempts']})
         _log(log, f"  {names[k]}: mu {fit.before['pulley_friction_coefficient']:.4f} -> "
@@ -304,7 +349,13 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         jobs = [{'spec': spec_for(condition, k),
                  'out_dir': str(out_dir / names[k] / condition), 'domain_id': domains[k],
                  'analyse': True, 'plot': True} for k in range(n)]
-        runs[condition] = _run_all(jobs, parallel, log)
+        # the calibrated condition of an instrument without a calibration cannot run
+        skipped = {k: not_completed(jobs[k], f"not run: {calibrations[k]['problems'][0]}")
+                   for k in range(n) if condition == 'controlled' and calibrated[k] is None}
+        done = iter(_run_all([j for k, j in enumerate(jobs) if k not in skipped], parallel, log))
+        runs[condition] = [skipped[k] if k in skipped else next(done) for k in range(n)]
+        for k in skipped:
+            _log(log, _done(jobs[k], skipped[k]))
 
     instruments = []
     for k in range(n):
@@ -314,6 +365,7 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
             r = runs[condition][k]
             m = r['metrics'] or {}
             per['runs'][condition] = {
+                'completed': r.get('completed', True),
                 'steady_ratio': m.get('steady_ratio'), 'target_force': m.get('target_force'),
                 'measured_force': m.get('measured_force'),
                 'hold_error_rms': m.get('hold_error_rms'), 'plot': r['plot'], 'bag': r['bag'],
@@ -331,9 +383,17 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         report[f'spread_{condition}_unspoiled'] = spread(clean) if len(clean) >= 2 else None
     report['runs_still_spoiled'] = (
         [f"{i['name']}/calibration: {i['calibration']['problems'][0]}"
-         for i in instruments if i['calibration']['problems']]
+         for i in instruments if i['calibration']['problems'] and i['calibration']['completed']]
         + [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
-           for i in instruments for c in conditions if i['runs'][c]['problems']])
+           for i in instruments for c in conditions
+           if i['runs'][c]['problems'] and i['runs'][c]['completed']])
+    # runs that no attempt completed (a node that never came up or died, a master that
+    # answered no request): which instrument, which run, why
+    report['runs_not_completed'] = (
+        [f"{i['name']}/calibration: {i['calibration']['problems'][0]}"
+         for i in instruments if not i['calibration']['completed']]
+        + [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
+           for i in instruments for c in conditions if not i['runs'][c]['completed']])
     report['naive_current_closed'] = gain
     report['plant_error'] = plant_error
     report['task_duration'] = task_duration
@@ -376,6 +436,8 @@ def format_report(report: dict[str, Any]) -> str:
         for c in conditions))
     for item in report.get('runs_still_spoiled') or []:
         lines.append(f'spoiled by a starved node after {ATTEMPTS} attempts: {item}')
+    for item in report.get('runs_not_completed') or []:
+        lines.append(f'NOT COMPLETED: {item}')
     lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "
                  f"{report['wall_time']:.0f} s; {report['out_dir']})")
     return '\n'.join(lines)

@@ -13,13 +13,31 @@ _PHASE_COLOURS = {'approach': '#f0f0f0', 'close': '#e3ecf7', 'hold': '#e6f4e6',
 
 
 def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[float, float]],
-                 metrics: Mapping[str, float], path: str | Path, title: str = '') -> Path:
+                 metrics: Mapping[str, float], path: str | Path, title: str = '',
+                 clocks: Mapping[str, str] | None = None) -> Path:
     """Write the summary figure of one run.
 
     Panels: master gripper angle and jaw angle (rad); target, estimated and
     measured grip force and the estimated needle pull-out force (N); current
     command and measured current (A). Phases are shaded; the steady hold
-    window is marked.
+    window is marked. Every trace is drawn as ``data`` holds it: on one time axis
+    (s), NaN where a topic was silent (a gap in its line).
+
+    Parameters
+    ----------
+    data : mapping
+        't' (s since the master started its task) and the series on it.
+    windows : mapping
+        Phase -> (start, end) on that axis (s).
+    metrics : mapping
+        The run's figures (N, s, A) shown in the force panel.
+    path : path
+        The PNG to write.
+    title : str
+        Figure title.
+    clocks : mapping, optional
+        Topic -> the clock of its samples (:func:`grip_force_ros.demo.series.sample_clock`);
+        the figure's footnote names the time base, and each topic not on its header stamps.
 
     Returns
     -------
@@ -83,18 +101,31 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     ax.legend(loc='upper right', fontsize=8)
 
     fig.suptitle(title or 'grip-force demo: needle grasp')
-    fig.tight_layout()
+    if clocks is not None:
+        fig.text(0.01, 0.005, time_base_note(clocks), fontsize=7, color='#555555',
+                 ha='left', va='bottom')
+    fig.tight_layout(rect=(0, 0.02, 1, 1) if clocks is not None else (0, 0, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
+def time_base_note(clocks: Mapping[str, str]) -> str:
+    """Say which clock the figure's traces are on (header stamps; exceptions by topic)."""
+    from grip_force_ros.demo.series import CLOCK_STAMP, SHOWN_GAP
+    others = [f'{topic}: {clock}' for topic, clock in clocks.items() if clock != CLOCK_STAMP]
+    where = ', except ' + '; '.join(others) if others else ' (every topic)'
+    return (f"time: the samples' header stamps{where}. A gap in a line: its topic silent "
+            f'for more than {SHOWN_GAP * 1e3:.0f} ms')
+
+
 def compare_plot(report: Mapping, path: str | Path) -> Path:
     """Bar chart of ``--compare-instruments``; returns the PNG written.
 
     Steady hold force / target per instrument and condition, with each condition's
-    spread in its label.
+    spread in its label. A run that was not completed (``completed`` false) has no bar
+    but a "not completed" mark where its bar would be.
     """
     plt = pyplot()
 
@@ -112,10 +143,15 @@ def compare_plot(report: Mapping, path: str | Path) -> Path:
         spread = report.get(f'spread_{c}')
         spread_text = 'n/a' if spread is None else f'{spread:.3f}'
         ax.bar(x + (k - 1.5) * width, ratios, width, label=f'{labels[c]}: spread {spread_text}')
+        for j, inst in enumerate(report['instruments']):
+            if not inst['runs'][c].get('completed', True):
+                ax.text(x[j] + (k - 1.5) * width, 0.02, 'not completed', rotation=90,
+                        ha='center', va='bottom', fontsize=7, color='tab:red')
     ax.axhline(1.0, color='black', lw=1)
     ax.set_xticks(x, names)
     ax.set_ylabel('steady hold grip force / target [-]')
-    target = report['instruments'][0]['runs']['controlled'].get('target_force') or 0.0
+    target = next((i['runs'][c]['target_force'] for c in conditions for i in report['instruments']
+                   if i['runs'][c].get('target_force')), 0.0)
     error = report.get('plant_error', 0.2)
     ax.set_title(f'same master trajectory, {len(names)} instruments, plants {error:.0%} off their '
                  f'YAML (target {target:.1f} N)', fontsize=10)

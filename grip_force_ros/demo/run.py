@@ -50,6 +50,15 @@ READY_MODES = (Mode.FREE, Mode.GRIP)
 #: loaded machine the master took its task and ran it while no answer came
 #: (docs/reliability.md, seventh round). An answer normally takes milliseconds.
 ANSWER_WAIT = 2.0
+#: Longest wait (s) for one answer: each request unanswered doubles the wait of the next one
+#: from :data:`ANSWER_WAIT` up to this (an answer that comes late is taken all the same).
+ANSWER_WAIT_MAX = 4.0
+#: Most requests (sets and reads) sent to the master to start its task before the run is
+#: given up, saying what was waited for (:class:`NoAnswer`).
+ANSWER_ATTEMPTS = 8
+#: Longest time (s) for the master's parameter service to appear, and again for the whole
+#: exchange that starts its task (2 + 7 x 4 s of answer waits: the 8 requests).
+MASTER_START_TIMEOUT = 30.0
 #: Longest wait (s), once the master's task has ended, for the recorder to take the task's
 #: last messages before the nodes are stopped. The recorder runs in this process at normal
 #: priority and falls behind on a loaded machine: at load 4.6 on two cores it took the
@@ -162,6 +171,7 @@ class RunResult:
     problems: list = field(default_factory=list)
     scheduling: dict = field(default_factory=dict)
     master_answer: str = ''          # how the master's taking its task was known
+    clocks: dict = field(default_factory=dict)   # topic -> the clock of its sample times
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -179,7 +189,7 @@ class RunResult:
             'phases': {k: [round(a, 4), round(b, 4)] for k, (a, b) in (self.windows or {}).items()},
             'metrics': self.metrics, 'safe_state_entries': self.safe_events,
             'late_inputs': self.late_inputs, 'scheduling': self.scheduling,
-            'master_answer': self.master_answer,
+            'master_answer': self.master_answer, 'clocks': self.clocks,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
         }
 
@@ -243,39 +253,94 @@ def _wait_until_ready(recorder, group: ProcessGroup, timeout: float) -> None:
     _poll(lambda: controller_ready(recorder), timeout, group.check_alive)
 
 
-def _start_master(node, spec: RunSpec, group: ProcessGroup, master: NodeProcess,
-                  timeout: float = 15.0) -> str:
+def _start_master(recorder, spec: RunSpec, group: ProcessGroup, master: NodeProcess,
+                  timeout: float = MASTER_START_TIMEOUT) -> str:
     """Start the held master's task now: set its real trajectory parameters at once.
 
     Returns how the master's taking them was known (see :func:`set_parameters_confirmed`).
     The held master runs its task 100 times slowed (``HOLD_MASTER``), so a clean exit of
     it within ``timeout`` can only follow the task these parameters start: that exit
     counts as the set taken.
+
+    The parameter client is a node of its own in the recorder's context, spun here
+    while its answers are awaited: on the recorder's node an answer queues behind the
+    recording's backlog (the recorder can fall seconds behind on a loaded machine) and can
+    come after every request's wait.
+
+    Raises
+    ------
+    NoAnswer
+        The master answered none of the requests (:func:`set_parameters_confirmed`).
+    ProcessError
+        The master's parameter service did not appear within ``timeout``, or a node died.
     """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter_client import AsyncParameterClient
 
+    from grip_force_ros.nodes.common import close_node
+
     values = spec.master_values()
-    client = AsyncParameterClient(node, 'master')
-    _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
-    outcome = set_parameters_confirmed(
-        client, {name: values[name] for name in HOLD_MASTER},
-        lambda: group.check_alive(may_finish=('master',)), timeout,
-        finished=lambda: master.popen.poll() == 0)
+    node = rclpy.create_node('grip_force_demo_parameters', context=recorder.context)
+    executor = SingleThreadedExecutor(context=recorder.context)
+    executor.add_node(node)
+    try:
+        client = AsyncParameterClient(node, 'master')
+        _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
+
+        def alive() -> None:
+            executor.spin_once(timeout_sec=0.0)     # take the answers that came
+            group.check_alive(may_finish=('master',))
+
+        outcome = set_parameters_confirmed(
+            client, {name: values[name] for name in HOLD_MASTER}, alive, timeout,
+            finished=lambda: master.popen.poll() == 0, whom="the master's parameter services")
+    finally:
+        close_node(executor, node)
     if outcome != 'answered':
-        node.get_logger().warning(f"the master's answer to its trajectory parameters was lost: "
-                                  f'{outcome}')
+        recorder.get_logger().warning(f"the master's answer to its trajectory parameters was "
+                                      f'lost: {outcome}')
     return outcome
+
+
+class NoAnswer(ProcessError):
+    """A node answered none of the requests sent to it; the message says what was waited for.
+
+    Attributes
+    ----------
+    what : str
+        What was asked (e.g. setting ['trajectory', ...]).
+    whom : str
+        Who was asked.
+    sets, reads : int
+        Requests sent: sets (each would start what the set starts) and reads.
+    waited : float
+        How long the exchange lasted (s).
+    """
+
+    def __init__(self, what: str, whom: str, sets: int, reads: int, waited: float,
+                 first_wait: float, last_wait: float):
+        self.what, self.whom, self.sets, self.reads, self.waited = what, whom, sets, reads, waited
+        super().__init__(
+            f'no answer to {what} from {whom}: {sets} set request(s) and {reads} read(s) sent '
+            f'over {waited:.1f} s, each answer awaited {first_wait:.1f}-{last_wait:.1f} s '
+            '(a late answer to any of them would have been taken)')
 
 
 def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Callable[[], None],
                              timeout: float, answer_wait: float = ANSWER_WAIT,
-                             finished: Callable[[], bool] | None = None) -> str:
+                             finished: Callable[[], bool] | None = None,
+                             attempts: int = ANSWER_ATTEMPTS, whom: str = 'the node',
+                             answer_wait_max: float = ANSWER_WAIT_MAX) -> str:
     """Set parameters atomically, and know they were taken even if the answer is lost.
 
     A set that restarts something (the master's task) must not be sent twice
-    blindly: when no answer comes within ``answer_wait``, the node is asked what
-    it holds (a read, safe to repeat); if it holds ``values`` the set was taken and
-    only its answer lost, otherwise the request itself was lost and is sent again.
+    blindly: when no answer comes within its wait, the node is asked what it holds
+    (a read, safe to repeat, again and again); if it holds ``values`` the set was
+    taken and only its answer lost, otherwise the request itself was lost and is sent
+    again. Every request stays awaited: a late answer to an earlier set or read
+    counts as well as one to the last. Each unanswered request doubles the wait of the
+    next, from ``answer_wait`` up to ``answer_wait_max``.
 
     Parameters
     ----------
@@ -288,10 +353,16 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
     timeout : float
         Longest time for the whole exchange (s).
     answer_wait : float
-        Wait for each answer before asking again (s).
+        Wait for the first answer before asking again (s).
     finished : callable, optional
         True once the node has done what the set starts and exited cleanly (the
         master's task): the set was taken, whatever answer is still missing.
+    attempts : int
+        Most requests sent, sets and reads together.
+    whom : str
+        Who is asked (for the error).
+    answer_wait_max : float
+        Longest wait for one answer (s).
 
     Returns
     -------
@@ -303,38 +374,60 @@ def set_parameters_confirmed(client, values: Mapping[str, Any], check_alive: Cal
     Raises
     ------
     ProcessError
-        The node refused the values (with its reason), or ``timeout`` passed.
+        The node refused the values (with its reason).
+    NoAnswer
+        ``attempts`` requests or ``timeout`` passed without any answer that settles it,
+        saying what was asked, of whom, how many requests and how long.
     """
     from rclpy.parameter import Parameter, parameter_value_to_python
 
     names = list(values)
+    wanted = [values[name] for name in names]
     done_already = finished or (lambda: False)
-    deadline = time.monotonic() + timeout
-    sent = 0
-    while time.monotonic() < deadline:
-        future = client.set_parameters_atomically(
-            [Parameter(name, value=values[name]) for name in names])
-        sent += 1
-        if _poll(lambda: future.done() or done_already(), answer_wait, check_alive,
-                 period=0.02):
-            if not future.done():
-                return 'finished before its answer'
-            result = future.result().result
-            if not result.successful:
-                raise ProcessError(f'the node refused the parameters {names}: {result.reason}')
-            return 'answered' if sent == 1 else 'sent again'
-        held = None
-        while held is None and time.monotonic() < deadline:
-            read = client.get_parameters(names)
-            if _poll(lambda: read.done() or done_already(), answer_wait, check_alive,
-                     period=0.02):
-                if not read.done():
-                    return 'finished before its answer'
-                held = [parameter_value_to_python(v) for v in read.result().values]
-        if held == [values[name] for name in names]:
-            return 'confirmed by a read' if sent == 1 else 'sent again'
-    raise ProcessError(f'no answer to setting {names} within {timeout:.0f} s '
-                       f'({sent} requests sent)')
+    started = time.monotonic()
+    deadline = started + timeout
+    sets: list = []          # every set request sent (any answer to one settles it)
+    reads: list = []         # the reads sent since the last set
+    n_reads = 0
+    wait = answer_wait
+
+    def send_set() -> None:
+        sets.append(client.set_parameters_atomically(
+            [Parameter(name, value=values[name]) for name in names]))
+        reads.clear()
+
+    def answer_came() -> bool:
+        return any(f.done() for f in sets) or any(f.done() for f in reads) or done_already()
+
+    send_set()
+    while True:
+        _poll(answer_came, max(0.0, min(wait, deadline - time.monotonic())), check_alive,
+              period=0.02)
+        answered = [f for f in sets if f.done()]
+        if answered:
+            for future in answered:
+                result = future.result().result
+                if not result.successful:
+                    raise ProcessError(f'the node refused the parameters {names}: '
+                                       f'{result.reason}')
+            return 'answered' if len(sets) == 1 else 'sent again'
+        read = next((f for f in reads if f.done()), None)
+        if read is not None:
+            held = [parameter_value_to_python(v) for v in read.result().values]
+            if held == wanted:
+                return 'confirmed by a read' if len(sets) == 1 else 'sent again'
+        elif done_already():
+            return 'finished before its answer'
+        if len(sets) + n_reads >= attempts or time.monotonic() >= deadline:
+            break
+        if read is not None:        # the node does not hold the values: the set was lost
+            send_set()
+        else:
+            reads.append(client.get_parameters(names))
+            n_reads += 1
+            wait = min(2.0 * wait, answer_wait_max)
+    raise NoAnswer(f'setting {names}', whom, len(sets), n_reads, time.monotonic() - started,
+                   answer_wait, wait)
 
 
 class TaskClock:
@@ -546,12 +639,21 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
 
 
 def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
-    """Read the run's bag back; phases, figures and (optionally) the summary plot."""
-    from grip_force_ros.demo.series import read_bag_series, resample
+    """Read the run's bag back; phases, figures and (optionally) the summary plot.
+
+    Every series, the figures and the plot are on the samples' header stamps
+    (:func:`~grip_force_ros.demo.series.read_bag_series`; ``result.clocks`` says, per topic,
+    when a topic is on its receive times instead), with one origin: the master's start of
+    its task. The plot shows a topic's silences as gaps; the figures interpolate across
+    them as before (a run with a silence in its hold is spoiled: ``problems``).
+    """
+    from grip_force_ros.demo.series import SHOWN_GAP, read_bag_series, resample
 
     recorded = result.spec.recorded()
     names = recorded.names
-    series, diagnostics = read_bag_series(result.bag, recorded)
+    clocks: dict[str, str] = {}
+    series, diagnostics = read_bag_series(result.bag, recorded, clocks=clocks)
+    result.clocks = clocks
     raw = resample(series, rate=500.0, t0=0.0)
     try:
         start = analysis.trajectory_start(raw['t'], raw['master_angle'], result.trajectory)
@@ -584,8 +686,11 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
                                                       windows)
     if plot:
         from grip_force_ros.demo.plot import summary_plot
+        shown = resample(series, rate=500.0, t0=0.0, max_gap=SHOWN_GAP)
+        shown['t'] = shown['t'] - start
         where = (f', dvrk {result.spec.arm}/{result.spec.master}' if result.spec.interface == 'dvrk'
                  else '')
-        result.plot = summary_plot(data, windows, result.metrics, result.out_dir / 'summary.png',
-                                   title=f'grip-force demo: needle grasp ({result.spec.label}{where})')
+        result.plot = summary_plot(shown, windows, result.metrics, result.out_dir / 'summary.png',
+                                   title=f'grip-force demo: needle grasp ({result.spec.label}{where})',
+                                   clocks=clocks)
     return result
