@@ -35,6 +35,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
+from grip_force_ros.nodes import realtime
 from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
 from grip_force_ros.nodes.processes import leave_after_peers, stop_watch, watch_own_teardown
 
@@ -310,8 +311,10 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
              args: list[str] | None = None) -> int:
     """Run the main loop of an executable node (ros2/demos Jazzy style).
 
-    Returns the process exit code: 0 on a normal end or Ctrl-C, 2 when the
-    parameters are refused (the reason goes to stderr).
+    Before the spin, the node's 'realtime' parameters are applied to the process
+    (:func:`~grip_force_ros.nodes.realtime.prepare`: memory locked, stack and heap
+    pre-faulted, CPU affinity; one INFO line says what). Returns the process exit code: 0 on
+    a normal end or Ctrl-C, 2 when the parameters are refused (the reason goes to stderr).
     """
     # Every thread's stack to stderr (the node's log) on STACK_DUMP_SIGNAL: what a process
     # that has to be killed because it did not stop was doing (NodeProcess.stop asks).
@@ -327,6 +330,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
     try:
         try:
             node = make_node()
+            realtime.prepare(node)    # memory locked, stack and heap pre-faulted, CPU affinity
         except ValueError as exc:   # ParameterError and every domain error: one clear line
             print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
             return 2
@@ -364,6 +368,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
         if watcher is None:
             faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
         try:
+            realtime.finish(node)     # the loop's queued log lines
             close_node(executor, node)
             # Dropped here, inside the limit, not as the function returns: the EventsExecutor's
             # C++ destructor runs now (stop 30 caught the sim hung in one).

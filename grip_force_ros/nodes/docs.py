@@ -17,7 +17,7 @@ from grip_force_ros.trajectories import MASTER_SPECS
 
 DOC = Path(__file__).resolve().parents[2] / 'docs' / 'ros_interface.md'
 MARKER = '<!-- generated below by `python -m grip_force_ros.nodes.docs`: do not edit by hand -->'
-GROUPS = ('instrument', 'limits', 'controller', 'sim', 'effects', 'interface')
+GROUPS = ('instrument', 'limits', 'controller', 'sim', 'effects', 'interface', 'realtime')
 
 
 def generated() -> str:

@@ -46,6 +46,7 @@ _ROS_TYPES = {
     'bool': Parameter.Type.BOOL,
     'string': Parameter.Type.STRING,
     'double_array': Parameter.Type.DOUBLE_ARRAY,
+    'integer_array': Parameter.Type.INTEGER_ARRAY,
 }
 
 #: rcl_interfaces ranges must be finite; an open end of a schema range becomes this.
@@ -59,7 +60,7 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
     constraints = []
     if spec.min is not None or spec.max is not None:
         constraints.append(f'range [{spec.min}, {spec.max}]{unit}')
-    if spec.type == 'double_array':
+    if spec.type in ('double_array', 'integer_array'):
         constraints.append('applies to each element')
     if spec.choices:
         constraints.append('one of ' + ', '.join(spec.choices))
@@ -82,6 +83,13 @@ def descriptor_for(spec: ParamSpec) -> ParameterDescriptor:
             to_value=int(spec.max) if spec.max is not None else _BIG_INT,
             step=1)]
     return desc
+
+
+def _declared_value(spec: ParamSpec, value: Any) -> Any:
+    """Return the value to declare ``spec`` with: a list for arrays, the ROS type for an empty one."""
+    if isinstance(value, tuple):
+        return list(value) if value else _ROS_TYPES[spec.type]
+    return value
 
 
 def plain(value: Any) -> Any:
@@ -169,10 +177,15 @@ class NodeParameters:
 
         self._values: dict[str, Any] = {n: checked[n] for n in self._specs}
         node.declare_parameters('', [
-            (name, list(value) if isinstance(value, tuple) else value, descriptor_for(spec))
+            (name, _declared_value(spec, value), descriptor_for(spec))
             for name, spec in self._specs.items()
             for value in (self._values[name],)
         ], ignore_override=True)
+        for name, spec in self._specs.items():
+            if _declared_value(spec, self._values[name]) is _ROS_TYPES[spec.type]:
+                # rclpy infers a type from the value and reads an empty list as a byte array:
+                # declared by type (uninitialised), the empty value is given here, typed.
+                node._parameters[name] = Parameter(name, _ROS_TYPES[spec.type], [])
         self._params = self._make_param_set(self._values)
         # After declaring: the values are already checked, and the node's own
         # state may not exist yet while it is being constructed.

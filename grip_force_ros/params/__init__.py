@@ -9,7 +9,8 @@ Groups: 'instrument' (model geometry and materials, the dVRK's jaw conversion), 
 (hardware limits, read-only), 'controller', 'sim', 'effects' (optional unmodelled effects
 of the simulated instrument, all off by default), 'interface' (the topic profile, crtk or
 dvrk, and the dVRK arm and master names; params/interface.py, which also holds the
-defaults a profile changes). Where the instrument files
+defaults a profile changes), 'realtime' (memory locking and CPU affinity of the 1 kHz node
+processes; params/realtime.py). Where the instrument files
 are: :mod:`grip_force_ros.params.files` (``instrument_path``, ``list_instruments``).
 """
 from __future__ import annotations
@@ -24,11 +25,12 @@ from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path, lis
 from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
 from grip_force_ros.params.interface import (DVRK_CONTROLLER, INTERFACE, check_interface,
                                              with_profile_defaults)
+from grip_force_ros.params.realtime import REALTIME
 from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, markdown_table, validate
 from grip_force_ros.params.sim import EFFECTS, SIM, check_sim
 
 SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + DVRK_CONTROLLER + SIM
-                                      + EFFECTS + INTERFACE)
+                                      + EFFECTS + INTERFACE + REALTIME)
 SPECS: dict[str, ParamSpec] = {s.name: s for s in SCHEMA}
 if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
     raise RuntimeError('duplicate parameter name in the schema')

@@ -20,7 +20,7 @@ class ParameterError(ValueError):
 
 
 #: Parameter types, named as in ROS (rcl_interfaces/ParameterType).
-TYPES = ('double', 'integer', 'bool', 'string', 'double_array')
+TYPES = ('double', 'integer', 'bool', 'string', 'double_array', 'integer_array')
 
 
 @dataclass(frozen=True)
@@ -41,11 +41,11 @@ class ParamSpec:
         What it is, and where its default comes from.
     min, max : float, optional
         Inclusive range for 'double', 'integer' and each element of
-        'double_array'.
+        'double_array' and 'integer_array'.
     read_only : bool
         Hardware limits and geometry: refused at runtime by the nodes.
     group : str
-        'instrument', 'limits', 'controller', 'sim' or 'effects'.
+        'instrument', 'limits', 'controller', 'sim', 'effects', 'interface' or 'realtime'.
     choices : tuple of str, optional
         Allowed values of a 'string' parameter.
     """
@@ -102,6 +102,17 @@ class ParamSpec:
                 out.append(float(v))
             if not out:
                 raise ParameterError(f'{where}: the list is empty')
+            return tuple(out)
+        if self.type == 'integer_array':     # may be empty (e.g. cpu_affinity: no pinning)
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+                raise ParameterError(f'{where}: expected a list of integers, got {value!r}')
+            out = []
+            for i, v in enumerate(value):
+                if isinstance(v, bool) or not isinstance(v, int):
+                    raise ParameterError(f"parameter '{self.name}[{i}]': expected an integer, "
+                                         f'got {v!r}')
+                self._check_range(v, f"parameter '{self.name}[{i}]'")
+                out.append(int(v))
             return tuple(out)
         raise ParameterError(f'{where}: unknown type {self.type!r}')
 
