@@ -200,31 +200,3 @@ def test_bench_all_parts_tiny(tmp_path):
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
     assert 'timer skipped' in text and 'full path' in text and 'goals:' in text
     assert 'contract floor' in text
-
-
-def test_order_ab_gives_each_variant_its_order_force_outputs_and_parameters(monkeypatch):
-    """The A/B of 2026-11-27 (BENCHMARKS.md): the variants reach the product run as named."""
-    from grip_force_ros.bench import order_ab
-    calls = []
-    monkeypatch.setattr(order_ab, 'run_floor', lambda *args, **kwargs: {})
-    monkeypatch.setattr(order_ab, 'run_product',
-                        lambda *args, **kwargs: calls.append(kwargs) or {'variant_kwargs': kwargs})
-    monkeypatch.setattr(order_ab, 'compare', lambda floor, product: product)
-    monkeypatch.setattr(order_ab, '_row', lambda name, loop: {
-        'variant': name, 'full_path_p99_ratio': 1.0, 'p99_ratio': 1.0,
-        'missed_fraction': 0.0, 'floor_missed_fraction': 0.0})
-    result = order_ab.run_ab(1, 0.1, ('plain', 'no_forces', 'timer_250', 'lean'))
-    by_order = {(c['sensor_order'], c['force_outputs'], tuple(sorted(c['controller_params'].items())))
-                for c in calls}
-    assert by_order == {('first', 'at-once', ()), ('first', 'off', ()),
-                        ('first', 'at-once', (('control_rate', 250.0),)),
-                        ('first', 'off', (('control_rate', 250.0),))}
-    assert set(result['summary']) == {'plain', 'no_forces', 'timer_250', 'lean'}
-    assert order_ab.ORDER_VARIANTS == ('narrowed', 'sensors_first', 'forces_at_once', 'plain')
-
-
-def test_product_controller_accepts_force_outputs_off():
-    from grip_force_ros.bench.product_controller import build_parser
-    assert build_parser().parse_args(['--record', 'x.npz', '--force-outputs', 'off']).force_outputs == 'off'
-    with pytest.raises(SystemExit):
-        build_parser().parse_args(['--record', 'x.npz', '--force-outputs', 'sometimes'])

@@ -75,8 +75,9 @@ def test_installed_executables_start_publish_and_stop(install, tmp_path):
             seen[topic] = seen.get(topic, 0) + 1
         return cb
 
+    # the sim's state: one combined instrument/measured_js a period (state_message)
     expected = {topics.MASTER_JS: JointState, topics.INSTRUMENT_JS: JointState,
-                topics.ACTUATOR_JS: JointState, topics.SERVO_CURRENT: JointState,
+                topics.SERVO_CURRENT: JointState,
                 topics.ESTIMATED_FORCE: WrenchStamped, topics.MEASURED_FORCE: WrenchStamped,
                 topics.DIAGNOSTICS: DiagnosticArray}
     with RosRunner() as ros:

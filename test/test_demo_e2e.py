@@ -74,7 +74,7 @@ def test_bag_holds_every_topic_and_rosbags_reads_it(demo_run):
     # answers late states). Reported, not judged; the recording is: at least 100 a second.
     print(f"recorded in a {result['duration']:.1f} s task: {counts} "
           f'(load average {os.getloadavg()[0]:.1f})')
-    for stream in ('/instrument/actuator/measured_js', '/instrument/actuator/servo_jf',
+    for stream in ('/instrument/measured_js', '/instrument/actuator/servo_jf',
                    '/grip/target_force'):
         assert counts[stream] > 100 * result['duration'], (stream, counts)
 

@@ -54,7 +54,8 @@ class Recorder(Node):
         self.steps: list[tuple[float, float]] = []
         self.status: list[str] = []                            # the controller's messages
         self.create_subscription(JointState, topics.SERVO_CURRENT, self._on_command, RECORD_QOS)
-        self.create_subscription(JointState, topics.ACTUATOR_JS, self._on_current, RECORD_QOS)
+        # the sim's combined state carries the drum's measured current
+        self.create_subscription(JointState, topics.INSTRUMENT_JS, self._on_current, RECORD_QOS)
         self.create_subscription(WrenchStamped, topics.ESTIMATED_FORCE, self._on_force, RECORD_QOS)
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_status, RECORD_QOS)
 
@@ -69,7 +70,9 @@ class Recorder(Node):
         self.steps.append((self.now(), stamp_seconds(msg.header.stamp)))
 
     def _on_current(self, msg) -> None:
-        self.currents.append((self.now(), float(msg.effort[0])))
+        names = list(msg.name)
+        if topics.DRUM_JOINT in names:
+            self.currents.append((self.now(), float(msg.effort[names.index(topics.DRUM_JOINT)])))
 
     def _on_status(self, msg) -> None:
         self.status += [s.message for s in msg.status if 'controller' in s.name]

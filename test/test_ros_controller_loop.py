@@ -9,6 +9,7 @@ from __future__ import annotations
 import bisect
 import math
 import random
+import time
 import types
 
 import pytest
@@ -19,6 +20,8 @@ from grip_force_ros.nodes.common import joint_state
 from grip_force_ros.nodes.controller import (FALLBACK_AFTER_PERIODS, MIN_STEP_SPACING_PERIODS,
                                              ControllerNode)
 from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.nodes.wire import JointStateData
+from rclpy.serialization import serialize_message
 
 pytestmark = pytest.mark.ros
 
@@ -57,7 +60,8 @@ def node(monkeypatch):
 def _state(ctl) -> None:
     """One actuator state (drum current, position, velocity) delivered to the node."""
     stamp = ctl.get_clock().now().to_msg()
-    ctl.io._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
+    ctl.io._on_actuator(serialize_message(
+        joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05])))
 
 
 def _run(ctl, clock, events) -> list[float]:
@@ -185,42 +189,15 @@ def test_steps_keep_their_spacing_under_jitter(node, seed):
     assert max(gaps) <= (FALLBACK_AFTER_PERIODS + 1.0) * period + 1e-12
 
 
-def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
-    """A fresh, stamped actuator state's stamp goes on the current command; timer steps,
-    duplicated and unstamped states get the controller's clock, the force outputs always."""
-    ctl, clock, steps = node
-    period = ctl._period
-
-    def deliver(stamp):
-        ctl.io._on_actuator(joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05]))
-        return ctl.io._servo_msg.header.stamp, ctl.io._estimate_msg.header.stamp
-
-    stamp = ctl.get_clock().now().to_msg()
-    stamp.nanosec = (stamp.nanosec // 1000) * 1000 + 123          # recognisable
-    servo, estimate = deliver(stamp)
-    assert (servo.sec, servo.nanosec) == (stamp.sec, stamp.nanosec)
-    assert (estimate.sec, estimate.nanosec) != (stamp.sec, stamp.nanosec)
-    clock.now += 0.5 * period
-    servo, _ = deliver(stamp)                                       # duplicate: no news
-    assert (servo.sec, servo.nanosec) != (stamp.sec, stamp.nanosec)
-    clock.now += 2 * period
-    ctl._tick()                                                     # fallback step
-    assert ctl.steps['on_timer'] == 1
-    fallback = ctl.io._servo_msg.header.stamp
-    assert (fallback.sec, fallback.nanosec) != (stamp.sec, stamp.nanosec)
-    zero = type(stamp)()                                            # unstamped driver
-    servo, _ = deliver(zero)
-    assert servo.sec > 0
-
-
 class _Recorder:
-    """Stands in for a publisher: notes its name in ``log`` on every publish."""
+    """Stands in for a publisher: notes its name in ``log`` and keeps the last message."""
 
     def __init__(self, name, log):
-        self.name, self.log = name, log
+        self.name, self.log, self.last = name, log, None
 
     def publish(self, msg):
         self.log.append(self.name)
+        self.last = msg
 
 
 def _record_outputs(ctl, log) -> None:
@@ -228,33 +205,57 @@ def _record_outputs(ctl, log) -> None:
         _Recorder('command', log), _Recorder('estimate', log), _Recorder('target', log))
 
 
-def test_command_at_once_forces_once_the_loop_has_closed(node):
-    """The current command goes out in the step; estimated and target force when the
-    instrument's joint state comes in, or before the next step's command (deferred)."""
+def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
+    """A fresh, stamped actuator state's stamp goes on the current command; timer steps,
+    duplicated and unstamped states get the controller's clock, the force outputs always."""
     ctl, clock, steps = node
-    log = []
-    ctl.io.defer_forces = True
-    _record_outputs(ctl, log)
-    _state(ctl)
-    assert log == ['command']
-    ctl.io._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
-                                      [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
-    assert log == ['command', 'estimate', 'target']
-    clock.now += ctl._period
-    _state(ctl)
-    clock.now += ctl._period
-    _state(ctl)                                                     # no joint state in between
-    assert log[3:] == ['command', 'estimate', 'target', 'command']
+    period = ctl._period
+    _record_outputs(ctl, [])
+
+    def command_stamp():
+        sent = JointStateData(ctl.io._servo_pub.last)
+        return sent.sec, sent.nanosec
+
+    def deliver(stamp):
+        ctl.io._on_actuator(serialize_message(
+            joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05])))
+        return command_stamp(), ctl.io._estimate_msg.header.stamp
+
+    stamp = ctl.get_clock().now().to_msg()
+    stamp.nanosec = (stamp.nanosec // 1000) * 1000 + 123          # recognisable
+    servo, estimate = deliver(stamp)
+    assert servo == (stamp.sec, stamp.nanosec)
+    assert (estimate.sec, estimate.nanosec) != (stamp.sec, stamp.nanosec)
+    clock.now += 0.5 * period
+    servo, _ = deliver(stamp)                                       # duplicate: no news
+    assert servo != (stamp.sec, stamp.nanosec)
+    clock.now += 2 * period
+    ctl._tick()                                                     # fallback step
+    assert ctl.steps['on_timer'] == 1
+    assert command_stamp() != (stamp.sec, stamp.nanosec)
+    zero = type(stamp)()                                            # unstamped driver
+    servo, _ = deliver(zero)
+    assert servo[0] > 0
 
 
-def test_forces_right_after_the_command_when_not_deferred(node):
-    """The plain order: command, estimated and target force in the step; a joint state sends nothing."""
+def test_command_every_step_forces_at_their_own_rate(node):
+    """The current command goes out in every step; the estimated and target force at
+    force_output_rate (100 Hz: the first step, then not before 10 ms minus half a period)."""
     ctl, clock, steps = node
     log = []
-    ctl.io.defer_forces = False
     _record_outputs(ctl, log)
+    assert ctl.params.force_output_rate == 100.0
     _state(ctl)
     assert log == ['command', 'estimate', 'target']
-    ctl.io._on_instrument(joint_state(ctl.get_clock().now().to_msg(),
-                                      [topics.WRIST_JOINT, topics.JAW_JOINT], [0.0, 0.3], [0.0, 0.0]))
-    assert log == ['command', 'estimate', 'target']
+    for _ in range(4):
+        clock.now += ctl._period
+        _state(ctl)
+    assert log[3:] == ['command'] * 4, 'the forces wait for their period'
+    time.sleep(0.0105)                                              # the node's ROS clock
+    clock.now += ctl._period
+    _state(ctl)
+    assert log[7:] == ['command', 'estimate', 'target']
+    # the one sent is the step's own output, stamped with the controller's clock at it
+    est = ctl.io._estimate_pub.last
+    assert est.wrench.force.z == ctl.last_output.estimated_force
+    assert est.header.stamp.sec > 0

@@ -5,12 +5,16 @@ with its publishers replaced by recorders, so the order is exact.
 """
 from __future__ import annotations
 
+import struct
+
 import pytest
+from rclpy.serialization import serialize_message
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import joint_state, stamp_nanoseconds
+from grip_force_ros.nodes.common import joint_state
 from grip_force_ros.nodes.harness import RosRunner
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
+from grip_force_ros.nodes.wire import JointStateData, read_wrench
 
 pytestmark = pytest.mark.ros
 
@@ -19,14 +23,18 @@ class _Recorder:
     def __init__(self, name, log):
         self.name, self.log = name, log
 
-    def publish(self, msg):
-        self.log.append((self.name, stamp_nanoseconds(msg.header.stamp)))
+    def publish(self, data):
+        """Note the name and the header stamp (ns) of the serialized message."""
+        decoded = read_wrench(data) if self.name == 'force' else JointStateData(data)
+        sec, nanosec = struct.unpack_from('<iI', data, 4)       # the CDR header's stamp
+        assert decoded is not None
+        self.log.append((self.name, sec * 1_000_000_000 + nanosec))
 
 
-@pytest.fixture
-def sim():
+@pytest.fixture(params=['split', 'combined'])
+def sim(request):
     ros = RosRunner()
-    node = ros.add(SimInstrumentNode)
+    node = ros.add(SimInstrumentNode, state_message=request.param)
     node._timer.cancel()                       # the test ticks it
     log: list = []
     node.io._actuator_pub = _Recorder('actuator', log)
@@ -42,55 +50,24 @@ def _answer(node, stamp_ns, current=0.1):
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
     stamp = node.get_clock().now().to_msg()
     stamp.sec, stamp.nanosec = sec, nanosec
-    node.io._on_command(joint_state(stamp, [topics.DRUM_JOINT], effort=[current]))
+    node.io._on_command(serialize_message(joint_state(stamp, [topics.DRUM_JOINT], effort=[current])))
 
 
-def test_actuator_state_first_the_rest_once_answered(sim):
+def test_sensors_first_the_step_finds_the_same_sample(sim):
+    """The load cell (and the joints, split) of a sample before the state the controller steps on."""
     node, log = sim
-    node.io.defer_sensors = True
+    order = ['joint', 'force', 'actuator'] if not node.io.combined else ['force', 'joint']
     node._last -= 1e-3
     node._tick()
-    assert [name for name, _ in log] == ['actuator'], 'only the loop-closing state at once'
-    stamp = log[0][1]
-    _answer(node, stamp)
-    assert [name for name, _ in log] == ['actuator', 'joint', 'force']
-    assert {s for _, s in log} == {stamp}, 'one measurement time on all three'
+    assert [name for name, _ in log] == order
+    assert len({s for _, s in log}) == 1, 'one measurement time on all of them'
+    n = len(log)
+    _answer(node, log[0][1])
+    assert len(log) == n, 'nothing left to send once answered'
     assert node.current_command == pytest.approx(0.1)
     summary = node.loop.summary()
     assert summary['answered'] == 1 and summary['round_trips'] == 1
     assert 0.0 <= summary['max_ms'] < 1000.0
-
-
-def test_unanswered_state_sends_its_sensors_before_the_next_step(sim):
-    node, log = sim
-    node.io.defer_sensors = True
-    node._last -= 1e-3
-    node._tick()
-    first = log[0][1]
-    node._last -= 1e-3
-    node._tick()                                  # no command came
-    names = [name for name, _ in log]
-    assert names == ['actuator', 'joint', 'force', 'actuator']
-    assert log[1][1] == log[2][1] == first        # the previous step's sensors, its stamp
-    assert log[3][1] > first
-    _answer(node, first)                          # a late answer to the first state
-    assert log[4:] == [('joint', log[3][1]), ('force', log[3][1])], 'the second step\'s, once'
-    _answer(node, first)                          # the same answer again: nothing more to send
-    assert len(log) == 6
-    summary = node.loop.summary()
-    assert summary['answered'] == 1 and summary['other_commands'] == 1
-
-
-def test_sensors_first_the_step_finds_the_same_sample(sim):
-    """The plain order: joint state and load cell of a sample before its actuator state, all at once."""
-    node, log = sim
-    node.io.defer_sensors = False
-    node._last -= 1e-3
-    node._tick()
-    assert [name for name, _ in log] == ['joint', 'force', 'actuator']
-    assert len({s for _, s in log}) == 1, 'one measurement time on all three'
-    _answer(node, log[0][1])
-    assert len(log) == 3, 'nothing left to send once answered'
     node._last -= 1e-3
     node._tick()                                  # the next step: the same order, a newer stamp
-    assert [name for name, _ in log[3:]] == ['joint', 'force', 'actuator'] and log[3][1] > log[0][1]
+    assert [name for name, _ in log[n:]] == order and log[n][1] > log[0][1]

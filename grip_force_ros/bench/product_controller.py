@@ -24,7 +24,7 @@ import sys
 import numpy as np
 from rclpy.utilities import remove_ros_args
 
-from grip_force_ros.nodes.common import run_node, stamp_nanoseconds
+from grip_force_ros.nodes.common import run_node
 from grip_force_ros.nodes.controller import ControllerNode
 
 #: Columns of the record (ns): the answered actuator-state stamp, the controller's clock at the
@@ -45,19 +45,14 @@ class BenchController(ControllerNode):
         self._record_path = opts.record
         self._rows = np.zeros((opts.capacity, len(COLUMNS)), np.int64)
         self._n = 0
-        if opts.force_outputs == 'off':      # the A/B's bound: no force output at all
-            io = self.io
-            io.publish_forces = lambda: setattr(io, 'forces_pending', False)
-        elif opts.force_outputs is not None:
-            self.io.defer_forces = opts.force_outputs == 'deferred'
         publish = self.io.publish
 
-        def noting_publish(out, stamp_msg, answered_stamp=None):
-            publish(out, stamp_msg, answered_stamp)
-            if answered_stamp is not None:
+        def noting_publish(out, now_ns, answered_ns=None):
+            publish(out, now_ns, answered_ns)
+            if answered_ns is not None:
                 inputs = self.inputs
                 self._rows[self._n % len(self._rows)] = (
-                    stamp_nanoseconds(answered_stamp), stamp_nanoseconds(stamp_msg),
+                    answered_ns, now_ns,
                     _ns(inputs.actuator_stamp), _ns(inputs.instrument_stamp), _ns(inputs.force_stamp))
                 self._n += 1
 
@@ -81,9 +76,6 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog='python -m grip_force_ros.bench.product_controller')
     p.add_argument('--record', required=True, help='.npz written at shutdown')
     p.add_argument('--capacity', type=int, default=200_000, help='newest steps kept')
-    p.add_argument('--force-outputs', choices=('deferred', 'at-once', 'off'), default=None,
-                   help="estimated/target force after the loop closed, right after the command, "
-                        "or never (off: what the two publishes cost; default: the node's)")
     return p
 
 

@@ -58,12 +58,11 @@ class BenchSim(SimInstrumentNode):
         super().__init__(**kwargs)
         self.period = 1.0 / self._param.params.publish_rate
         capacity = int((opts.seconds + 5.0) / self.period) + 1000
-        self.window = _Window(self, opts.seconds, opts.warmup, capacity, gc_freeze=False)
+        self.window = _Window(self, opts.seconds, opts.warmup, capacity, gc_freeze=False,
+                              open_at_ns=opts.open_at_ns)
         self.finished = self.window.finished          # run_node stops when the window is over
         self.loop = _RecordingLoopLatency(self.window)
         self._record_path = opts.record
-        if opts.sensor_order is not None:
-            self.io.defer_sensors = opts.sensor_order == 'deferred'
         self._bench_timer = self.create_timer(0.05, lambda: self.window.advance(self.summary))
 
     def _tick(self) -> None:
@@ -78,7 +77,7 @@ class BenchSim(SimInstrumentNode):
         out = w.answer_summary(self.period)
         out.update({'states': w.sent, 'answered': w.n_latencies,
                     'other_commands': self.loop.other_in_window,
-                    'sensors_deferred': self.io.defer_sensors, 'period_s': self.period})
+                    'period_s': self.period})
         if self._record_path:          # every answer of the window, for the full path
             np.savez(self._record_path, answered_ns=w.answered[:w.n_latencies],
                      round_trip_ns=w.latencies[:w.n_latencies])
@@ -90,9 +89,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--seconds', type=float, default=10.0, help='measurement window (s)')
     p.add_argument('--warmup', type=float, default=2.0, help='after the first answer (s)')
     p.add_argument('--record', default=None, help='.npz of every answer of the window (stamp, round trip)')
-    p.add_argument('--sensor-order', choices=('deferred', 'first'), default=None,
-                   help='joint state and load cell once answered, or before the actuator state '
-                        "(default: the node's)")
+    p.add_argument('--open-at-ns', type=int, default=0,
+                   help='wall clock (ns) before which the window does not open (0: after the '
+                        'warm-up); the arms of a two-arm run share one window')
     return p
 
 

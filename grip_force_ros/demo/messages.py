@@ -107,12 +107,19 @@ class RecordedTopics:
     controller's /diagnostics carry it (``arm_state``), and the bag keeps standard types only.
     """
 
-    def __init__(self, names: topics.TopicSet, conversion=None):
+    def __init__(self, names: topics.TopicSet, conversion=None, combined: bool = False):
         self.names = names
         self.conversion = conversion
+        self.combined = combined and names.interface == 'crtk'
+        #: the topics that carry the instrument's state (the sim's ``state_message``)
+        self.state_topics = ((names.instrument_js,) if self.combined
+                             else (names.instrument_js, names.actuator_js))
         if names.interface == 'crtk':
             self.fields = dict(FIELDS)
             self.types = dict(TOPIC_TYPES)
+            if self.combined:       # the drum rides in instrument/measured_js
+                self.fields[topics.INSTRUMENT_JS] += self.fields.pop(topics.ACTUATOR_JS)
+                del self.types[topics.ACTUATOR_JS]
             return
         if conversion is None:
             raise ValueError('the dvrk profile needs the jaw effort conversion')
@@ -133,6 +140,8 @@ class RecordedTopics:
         """Return the plain SI numbers a message of ``topic`` carries, named as in ``fields``."""
         n = self.names
         if n.interface == 'crtk':
+            if self.combined and topic == topics.INSTRUMENT_JS:
+                return {**values_of(topic, msg), **values_of(topics.ACTUATOR_JS, msg)}
             return values_of(topic, msg)
         if topic == n.master_js:
             return values_of(topics.MASTER_JS, msg)
@@ -163,7 +172,7 @@ def recorded_topics(params) -> RecordedTopics:
     if params.interface == 'dvrk':
         from grip_force_ros.model.dvrk_jaw import JawEffortConversion
         conversion = JawEffortConversion.from_params(params)
-    return RecordedTopics(names, conversion)
+    return RecordedTopics(names, conversion, combined=params.state_message == 'combined')
 
 
 def diagnostic_summary(msg: Any) -> list[dict[str, Any]]:

@@ -591,7 +591,7 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
                                  rt_priority=master_rt_priority(spec.rt_priority))
             scheduling['master'] = master.scheduling
             # (dvrk: the controller sends its first command once it has enabled the arm)
-            needed = [names.actuator_js, names.instrument_js, names.command, names.master_js]
+            needed = [*recorded.state_topics, names.command, names.master_js]
             _wait_for(lambda: all(recorder.count(t) > 0 for t in needed),
                       group, startup_timeout, 'the master, the simulated instrument and the '
                       'controller')
@@ -680,8 +680,7 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
         if phase in windows:
             result.metrics[f'largest_gap_{phase}'] = max(
                 analysis.largest_gap(series[t]['t'] - start, windows[phase])
-                for t in (names.target_force, names.measured_force, names.instrument_js,
-                          names.actuator_js))
+                for t in (names.target_force, names.measured_force, *recorded.state_topics))
     result.problems = missing + analysis.run_problems({**result.metrics, 'safe_events': events},
                                                       windows)
     if plot:

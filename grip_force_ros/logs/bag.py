@@ -5,12 +5,13 @@ Topics (names from :mod:`grip_force_ros.topics`, standard message types):
 | topic | type | columns |
 |---|---|---|
 | ``instrument/actuator/measured_js`` | sensor_msgs/JointState ``jaw_drum`` | position -> ``motor_angle`` (rad), velocity -> ``motor_velocity`` (rad/s), effort -> ``current`` (A) |
-| ``instrument/measured_js`` | sensor_msgs/JointState ``wrist_pitch``, ``jaw`` | positions -> ``wrist_angle``, ``jaw_angle`` (rad); velocities -> ``wrist_velocity``, ``jaw_velocity`` (rad/s) |
+| ``instrument/measured_js`` | sensor_msgs/JointState ``wrist_pitch``, ``jaw`` (and ``jaw_drum``, in the sim's combined state) | positions -> ``wrist_angle``, ``jaw_angle`` (rad); velocities -> ``wrist_velocity``, ``jaw_velocity`` (rad/s); ``jaw_drum`` as on the actuator topic |
 | ``grip/measured_force`` | geometry_msgs/WrenchStamped | force.z -> ``grip_force`` (N); torque.z -> ``jaw_torque`` (N*m) |
 | ``/diagnostics`` | diagnostic_msgs/DiagnosticArray | a status value with key ``object`` -> ``object`` |
 
 Reading aligns every topic on the time stamps (``header.stamp``; the bag's
-receive time when a stamp is zero) of the actuator topic, by linear interpolation
+receive time when a stamp is zero) of the actuator topic (of the joint state when it
+carries the drum and the actuator topic is empty), by linear interpolation
 (``object``: the last value published). Messages of one topic usually share one
 byte layout; those are decoded together with numpy instead of one by one.
 """  # noqa: E501 - Markdown table rows are kept whole
@@ -328,13 +329,20 @@ def read_bag(path, *, progress=None, measured: bool = True) -> dict[str, np.ndar
     except Exception as exc:  # rosbags raises its own types; keep one domain error
         raise LogError(f'{path}: cannot read bag: {exc}') from exc
 
-    needed = (topics.ACTUATOR_JS, topics.INSTRUMENT_JS) + ((topics.MEASURED_FORCE,) if measured else ())
+    # the drum in its own topic (split) or in the joint state (the sim's combined state)
+    combined = not buffers[topics.ACTUATOR_JS].count
+    needed = ((topics.INSTRUMENT_JS,) + (() if combined else (topics.ACTUATOR_JS,))
+              + ((topics.MEASURED_FORCE,) if measured else ()))
     for topic in needed:
         if not buffers[topic].count:
             raise LogError(f'{path}: no messages on {topic}')
     try:
-        act = buffers.pop(topics.ACTUATOR_JS).finish()
+        act = buffers.pop(topics.ACTUATOR_JS)
         ins = buffers.pop(topics.INSTRUMENT_JS).finish()
+        act = ins if combined else act.finish()
+        if f'effort/{topics.DRUM_JOINT}' not in act:
+            raise LogError(f'no {topics.DRUM_JOINT} on {topics.ACTUATOR_JS} nor on '
+                           f'{topics.INSTRUMENT_JS}')
         force = buffers.pop(topics.MEASURED_FORCE)
         wr = force.finish() if force.count else None
     except LogError as exc:

@@ -7,29 +7,33 @@ in N*m, the arm's operating state); the wiring of each profile is
 
 Subscribes (KEEP_LAST 1; only the newest sample matters):
     master/gripper/measured_js        gripper: position (rad)
-    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s, optional)
-    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
-                                      effort = measured current (A)
+    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s, optional);
+                                      and jaw_drum (the sim's combined state, ``state_message``):
+                                      position (rad), velocity (rad/s), effort = current (A)
+    instrument/actuator/measured_js   jaw_drum, as above (an instrument with a split state)
     grip/measured_force               force.z = grip force (N), only when force_sensor_enabled
-Publishes, every control step (one per instrument state, ``expected_state_rate``):
-    instrument/actuator/servo_jf      jaw_drum: effort = current command (A)
+Publishes:
+    instrument/actuator/servo_jf      jaw_drum: effort = current command (A), every control step
+                                      (one per instrument state, ``expected_state_rate``)
     grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
     grip/target_force                 force.z = target grip force (N)
-        in this order, in the step (deferring the two forces until the loop had closed was
-        measured and dropped: BENCHMARKS.md, "Full path").
-and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults.
+        both at ``force_output_rate`` (100 Hz), right after the step's command;
+and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults. The 1 kHz
+messages are read and written as serialized bytes (:mod:`grip_force_ros.nodes.wire`).
 
 Loop timing, as hardware interfaces do it: the control step runs when a fresh
-instrument state arrives (the actuator state; dvrk: the jaw's ``measured_js``, in its
-subscription callback), so each command answers the newest state without waiting for a
-free-running timer. The step integrates over the time measured since the previous step
-(:class:`~grip_force_ros.control.GripController`), so the loop is the same at any state
-rate from 100 to 1500 Hz (``expected_state_rate``; the dVRK publishes at 100 Hz). The
-``control_rate`` timer (1 kHz) is the watchdog and fallback: it steps when no state came
-for :data:`FALLBACK_AFTER_PERIODS` state periods (a lost state, or silence: then it steps
-every half state period at most, and the safe state still comes within a timer period or
+instrument state arrives (the combined state or the actuator state; dvrk: the jaw's
+``measured_js``, in its subscription callback), so each command answers the newest state
+without waiting for a free-running timer. The step integrates over the time measured since
+the previous step (:class:`~grip_force_ros.control.GripController`), so the loop is the same
+at any state rate from 100 to 1500 Hz (``expected_state_rate``; the dVRK publishes at 100
+Hz). The ``control_rate`` timer (1 kHz) is the watchdog and fallback: it runs once no state
+came for :data:`FALLBACK_AFTER_PERIODS` state periods (a watch timer looks every
+:data:`WATCH_PERIOD`, so the first fallback step comes at most that much later) and then
+steps every half state period at most (the safe state still comes within a timer period or
 two of ``watchdog_timeout``), never within :data:`MIN_STEP_SPACING_PERIODS` of the previous
-step. Cancelling the timer stops the loop altogether (no step on states either).
+step; the next state puts it to sleep again. Cancelling the watch timer (``_timer``) stops the
+loop altogether (no step on states either).
 
 Stamps: the current command of a step on a fresh actuator state (accepted,
 with a non-zero stamp) carries that state's header stamp, a reply stamp in the
@@ -86,15 +90,17 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.task import Future
+from rclpy.time import Time
 
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
 from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, InputRejected, run_node
 from grip_force_ros.nodes.controller_io import controller_io
 from grip_force_ros.nodes.controller_services import ControllerServices
+from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 
-GROUPS = ('instrument', 'limits', 'controller', 'interface')
+GROUPS = ('instrument', 'limits', 'controller', 'interface', 'realtime')
 #: Periodic /diagnostics rate (Hz); changes are published sooner, at most this often:
 DIAGNOSTICS_RATE = 10.0
 DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
@@ -102,6 +108,10 @@ DIAGNOSTICS_MIN_INTERVAL = 0.01  # s
 MIN_STEP_SPACING_PERIODS = 0.5
 #: The timer steps only when no instrument state came for this many state periods:
 FALLBACK_AFTER_PERIODS = 1.5
+#: Period of the loop's watch timer (s): while states come, the ``control_rate`` fallback
+#: timer sleeps and this one looks whether they still come (a 1 kHz timer that fires for
+#: nothing costs a 1 kHz node several % of a core: BENCHMARKS.md, "The nodes' own cost").
+WATCH_PERIOD = 0.005
 #: After ``shutdown`` the process ends this long later (s): the transition's reply goes out first.
 EXIT_DELAY = 0.2
 #: A timer tick this many timer periods after the previous one follows a stall of this process:
@@ -162,7 +172,9 @@ class ControllerNode(LifecycleNode):
         self.io = None
         self.procedure = None          # a service's procedure or the deactivation ramp, or None
         self.last_output = None
-        self._timer = None             # the control_rate timer: exists while configured
+        self._timer = None             # the watch timer: exists while configured, runs while active
+        self._fallback = None          # the control_rate timer: runs while no state comes
+        self._fallback_idle = True     # the fallback timer is cancelled (states come)
         self._diag_pub = None
         self._exit_timer = None
         self._configure_error = None
@@ -204,7 +216,9 @@ class ControllerNode(LifecycleNode):
             self.inputs = self.controller.new_inputs()
             self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                    DIAGNOSTICS_QOS)
-            self._timer = self.create_timer(1.0 / params.control_rate, self._tick, autostart=False)
+            self._timer = self.create_timer(WATCH_PERIOD, self._watch, autostart=False)
+            self._fallback = self.create_timer(1.0 / params.control_rate, self._tick,
+                                               autostart=False)
             self.io = controller_io(self, params)     # the profile's topics (dvrk: crtk_msgs)
         except ValueError as exc:
             self._release()
@@ -303,8 +317,6 @@ class ControllerNode(LifecycleNode):
         self._timer_period = 1.0 / params.control_rate   # s, between timer ticks
         self._late_reported = 0            # late inputs counted at the last /diagnostics
         self._last_state_step = -math.inf  # when the last step on an instrument state started
-        if self.io is not None:
-            self.io.forces_pending = False
 
     def _stop_loop(self, reason: str) -> None:
         """Stop the loop (if it runs): a running procedure is stopped, the current ramps to 0 A.
@@ -317,6 +329,8 @@ class ControllerNode(LifecycleNode):
             return
         self.user_services.stop(f'the controller is {reason}')
         self._timer.cancel()
+        self._fallback.cancel()
+        self._fallback_idle = True
         self.procedure = _ZeroRamp(self, reason)
         longest = 2.0 * self.controller.current_limit / self.params.max_current_slew + 1.0  # s
         give_up = time.monotonic() + longest
@@ -326,18 +340,19 @@ class ControllerNode(LifecycleNode):
                 break
             time.sleep(self._period)
         self.procedure = None
-        if self.io.forces_pending:
-            self.io.publish_forces()
-        self._publish_diagnostics(self._now_ns().to_msg(), self.last_output)
+        stamp = self._now_ns()
+        self.io.publish_forces(self.last_output, stamp.nanoseconds)   # the last ramp step's
+        self._publish_diagnostics(stamp.to_msg(), self.last_output)
 
     def _release(self) -> None:
         """Destroy what configure created (safe on a half-made configuration)."""
         if self.io is not None:
             self.io.destroy()
             self.io = None
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
+        for timer in (self._timer, self._fallback):
+            if timer is not None:
+                self.destroy_timer(timer)
+        self._timer = self._fallback = None
         if self._diag_pub is not None:
             self.destroy_publisher(self._diag_pub)
             self._diag_pub = None
@@ -371,7 +386,7 @@ class ControllerNode(LifecycleNode):
         """Count a malformed message of ``source``: the input is faulted until a good one."""
         reason = self.inputs.reject(source, now, f'malformed message: {exc}')
         self._note_rejection(reason)
-        self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
+        loop_log(self).put('warning', f'rejected {reason}', throttle=1.0)
 
     def _note_rejection(self, reason: str) -> None:
         """Keep a rejection for the next /diagnostics, even if it is over by then."""
@@ -382,19 +397,22 @@ class ControllerNode(LifecycleNode):
         """Note the result of a ``set_*`` of the inputs (None, or why the sample was rejected)."""
         if reason is not None:
             self._note_rejection(reason)
-            self.get_logger().warning(f'rejected {reason}', throttle_duration_sec=1.0)
+            loop_log(self).put('warning', f'rejected {reason}', throttle=1.0)
 
     def on_state(self, answered_stamp=None) -> None:
         """Run a control step on an instrument state (event-driven loop).
 
-        ``answered_stamp``: the state's header stamp when it was accepted fresh (the command
-        carries it), else None.
+        ``answered_stamp``: the state's header stamp (int ns) when it was accepted fresh (the
+        command carries it), else None.
         """
         if not self._timer.is_canceled():  # cancelled: the loop is stopped (inactive)
             self.steps['on_state'] += 1
             started = time.perf_counter()
             self._last_state_step = started
             self._step(started, answered_stamp)
+            if not self._fallback_idle:    # the states came back: the fallback sleeps
+                self._fallback.cancel()
+                self._fallback_idle = True
 
     # ------------------------------------------------------------------ parameters
     def _refuse_unsafe_set(self, parameters) -> SetParametersResult:
@@ -417,6 +435,19 @@ class ControllerNode(LifecycleNode):
             self.io.request_enable()
 
     # ------------------------------------------------------------------ loop
+    def _watch(self) -> None:
+        """Run the watch timer: wake the fallback timer when no state came for a while.
+
+        Every :data:`WATCH_PERIOD` while the loop runs; once no instrument state came for
+        :data:`FALLBACK_AFTER_PERIODS` state periods, the ``control_rate`` timer starts
+        (:meth:`_tick`), until the next state.
+        """
+        if (self._fallback_idle
+                and time.perf_counter() - self._last_state_step >= self._fallback_after):
+            self._fallback_idle = False
+            self._last_timer = -math.inf   # its first tick is no stall
+            self._fallback.reset()
+
     def _tick(self) -> None:
         """Run the ``control_rate`` timer: watchdog and fallback of the event-driven loop.
 
@@ -428,7 +459,7 @@ class ControllerNode(LifecycleNode):
         states that came in meanwhile run first, so a stall of this process is not taken for a
         lost input (the next tick steps if none came).
         """
-        if self.controller is None:        # a queued event after cleanup or shutdown
+        if self.controller is None or self._timer.is_canceled():   # a queued event after a stop
             return
         started = time.perf_counter()
         previous, self._last_timer = self._last_timer, started
@@ -445,7 +476,7 @@ class ControllerNode(LifecycleNode):
     def _step(self, started: float, answered_stamp=None) -> None:
         """One control step, timed (``started``: perf_counter s, now).
 
-        ``answered_stamp``: header stamp of the fresh actuator state the step answers
+        ``answered_stamp``: header stamp (int ns) of the fresh actuator state the step answers
         (the current command carries it), or None (the controller's clock).
         """
         self._last_step = started
@@ -466,16 +497,15 @@ class ControllerNode(LifecycleNode):
         self._last_tick = started
 
     def _control(self, answered_stamp=None) -> None:
-        stamp = self._now_ns()
-        now = stamp.nanoseconds * 1e-9
+        now_ns = self._now_ns().nanoseconds
+        now = now_ns * 1e-9
         procedure = self.procedure
         if procedure is None:
             out = self.controller.step(now, self.inputs, self.io.interlock())
         else:                               # a service's procedure, or the ramp to 0 A
             out = procedure.step(now, self.inputs, self.io.interlock())
         self.last_output = out
-        stamp_msg = stamp.to_msg()
-        self.io.publish(out, stamp_msg, answered_stamp)
+        self.io.publish(out, now_ns, answered_stamp)
 
         if out.limits_hit:
             self._limits_seen.update(out.limits_hit)
@@ -483,7 +513,7 @@ class ControllerNode(LifecycleNode):
         since = now - self._diag_time
         if since >= 1.0 / DIAGNOSTICS_RATE or ((key != self._diag_key or self._new_rejections)
                                                and since >= DIAGNOSTICS_MIN_INTERVAL):
-            self._publish_diagnostics(stamp_msg, out)
+            self._publish_diagnostics(Time(nanoseconds=now_ns).to_msg(), out)
             self._diag_key, self._diag_time = key, now
 
     def diagnostic_status(self, out) -> DiagnosticStatus:

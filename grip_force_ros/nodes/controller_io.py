@@ -37,11 +37,15 @@ from grip_force_ros.model.dvrk_jaw import JawEffortConversion
 from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
     stamp_seconds
 from grip_force_ros.nodes.dvrk_msgs import arm_interlock, crtk_msgs
+from grip_force_ros.nodes.wire import JointStateData, JointStateWriter, read_wrench
 
 _MASTER_JOINTS = (topics.MASTER_JOINT,)
 _INSTRUMENT_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT)
 _ACTUATOR_JOINTS = (topics.DRUM_JOINT,)
 _JAW_JOINTS = (topics.JAW_JOINT,)
+_DRUM_FIELDS = ('effort', 'position', 'velocity')
+#: The joints of a combined crtk state (instrument/measured_js): wrist, jaw and the drum.
+_STATE_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT)
 #: How often the dvrk profile asks the arm's operating_state service while it knows no state,
 #: and resends a pending enable/home request (s).
 ARM_POLL_PERIOD = 0.5
@@ -68,17 +72,13 @@ class ControllerIO:
     """
 
     interface = ''
-    #: True: the estimated and target force of a step go out when the instrument's next joint
-    #: state comes in (before the next command at the latest); False: right after the command.
-    #: The benchmark's A/B switch (BENCHMARKS.md), not a parameter.
-    defer_forces = False
 
     def __init__(self, node, params, names: topics.TopicSet):
         self.node = node
         self.names = names
         self._entities: list = []      # what this object created on the node (destroy())
         self.alive = True              # False once destroy() ran: callbacks drop their event
-        self.subscribe(JointState, names.master_js, self._on_master, STATE_SUB_QOS)
+        self.subscribe(JointState, names.master_js, self._on_master, STATE_SUB_QOS, raw=True)
         self._force_sub = None
         self._force_wanted = False     # a service needs the load cell (want_force)
         self.update_params(params)
@@ -89,12 +89,15 @@ class ControllerIO:
         self._estimate_msg.header.frame_id = topics.JAW_FRAME
         self._target_msg = WrenchStamped()
         self._target_msg.header.frame_id = topics.JAW_FRAME
-        self.forces_pending = False    # estimated/target force of the last step not sent yet
+        self._next_forces_ns = 0       # controller clock (ns) at which the forces are due
 
     # ------------------------------------------------------------------ entities
-    def subscribe(self, msg_type, topic: str, callback, qos):
-        """Create a subscription on the node, for :meth:`destroy`; see :meth:`_live`."""
-        sub = self.node.create_subscription(msg_type, topic, self._live(callback), qos)
+    def subscribe(self, msg_type, topic: str, callback, qos, raw: bool = False):
+        """Create a subscription on the node, for :meth:`destroy`; see :meth:`_live`.
+
+        ``raw``: the callback takes the serialized bytes (:mod:`~grip_force_ros.nodes.wire`).
+        """
+        sub = self.node.create_subscription(msg_type, topic, self._live(callback), qos, raw=raw)
         self._entities.append(sub)
         return sub
 
@@ -128,25 +131,34 @@ class ControllerIO:
         self._entities = []
 
     # ------------------------------------------------------------------ inputs
-    def _on_master(self, msg: JointState) -> None:
+    def _on_master(self, data: bytes) -> None:
         node = self.node
         now = node.now()
         try:
+            msg = JointStateData(data)
             (angle,), = read_joints(msg, _MASTER_JOINTS, ('position',)).values()
         except InputRejected as exc:
             return node.reject('master', now, exc)
-        node.report(node.inputs.set_master(now, angle, stamp_seconds(msg.header.stamp)))
+        node.report(node.inputs.set_master(now, angle, msg.stamp))
 
-    def _on_force(self, msg: WrenchStamped) -> None:
+    def _on_force(self, data: bytes) -> None:
         node = self.node
-        node.report(node.inputs.set_force(node.now(), msg.wrench.force.z - self.force_offset,
-                                          stamp_seconds(msg.header.stamp)))
+        now = node.now()
+        try:
+            stamp, _, _, force = read_wrench(data)
+        except InputRejected as exc:
+            return node.reject('force', now, exc)
+        node.report(node.inputs.set_force(now, force - self.force_offset, stamp))
 
     def update_params(self, params) -> None:
         """Apply accepted parameters (the load-cell subscription follows force_sensor_enabled)."""
         self._force_enabled = params.force_sensor_enabled
         self.force_offset = params.load_cell_offset          # N
         self.current_offset = params.current_sensor_offset   # A
+        # due again one output period after, less half a state period (so that at equal
+        # rates the forces go out every step, whatever the states' jitter)
+        self._forces_period_ns = max(0, int(1e9 / params.force_output_rate
+                                            - 0.5e9 / params.expected_state_rate))
         self._follow_force()
 
     def want_force(self, wanted: bool) -> None:
@@ -163,36 +175,40 @@ class ControllerIO:
         listen = self._force_enabled or self._force_wanted
         if listen and self._force_sub is None:
             self._force_sub = self.node.create_subscription(
-                WrenchStamped, self.names.measured_force, self._live(self._on_force), STATE_SUB_QOS)
+                WrenchStamped, self.names.measured_force, self._live(self._on_force), STATE_SUB_QOS,
+                raw=True)
         elif not listen and self._force_sub is not None:
             self.node.destroy_subscription(self._force_sub)
             self._force_sub = None
 
     # ------------------------------------------------------------------ outputs
-    def publish(self, out, stamp_msg, answered_stamp=None) -> None:
-        """Publish the command of one step, then (now or later) its forces."""
-        if self.forces_pending:         # the previous step's, not sent yet: first
-            self.publish_forces()
-        self.publish_command(out, stamp_msg, answered_stamp)
+    def publish(self, out, now_ns: int, answered_ns: int | None = None) -> None:
+        """Publish the command of one step, then its forces when due (``force_output_rate``).
+
+        ``now_ns``: the controller's clock at the step (ns); ``answered_ns``: the header stamp
+        (ns) of the fresh state the step answers, which the command carries, or None (the
+        command carries ``now_ns``).
+        """
+        self.publish_command(out, answered_ns if answered_ns is not None else now_ns)
+        if now_ns >= self._next_forces_ns:
+            self.publish_forces(out, now_ns)
+
+    def publish_forces(self, out, now_ns: int) -> None:
+        """Publish the estimated and target force of ``out``, stamped ``now_ns`` (ns)."""
+        self._next_forces_ns = now_ns + self._forces_period_ns
+        sec, nanosec = divmod(now_ns, 1_000_000_000)
         est = self._estimate_msg
-        est.header.stamp = stamp_msg
+        est.header.stamp.sec, est.header.stamp.nanosec = sec, nanosec
         est.wrench.force.z = out.estimated_force
         est.wrench.force.x = out.pull_out_force
         target = self._target_msg
-        target.header.stamp = stamp_msg
+        target.header.stamp.sec, target.header.stamp.nanosec = sec, nanosec
         target.wrench.force.z = out.target_force
-        self.forces_pending = True
-        if not self.defer_forces:
-            self.publish_forces()
+        self._estimate_pub.publish(est)
+        self._target_pub.publish(target)
 
-    def publish_forces(self) -> None:
-        """Estimated and target force of the last step (stamped with its time)."""
-        self.forces_pending = False
-        self._estimate_pub.publish(self._estimate_msg)
-        self._target_pub.publish(self._target_msg)
-
-    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
-        """Send the step's command (the profile's topic and unit)."""
+    def publish_command(self, out, stamp_ns: int) -> None:
+        """Send the step's command (the profile's topic and unit), stamped ``stamp_ns`` (ns)."""
         raise NotImplementedError
 
     # ------------------------------------------------------------------ state
@@ -212,54 +228,70 @@ class CrtkControllerIO(ControllerIO):
 
     def __init__(self, node, params, names: topics.TopicSet):
         super().__init__(node, params, names)
-        self.subscribe(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS)
-        self.subscribe(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS)
+        self.subscribe(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS,
+                       raw=True)
+        self.subscribe(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS, raw=True)
         self._servo_pub = self.publisher(JointState, names.command, STATE_PUB_QOS)
-        self._servo_msg = JointState(name=[topics.DRUM_JOINT], effort=[0.0])
+        self._servo = JointStateWriter([topics.DRUM_JOINT], ('effort',))
 
-    def _on_instrument(self, msg: JointState) -> None:
+    def _on_instrument(self, data: bytes) -> None:
+        """Joint state: wrist and jaw; with the drum too (combined), the step runs on it."""
         node = self.node
         now = node.now()
-        fields = ('position', 'velocity') if len(msg.velocity) else ('position',)
+        combined = False
         try:
-            joints = read_joints(msg, _INSTRUMENT_JOINTS, fields)
+            msg = JointStateData(data)
+            combined = len(msg.name) == 3
+            fields = ('position', 'velocity') if len(msg.velocity) else ('position',)
+            joints = read_joints(msg, _STATE_JOINTS if combined else _INSTRUMENT_JOINTS, fields)
+            if combined:
+                current = _drum_effort(msg)
         except InputRejected as exc:
-            return node.reject('instrument', now, exc)
-        if self.forces_pending:         # the loop has closed (the instrument sent its joints)
-            self.publish_forces()
+            node.reject('instrument', now, exc)
+            if combined:
+                node.reject('actuator', now, exc)
+                node.on_state(None)
+            return
         wrist, jaw = joints[topics.WRIST_JOINT], joints[topics.JAW_JOINT]
         jaw_velocity = jaw[1] if len(jaw) > 1 else 0.0
-        node.report(node.inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity,
-                                               stamp_seconds(msg.header.stamp)))
+        stamp = msg.stamp
+        inputs = node.inputs
+        node.report(inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity, stamp))
+        if not combined:
+            return
+        drum = joints[topics.DRUM_JOINT]
+        node.report(inputs.set_actuator(now, current - self.current_offset, drum[0],
+                                        drum[1] if len(drum) > 1 else 0.0, stamp))
+        fresh = inputs.actuator_time == now and stamp != 0.0
+        node.on_state(msg.sec * 1_000_000_000 + msg.nanosec if fresh else None)
 
-    def _on_actuator(self, msg: JointState) -> None:
+    def _on_actuator(self, data: bytes) -> None:
         """Actuator state: store it and run the control step on it (event-driven loop)."""
-        fresh = self._read_actuator(msg)
-        self.node.on_state(msg.header.stamp if fresh else None)
+        self.node.on_state(self._read_actuator(data))
 
-    def _read_actuator(self, msg: JointState) -> bool:
-        """Store the actuator state; True if it was accepted as a new, stamped sample."""
+    def _read_actuator(self, data: bytes) -> int | None:
+        """Store the actuator state; its stamp (ns) if it was accepted as a new, stamped sample."""
         node = self.node
         now = node.now()
-        fields = ('effort', 'position', 'velocity') if len(msg.velocity) else ('effort', 'position')
         try:
+            msg = JointStateData(data)
+            fields = _DRUM_FIELDS if len(msg.velocity) else _DRUM_FIELDS[:2]
             (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
         except InputRejected as exc:
             node.reject('actuator', now, exc)
-            return False
+            return None
         velocity = drum[2] if len(drum) > 2 else 0.0
-        stamp = stamp_seconds(msg.header.stamp)
+        stamp = msg.stamp
         inputs = node.inputs
         node.report(inputs.set_actuator(now, drum[0] - self.current_offset, drum[1], velocity, stamp))
         # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
-        return inputs.actuator_time == now and stamp != 0.0
+        fresh = inputs.actuator_time == now and stamp != 0.0
+        return msg.sec * 1_000_000_000 + msg.nanosec if fresh else None
 
-    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
+    def publish_command(self, out, stamp_ns: int) -> None:
         """Send the current command (A) on ``instrument/actuator/servo_jf``."""
-        servo = self._servo_msg
-        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
-        servo.effort[0] = out.current_command
-        self._servo_pub.publish(servo)
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        self._servo_pub.publish(self._servo.write(sec, nanosec, (out.current_command,)))
 
 
 class DvrkControllerIO(ControllerIO):
@@ -349,7 +381,8 @@ class DvrkControllerIO(ControllerIO):
         node.report(inputs.set_actuator(now, self.conversion.current(jaw[1]) - self.current_offset,
                                         stamp=stamp))
         fresh = inputs.actuator_time == now and stamp != 0.0
-        node.on_state(msg.header.stamp if fresh else None)
+        node.on_state(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                      if fresh else None)
 
     def _on_operating_state(self, msg) -> None:
         stamp = stamp_seconds(msg.header.stamp)
@@ -414,15 +447,7 @@ class DvrkControllerIO(ControllerIO):
         return arm_interlock(self.arm, self.state, self.is_homed, self.is_busy)
 
     # ------------------------------------------------------------------ outputs
-    def publish(self, out, stamp_msg, answered_stamp=None) -> None:
-        """Send the step's effort (only to a ready arm), then its forces at once.
-
-        At the dVRK's 100 Hz nothing is gained by deferring the forces after the command.
-        """
-        super().publish(out, stamp_msg, answered_stamp)
-        self.publish_forces()
-
-    def publish_command(self, out, stamp_msg, answered_stamp=None) -> None:
+    def publish_command(self, out, stamp_ns: int) -> None:
         """Send the jaw effort (N*m) on ``<arm>/jaw/servo_jf`` while the arm is ready."""
         if self.interlock() is not None:
             self.withheld += 1          # a disabled arm gets nothing (servo_jf takes over the jaw)
@@ -430,7 +455,7 @@ class DvrkControllerIO(ControllerIO):
         effort = self.conversion.effort(out.current_command)
         limit = self.effort_limit       # the current limit already keeps it inside; rounding
         servo = self._servo_msg
-        servo.header.stamp = answered_stamp if answered_stamp is not None else stamp_msg
+        servo.header.stamp.sec, servo.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
         servo.effort[0] = limit if effort > limit else (-limit if effort < -limit else effort)
         self._servo_pub.publish(servo)
 
@@ -442,6 +467,22 @@ class DvrkControllerIO(ControllerIO):
                 'wrist_joint': self.wrist_joint or 'none yet',
                 'commands_withheld': str(self.withheld),
                 'enable_requested': str(self.requested).lower()}
+
+
+def _drum_effort(msg) -> float:
+    """Return the drum's effort (measured current, A) of a combined state; only its is read.
+
+    Raises
+    ------
+    InputRejected
+        No effort for every joint, or the drum's is not finite.
+    """
+    if len(msg.effort) != len(msg.name):
+        raise InputRejected(f'effort has {len(msg.effort)} values for {len(msg.name)} joints')
+    current = msg.effort[msg.name.index(topics.DRUM_JOINT)]
+    if not math.isfinite(current):
+        raise InputRejected(f"effort of '{topics.DRUM_JOINT}' is {current}")
+    return current
 
 
 def inputs_timeout(node) -> float:

@@ -18,8 +18,10 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import STATE_PUB_QOS, joint_state, run_node
+from grip_force_ros.nodes.common import STATE_PUB_QOS, run_node
+from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
+from grip_force_ros.nodes.wire import JointStateWriter
 from grip_force_ros.trajectories import MASTER_SPECS, Trajectory, make_trajectory
 
 #: How long after the end of the trajectory an ``exit_when_done`` master keeps publishing (s).
@@ -32,12 +34,15 @@ class MasterNode(Node):
     def __init__(self, **kwargs):
         super().__init__('master', **kwargs)
         self.finished = Future()
-        self._param = declare_node_parameters(self, groups=('interface',), extra_specs=MASTER_SPECS,
+        self._param = declare_node_parameters(self, groups=('interface', 'realtime'),
+                                              extra_specs=MASTER_SPECS,
                                               on_update=self._on_params, check=self._check)
         self.trajectory: Trajectory = self._build(self._values())
         params = self._param.params
         self.topic = topics.topic_set(params.interface, params.arm, params.master).master_js
         self._pub = self.create_publisher(JointState, self.topic, STATE_PUB_QOS)
+        # serialized once; each tick writes its stamp and values in place (nodes/wire.py)
+        self._msg = JointStateWriter([topics.MASTER_JOINT], ('position', 'velocity'))
         self._start = time.monotonic()
         self._started = False            # trajectory clock running (see start_when_subscribed)
         self._last_phase = None
@@ -94,11 +99,11 @@ class MasterNode(Node):
         velocity = 0.0
         if 0.0 < t < traj.duration:
             velocity = (traj.angle(t + dt) - traj.angle(t - dt)) / (2 * dt)
-        self._pub.publish(joint_state(self.get_clock().now().to_msg(), [topics.MASTER_JOINT],
-                                      [angle], [velocity]))
+        sec, nanosec = divmod(self.get_clock().now().nanoseconds, 1_000_000_000)
+        self._pub.publish(self._msg.write(sec, nanosec, (angle,), (velocity,)))
         phase = traj.phase(t)
         if phase != self._last_phase:
-            self.get_logger().info(f'phase {phase} at t={t:.2f} s, master angle {angle:.3f} rad')
+            loop_log(self).put('info', f'phase {phase} at t={t:.2f} s, master angle {angle:.3f} rad')
             self._last_phase = phase
         if self._param.value('exit_when_done') and not self._param.value('repeat') \
                 and t > traj.duration + EXIT_GRACE and not self.finished.done():

@@ -13,16 +13,17 @@ simulation by the time actually elapsed since the last step (capped at
 :data:`MAX_STEP` or 2.5 periods, so a stalled process slows the simulation instead of
 integrating one huge step), with the last accepted current command held.
 Publishes each step's measurements, all with the same stamp (the time of the
-measurement), at once, in this order:
-    instrument/measured_js            wrist_pitch, jaw: position (rad), velocity (rad/s)
+measurement), at once, in this order (``state_message: combined``, the default):
     grip/measured_force               force.z = load-cell grip force (N)
-    instrument/actuator/measured_js   jaw_drum: position (rad), velocity (rad/s),
-                                      effort = measured current (A)
-        last: the controller steps on it, so the step finds the jaw angle and load cell of
-        the same sample (sending those two only after the answering command shortened the
-        round trip but made the step use them one period old: BENCHMARKS.md, "Full path").
+    instrument/measured_js            wrist_pitch, jaw, jaw_drum: position (rad), velocity
+                                      (rad/s); effort of jaw_drum = measured current (A),
+                                      of the joints NaN (not measured)
+        last: the controller steps on it, so the step finds the load cell of the same
+        sample. ``state_message: split`` sends the joints (wrist_pitch, jaw) on
+        instrument/measured_js, the load cell, then the drum on
+        instrument/actuator/measured_js, on which the controller steps.
 and its status on ``/diagnostics`` at 1 Hz, with the loop's round trip over the
-last second: a command that carries the stamp of an actuator state it answers
+last second: a command that carries the stamp of a state it answers
 (the controller's convention) took arrival minus stamp, both on this node's clock
 (:class:`~grip_force_ros.sim.loop_latency.LoopLatency`).
 
@@ -47,13 +48,14 @@ from rclpy.task import Future
 
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, run_node
+from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.nodes.sim_io import sim_io
 from grip_force_ros.sim import InstrumentSim
 from grip_force_ros.sim.drive import CommandTimeout
 from grip_force_ros.sim.loop_latency import LoopLatency
 
-GROUPS = ('instrument', 'limits', 'sim', 'effects', 'interface')
+GROUPS = ('instrument', 'limits', 'sim', 'effects', 'interface', 'realtime')
 #: Largest simulated step per timer period (s), at least :data:`MAX_STEP_PERIODS` publish
 #: periods; longer stalls slow the simulation down.
 MAX_STEP = 0.01
@@ -126,7 +128,7 @@ class SimInstrumentNode(Node):
         self.loop.command_received(stamp_ns, self.get_clock().now().nanoseconds)
         self.rejected += 1
         self.last_rejection = reason
-        self.get_logger().warning(reason, throttle_duration_sec=1.0)
+        loop_log(self).put('warning', reason, throttle=1.0)
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, params, changed) -> None:
@@ -161,7 +163,7 @@ class SimInstrumentNode(Node):
             self.current_command = 0.0
         self.sim.step(self.current_command, dt)
         stamp = self.get_clock().now()
-        self.io.publish_state(self.sim.measure(), stamp.to_msg())
+        self.io.publish_state(self.sim.measure(), stamp.nanoseconds)
         self.loop.state_published(stamp.nanoseconds)
 
     def _check_drive(self) -> None:
@@ -200,8 +202,8 @@ class SimInstrumentNode(Node):
         self.current_command = 0.0       # the cut first, then the words
         if live:
             self.live_cuts += 1
-        self.get_logger().warning(
-            f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
+        loop_log(self).put(
+            'warning', f'no command for {self.drive.last_silence * 1e3:.1f} ms (command timeout '
             f'{self.drive.timeout * 1e3:g} ms): drive current cut from {held:.4f} A '
             f'to 0 A{starved}')
         if live:

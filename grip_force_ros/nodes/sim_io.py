@@ -6,9 +6,10 @@ command and its drive-side timeout, and publishes /diagnostics; the profile obje
 
 ``crtk`` (:class:`CrtkSimIO`)
     command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A); sensors
-    ``instrument/measured_js`` and ``grip/measured_force``, then
-    ``instrument/actuator/measured_js`` (the controller steps on it, with the jaw angle and
-    load cell of the same sample).
+    ``grip/measured_force``, then ``instrument/measured_js`` with the joints and the drum
+    (``state_message: combined``; the controller steps on it, with the load cell of the same
+    sample), or the joints there, the load cell, then the drum on
+    ``instrument/actuator/measured_js`` (``split``).
 ``dvrk`` (:class:`DvrkSimIO`): the sim as a dVRK PSM named ``arm``
     command ``<arm>/jaw/servo_jf`` (jaw, effort = jaw effort, N*m; turned into the motor
     current with the dVRK's conversion, :mod:`grip_force_ros.model.dvrk_jaw`), taken only
@@ -27,6 +28,7 @@ command and its drive-side timeout, and publishes /diagnostics; the profile obje
 from __future__ import annotations
 
 from geometry_msgs.msg import WrenchStamped
+from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
@@ -34,9 +36,13 @@ from grip_force_ros.model.dvrk_jaw import JawEffortConversion
 from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
     stamp_nanoseconds
 from grip_force_ros.nodes.dvrk_msgs import crtk_msgs
+from grip_force_ros.nodes.wire import JointStateData, JointStateWriter, WrenchWriter
 from grip_force_ros.sim.drive import ArmState
 
 _COMMAND_JOINTS = (topics.DRUM_JOINT,)
+#: The crtk state's joints: the wrist and the jaw, then the drum (combined: one message).
+_STATE_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT)
+_NAN = float('nan')
 _JAW_JOINTS = (topics.JAW_JOINT,)
 
 
@@ -76,61 +82,60 @@ class SimIO:
 
 
 class CrtkSimIO(SimIO):
-    """The ``crtk`` profile: this package's topics, the current in A."""
+    """The ``crtk`` profile: this package's topics, the current in A.
+
+    The 1 kHz messages go as serialized bytes (:mod:`~grip_force_ros.nodes.wire`): the
+    command is read from them, the sensors are written into them.
+    """
 
     interface = 'crtk'
-    #: True: the joint state and load cell of a step go out once the command answering its
-    #: actuator state came in (the control step then uses them one period old); False: before
-    #: the actuator state, so the step on it uses all three of one sample. The benchmark's A/B
-    #: switch (``grip_force_ros.bench.order_ab``, BENCHMARKS.md), not a parameter.
-    defer_sensors = False
 
     def __init__(self, node, params, names: topics.TopicSet):
         super().__init__(node, params, names)
-        node.create_subscription(JointState, names.command, self._on_command, STATE_SUB_QOS)
+        node.create_subscription(JointState, names.command, self._on_command, STATE_SUB_QOS,
+                                 raw=True)
+        self.combined = params.state_message == 'combined'
         self._joint_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
+        self._force = WrenchWriter(topics.JAW_FRAME)
+        if self.combined:
+            self._state = JointStateWriter(_STATE_JOINTS, ('position', 'velocity', 'effort'))
+            return
         self._actuator_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
-        self._joint_msg = JointState(name=[topics.WRIST_JOINT, topics.JAW_JOINT],
-                                     position=[0.0, 0.0], velocity=[0.0, 0.0])
-        self._actuator_msg = JointState(name=[topics.DRUM_JOINT], position=[0.0],
-                                        velocity=[0.0], effort=[0.0])
-        self.sensors_pending = False   # joint state and force of the last step not yet sent
+        self._joints = JointStateWriter(_STATE_JOINTS[:2], ('position', 'velocity'))
+        self._actuator = JointStateWriter(_STATE_JOINTS[2:], ('position', 'velocity', 'effort'))
 
-    def _on_command(self, msg: JointState) -> None:
-        stamp = stamp_nanoseconds(msg.header.stamp)
+    def _on_command(self, data: bytes) -> None:
+        try:
+            msg = JointStateData(data)
+        except InputRejected as exc:
+            self.node.refuse(f'rejected current command: {exc}', 0)
+            return
+        stamp = msg.sec * 1_000_000_000 + msg.nanosec
         try:
             (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
         except InputRejected as exc:
             self.node.refuse(f'rejected current command: {exc}', stamp)
             return
         self.node.accept(current, stamp)
-        if self.sensors_pending:
-            self.publish_sensors()
 
-    def publish_state(self, m, stamp) -> None:
-        """Publish a step's sensors: joint state and load cell first, or once answered."""
-        if self.sensors_pending:        # no answer to the previous state came: now
-            self.publish_sensors()
-        js = self._joint_msg
-        js.header.stamp = stamp
-        js.position[0], js.position[1] = m.wrist_angle, m.jaw_angle
-        js.velocity[1] = m.jaw_velocity
-        force = self._force_msg
-        force.header.stamp = stamp
-        force.wrench.force.z = m.grip_force
-        if not self.defer_sensors:      # the step on the actuator state finds them in
-            self.publish_sensors()
-        act = self._actuator_msg
-        act.header.stamp = stamp
-        act.position[0], act.velocity[0], act.effort[0] = m.motor_angle, m.motor_velocity, m.current
-        self._actuator_pub.publish(act)
-        self.sensors_pending = self.defer_sensors   # sent once the answering command is in
+    def publish_state(self, m, stamp_ns: int) -> None:
+        """Publish a step's sensors, stamped ``stamp_ns`` (ns): the load cell, then the state.
 
-    def publish_sensors(self) -> None:
-        """Joint state and load cell of the last step (stamped with the actuator state's time)."""
-        self.sensors_pending = False
-        self._joint_pub.publish(self._joint_msg)
-        self._force_pub.publish(self._force_msg)
+        The message the controller steps on goes last (the combined state, or the actuator
+        state after the joints), so the step finds the load cell of the same sample in.
+        """
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        if self.combined:
+            self._force_pub.publish(self._force.write(sec, nanosec, (0.0, 0.0, m.grip_force)))
+            self._joint_pub.publish(self._state.write(
+                sec, nanosec, (m.wrist_angle, m.jaw_angle, m.motor_angle),
+                (0.0, m.jaw_velocity, m.motor_velocity), (_NAN, _NAN, m.current)))
+            return
+        self._joint_pub.publish(self._joints.write(sec, nanosec, (m.wrist_angle, m.jaw_angle),
+                                                   (0.0, m.jaw_velocity)))
+        self._force_pub.publish(self._force.write(sec, nanosec, (0.0, 0.0, m.grip_force)))
+        self._actuator_pub.publish(self._actuator.write(sec, nanosec, (m.motor_angle,),
+                                                        (m.motor_velocity,), (m.current,)))
 
 
 class DvrkSimIO(SimIO):
@@ -238,8 +243,9 @@ class DvrkSimIO(SimIO):
         node.accept(self.conversion.current(effort), stamp)
 
     # ------------------------------------------------------------------ sensors
-    def publish_state(self, m, stamp) -> None:
+    def publish_state(self, m, stamp_ns: int) -> None:
         """Publish a step's arm joints and load cell, then the jaw (the controller steps on it)."""
+        stamp = Time(nanoseconds=stamp_ns).to_msg()
         arm = self._arm_msg
         arm.header.stamp = stamp
         arm.position[self._wrist_index] = m.wrist_angle

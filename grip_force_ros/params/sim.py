@@ -33,6 +33,14 @@ SIM = [
          'Rate at which the simulated instrument node steps and publishes its sensors '
          '(dvrk profile: 100 Hz by default, the dVRK\'s ROS rate).',
          min=1.0, max=10000.0),
+    _sim('state_message', 'string', 'combined', '',
+         "crtk profile: how the instrument's state goes out each period. 'combined': one "
+         'instrument/measured_js with wrist_pitch, jaw and jaw_drum (position, velocity; the '
+         "drum's effort = measured current, A; the joints' effort NaN, not measured), as a "
+         "drive's one frame carries its joints and its actuator; 'split': the joints on "
+         'instrument/measured_js and the drum on instrument/actuator/measured_js. The '
+         'controller steps on either (the combined message, or the actuator state).',
+         choices=('combined', 'split'), read_only=True),
     _sim('command_timeout', 'double', 0.03, 's',
          'Drive-side command timeout: with no current command (crtk) or jaw effort (dvrk) for '
          'this long, the drive sets the current to 0 A and reports it (/diagnostics, a log '
