@@ -7,11 +7,14 @@ import pytest
 from geometry_msgs.msg import WrenchStamped
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from rosbags.typesys import Stores, get_typestore
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 
 from grip_force_ros.nodes.common import InputRejected, read_joints
 from grip_force_ros.nodes.wire import FIELDS, JointStateData, JointStateWriter, WrenchWriter, read_wrench
+
+ROSBAGS = get_typestore(Stores.ROS2_JAZZY)
 
 _names = st.lists(st.text(st.characters(min_codepoint=97, max_codepoint=122), min_size=1,
                           max_size=13), min_size=0, max_size=7, unique=True)
@@ -51,6 +54,10 @@ def test_the_writer_gives_the_bytes_rclpy_reads_back(names, frame, stamp, data):
     assert msg.header.frame_id == frame and list(msg.name) == names
     for field in FIELDS:
         assert list(getattr(msg, field)) == values.get(field, [])
+    # a strict CDR reader (a bag's) takes the bytes too: no trailing room
+    bagged = ROSBAGS.deserialize_cdr(writer.write(*stamp, *values.values()),
+                                     'sensor_msgs/msg/JointState')
+    assert list(bagged.name) == names and bagged.header.stamp.nanosec == stamp[1]
 
 
 def test_nan_goes_through_and_read_joints_refuses_it_as_for_a_message():
@@ -76,8 +83,9 @@ def test_a_wrench_reads_and_writes_as_rclpy_does():
     msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
     msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = 0.5, -1.0, 2.5
     assert read_wrench(serialize_message(msg)) == (pytest.approx(12.000000345), 0.5, -1.0, 2.5)
-    back = deserialize_message(WrenchWriter('jaw').write(12, 345, (0.5, -1.0, 2.5), (0.0, 0.0, 0.1)),
-                               WrenchStamped)
+    data = WrenchWriter('jaw').write(12, 345, (0.5, -1.0, 2.5), (0.0, 0.0, 0.1))
+    back = deserialize_message(data, WrenchStamped)
+    assert ROSBAGS.deserialize_cdr(data, 'geometry_msgs/msg/WrenchStamped').wrench.force.z == 2.5
     assert back.header.frame_id == 'jaw' and back.wrench.force.z == 2.5
     assert back.wrench.torque.z == 0.1 and back.header.stamp.nanosec == 345
     with pytest.raises(InputRejected, match='not a serialized WrenchStamped'):

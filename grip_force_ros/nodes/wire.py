@@ -57,7 +57,7 @@ class JointStateData:
     """
 
     __slots__ = ('sec', 'nanosec', 'frame_id', 'name', 'position', 'velocity', 'effort',
-                 'offsets')
+                 'offsets', 'end')
 
     def __init__(self, data: bytes):
         try:
@@ -89,11 +89,12 @@ class JointStateData:
         except (struct.error, UnicodeDecodeError, MemoryError, OverflowError) as exc:
             raise InputRejected(f'not a serialized JointState ({exc})') from None
         self.position, self.velocity, self.effort = arrays
-        self.offsets = offsets
+        self.offsets = offsets      # bytes from the start: each field's first value
+        self.end = offset           # bytes from the start: the end of the last field
 
     @property
     def stamp(self) -> float:
-        """Header stamp (s); 0.0 when unset."""
+        """Return the header time in seconds (0.0 when unset)."""
         return self.sec + self.nanosec * 1e-9
 
 
@@ -127,8 +128,11 @@ class JointStateWriter:
         msg.header.frame_id = frame_id
         for field in self.fields:
             setattr(msg, field, [0.0] * n)
-        self._buffer = bytearray(serialize_message(msg))
-        parsed = JointStateData(bytes(self._buffer))
+        data = serialize_message(msg)
+        parsed = JointStateData(data)
+        # rclpy's buffer may run past the message (room reserved for empty sequences); a
+        # strict reader (rosbags) takes the message's own length, padded to 4 bytes
+        self._buffer = bytearray(data[:_align(parsed.end, 4)])
         starts = [parsed.offsets[FIELDS.index(f)] for f in self.fields]
         # one pack of the stamp, one of each field's doubles
         self._values = [(struct.Struct(f'<{n}d'), start) for start in starts]
