@@ -13,9 +13,9 @@ import pytest
 from _ros_tools import require_ros_tools
 from grip_force_ros.control.inputs import TIMEOUT_PARAMS
 from grip_force_ros.faults import dvrk
-from grip_force_ros.faults.catalogue import OUTCOMES, catalogue
-from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, _master_case, _Probe, dvrk_cases,
-                                        lines_since, run_process_cases)
+from grip_force_ros.faults.catalogue import OUTCOMES, catalogue, dvrk_cases
+from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, _master_case, _Probe, lines_since,
+                                        run_process_cases)
 from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros

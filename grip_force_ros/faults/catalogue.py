@@ -478,9 +478,28 @@ def _param_file_cases() -> list[FaultCase]:
     ]
 
 
+def dvrk_cases() -> list[FaultCase]:
+    """Return the fault cases of the dVRK interface and the drive (kind 'process').
+
+    They run on real node processes (:mod:`grip_force_ros.faults.dvrk`).
+    """
+    C = FaultCase
+    return [
+        C('controller_sigkill_crtk', 'process', 'the controller process is killed (SIGKILL) '
+          'mid-grasp, crtk profile', 'drive_cut', reason=r'command timeout'),
+        C('controller_sigkill_dvrk', 'dvrk interface', 'the controller process is killed (SIGKILL) '
+          'mid-grasp, dvrk profile', 'drive_cut', reason=r'command timeout'),
+        C('arm_disabled_mid_grasp', 'dvrk interface', "state_command 'disable' to the arm "
+          'mid-grasp', 'arm_interlock', reason=r'is DISABLED, not ENABLED'),
+        C('current_on_effort_topic', 'dvrk interface', 'a current-sized number (0.3) on '
+          'jaw/servo_jf, wrong units', 'effort_refused', reason=r'beyond the tool limit'),
+        C('dvrk_master_silent', 'dvrk interface', 'the master MTML stops publishing (SIGSTOP) '
+          'mid-grasp, dvrk profile', 'stale_safe', reason=r'stale master'),
+    ]
+
+
 def catalogue() -> list[FaultCase]:
     """Every fault case, message faults first."""
-    from grip_force_ros.faults.dvrk import dvrk_cases   # its cases run node processes
     cases = _message_cases() + _param_set_cases() + _param_file_cases() + dvrk_cases()
     names = [c.name for c in cases]
     if len(set(names)) != len(names):  # pragma: no cover - a programming error

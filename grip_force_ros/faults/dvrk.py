@@ -83,23 +83,6 @@ REACTION_SLACK = 0.05
 SIM_DIAGNOSTICS_WAIT = 5.0
 
 
-def dvrk_cases() -> list[FaultCase]:
-    """Return the fault cases of the dVRK interface and the drive (kind 'process')."""
-    C = FaultCase
-    return [
-        C('controller_sigkill_crtk', 'process', 'the controller process is killed (SIGKILL) '
-          'mid-grasp, crtk profile', 'drive_cut', reason=r'command timeout'),
-        C('controller_sigkill_dvrk', 'dvrk interface', 'the controller process is killed (SIGKILL) '
-          'mid-grasp, dvrk profile', 'drive_cut', reason=r'command timeout'),
-        C('arm_disabled_mid_grasp', 'dvrk interface', "state_command 'disable' to the arm "
-          'mid-grasp', 'arm_interlock', reason=r'is DISABLED, not ENABLED'),
-        C('current_on_effort_topic', 'dvrk interface', 'a current-sized number (0.3) on '
-          'jaw/servo_jf, wrong units', 'effort_refused', reason=r'beyond the tool limit'),
-        C('dvrk_master_silent', 'dvrk interface', 'the master MTML stops publishing (SIGSTOP) '
-          'mid-grasp, dvrk profile', 'stale_safe', reason=r'stale master'),
-    ]
-
-
 class _Probe:
     """Records the sim's states, the commands and /diagnostics in this process (rclpy)."""
 
@@ -502,7 +485,7 @@ _RUN = {'controller_sigkill_crtk': ('crtk', _kill_case),
 
 
 def run_process_case(case: FaultCase, config: Path, log_root: Path) -> dict:
-    """Run one case of :func:`dvrk_cases` on fresh processes; the report's detail dict."""
+    """Run one case of :func:`~grip_force_ros.faults.catalogue.dvrk_cases` on fresh processes; the report's detail dict."""
     detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
               'description': case.description}
     interface, body = _RUN[case.name]
@@ -554,4 +537,4 @@ def run_process_cases(cases: list[FaultCase], config: Path, progress=None) -> li
     return details
 
 
-__all__ = ['dvrk_cases', 'run_process_case', 'run_process_cases', 'KILL_TO_ZERO']
+__all__ = ['run_process_case', 'run_process_cases', 'KILL_TO_ZERO']
