@@ -75,6 +75,76 @@ def edges() -> list[tuple[str, str, str]]:
     return out
 
 
+def module_name(path: Path) -> str:
+    """'grip_force_ros.faults.dvrk' for grip_force_ros/faults/dvrk.py, 'grip_force_ros.faults' for its __init__."""
+    parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def module_graph() -> dict[str, set[str]]:
+    """Module of the package -> the package's modules it imports (at the top or in a function).
+
+    ``from grip_force_ros.faults import runner`` imports the module ``grip_force_ros.faults.runner``;
+    ``from grip_force_ros.faults.catalogue import FaultCase`` the module ``grip_force_ros.faults.catalogue``.
+    A package's ``__init__`` is a module of its own; importing a submodule runs it too, but that
+    implicit step is left out (every ``__init__`` that re-exports its submodules would close a loop).
+    """
+    paths = {module_name(p): p for p in PACKAGE.rglob('*.py')}
+    graph = {}
+    for name, path in paths.items():
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets |= {alias.name for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                targets |= {f'{node.module}.{alias.name}' if f'{node.module}.{alias.name}' in paths
+                            else node.module for alias in node.names}
+        graph[name] = {t for t in targets if t in paths and t != name}
+    return graph
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One import loop per strongly connected component of ``graph`` with more than one module."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):                                   # Tarjan's algorithm
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_package_has_no_import_cycle():
+    graph = module_graph()
+    assert len(graph) > 100 and 'grip_force_ros.faults.dvrk' in graph['grip_force_ros.faults.runner']
+    assert cycles(graph) == []
+
+
+def test_the_cycle_check_finds_a_loop():
+    graph = {'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}
+    assert cycles(graph) == [['a', 'b', 'c']]
+
+
 def test_every_part_is_in_the_table():
     parts = {part_of(p) for p in PACKAGE.rglob('*.py')
              if not (p.parent == PACKAGE and p.stem in ('__init__', '__main__'))}

@@ -26,7 +26,7 @@ from grip_force_ros.params.instrument import INSTRUMENT, LIMITS
 from grip_force_ros.params.interface import (DVRK_CONTROLLER, INTERFACE, check_interface,
                                              with_profile_defaults)
 from grip_force_ros.params.realtime import REALTIME
-from grip_force_ros.params.schema import ParameterError, ParamSet, ParamSpec, markdown_table, validate
+from grip_force_ros.params.schema import ParameterError, ParamSpec, markdown_table, validate
 from grip_force_ros.params.sim import EFFECTS, SIM, check_sim
 
 SCHEMA: tuple[ParamSpec, ...] = tuple(INSTRUMENT + LIMITS + CONTROLLER + DVRK_CONTROLLER + SIM
@@ -38,6 +38,44 @@ if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
 __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
            'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency',
            'DEFAULT_INSTRUMENT', 'instrument_path', 'list_instruments', 'markdown_table']
+
+
+class ParamSet(Mapping):
+    """Validated parameter values with attribute access (``p.drum_radius``).
+
+    Immutable. Build one with :func:`make_params` or :func:`load_params_file`; derive a
+    changed copy with :meth:`replace`.
+    """
+
+    __slots__ = ('_values',)
+
+    def __init__(self, values: Mapping[str, Any]):
+        object.__setattr__(self, '_values', dict(values))
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self._values[name]
+        except KeyError:
+            raise AttributeError(f'no parameter {name!r}') from None
+
+    def __setattr__(self, name, value):
+        raise AttributeError('ParamSet is immutable; use replace()')
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def replace(self, **changes: Any) -> 'ParamSet':
+        """Return a validated copy with ``changes`` applied."""
+        return make_params({**self._values, **changes})
+
+    def __repr__(self) -> str:
+        return f'ParamSet({self._values!r})'
 
 
 def specs_in(*groups: str) -> list[ParamSpec]:

@@ -125,46 +125,6 @@ class ParamSpec:
                 f'[{self.min}, {self.max}] {self.unit}')
 
 
-class ParamSet(Mapping):
-    """Validated parameter values with attribute access (``p.drum_radius``).
-
-    Immutable. Build one with :func:`grip_force_ros.params.make_params` or
-    :func:`grip_force_ros.params.load_params_file`; derive a changed copy with
-    :meth:`replace`.
-    """
-
-    __slots__ = ('_values',)
-
-    def __init__(self, values: Mapping[str, Any]):
-        object.__setattr__(self, '_values', dict(values))
-
-    def __getattr__(self, name: str) -> Any:
-        try:
-            return self._values[name]
-        except KeyError:
-            raise AttributeError(f'no parameter {name!r}') from None
-
-    def __setattr__(self, name, value):
-        raise AttributeError('ParamSet is immutable; use replace()')
-
-    def __getitem__(self, key: str) -> Any:
-        return self._values[key]
-
-    def __iter__(self):
-        return iter(self._values)
-
-    def __len__(self) -> int:
-        return len(self._values)
-
-    def replace(self, **changes: Any) -> 'ParamSet':
-        """Return a validated copy with ``changes`` applied."""
-        from grip_force_ros.params import make_params  # avoid an import cycle
-        return make_params({**self._values, **changes})
-
-    def __repr__(self) -> str:
-        return f'ParamSet({self._values!r})'
-
-
 def validate(specs: Iterable[ParamSpec], values: Mapping[str, Any], *,
              allow_unknown: bool = False) -> dict[str, Any]:
     """Check ``values`` against ``specs`` and fill in defaults.
