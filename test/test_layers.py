@@ -76,7 +76,7 @@ def edges() -> list[tuple[str, str, str]]:
 
 
 def module_name(path: Path) -> str:
-    """'grip_force_ros.faults.dvrk' for grip_force_ros/faults/dvrk.py, 'grip_force_ros.faults' for its __init__."""
+    """'grip_force_ros.faults.dvrk' for faults/dvrk.py, 'grip_force_ros.faults' for faults/__init__.py."""
     parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
     return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
 

@@ -485,7 +485,10 @@ _RUN = {'controller_sigkill_crtk': ('crtk', _kill_case),
 
 
 def run_process_case(case: FaultCase, config: Path, log_root: Path) -> dict:
-    """Run one case of :func:`~grip_force_ros.faults.catalogue.dvrk_cases` on fresh processes; the report's detail dict."""
+    """Run one case of :func:`~grip_force_ros.faults.catalogue.dvrk_cases` on fresh processes.
+
+    Returns the report's detail dict.
+    """
     detail = {'name': case.name, 'category': case.category, 'outcome': case.outcome,
               'description': case.description}
     interface, body = _RUN[case.name]
