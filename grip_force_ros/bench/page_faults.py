@@ -7,8 +7,8 @@ a ``--seconds`` window: minor and major page faults and CPU time in the window, 
 of the start-up, resident and locked memory (MiB). One JSON line on stdout.
 docs/ros_interface.md ("Real-time settings") gives the figures it measured::
 
-    ROS_DOMAIN_ID=59 .venv/bin/python tools/page_faults.py --lock on --seconds 20
-    ROS_DOMAIN_ID=59 .venv/bin/python tools/page_faults.py --lock off --seconds 20
+    ROS_DOMAIN_ID=59 .venv/bin/python -m grip_force_ros.bench.page_faults --lock on --seconds 20
+    ROS_DOMAIN_ID=59 .venv/bin/python -m grip_force_ros.bench.page_faults --lock off --seconds 20
 """
 from __future__ import annotations
 
@@ -16,14 +16,11 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from grip_force_ros.nodes.processes import node_command, ros_environment  # noqa: E402
-from grip_force_ros.params.files import instrument_path  # noqa: E402
+from grip_force_ros.nodes.processes import node_command, ros_environment
+from grip_force_ros.params.files import instrument_path
 
 NODES = ('sim_instrument', 'controller', 'master')
 
