@@ -264,15 +264,14 @@ def native_stacks(pid: int, timeout: float = 60.0) -> str:
 #: Fast DDS's deadlock of a participant's own threads (eProsima/Fast-DDS#6502, open): a
 #: receive thread, removing a remote writer under the PDP mutex, waits in ``unregister_timer``
 #: for the event thread, which waits for that mutex in ``check_remote_participant_liveliness``.
-#: The participant receives nothing from then on. Reproduced here with participants that come
-#: and go (docs/reliability.md, seventeenth round).
+#: The participant receives nothing from then on. Participants that come and go, with a short
+#: lease, make it likelier.
 FAST_DDS_6502 = ('check_remote_participant_liveliness', 'unregister_timer')
 
 
 #: Fast DDS's spinning ``set_listener`` (eProsima/Fast-DDS#6513, open): rmw_fastrtps's
 #: ``destroy_participant`` begins with ``set_listener(nullptr)``, whose wait for the listener
 #: callbacks in progress busy-waits for good when one runs (another participant's leaving).
-#: Stop 42's controller, reproduced by tools/fast_dds_set_listener_spin.cpp (twenty-sixth round).
 FAST_DDS_6513 = ('destroy_participant', 'set_listener')
 #: ... and the callback it waits for: a receive thread inside one of these, on the listener's mutex.
 FAST_DDS_6513_CALLBACKS = ('onParticipantDiscovery', 'onWriterDiscovery', 'onReaderDiscovery')

@@ -487,11 +487,9 @@ def _unheard_sim(session: Session, states_relayed: int) -> str | None:
 
     A new process that runs (it has not crashed) but none of whose states reached this
     process (the probe relayed none) tells nothing about the controller, which rightly stays
-    safe without instrument states: the trial is spoiled. Seen once in CI
-    (``sim_restart@sim_instrument``, 30 s without a state; not reproduced here in 324
-    restarts: faultcheck and tools/shm_crash_restart.py, stop 45); Fast DDS 2.14's
-    shared-memory transport is known to lose a restarted participant that reuses a killed
-    one's port (eProsima/Fast-DDS#5053, #4728). The process is asked for its Python stacks (in
+    safe without instrument states: the trial is spoiled. Fast DDS 2.14's shared-memory
+    transport can lose a restarted participant that reuses a killed one's port
+    (eProsima/Fast-DDS#5053, #4728). The process is asked for its Python stacks (in
     its log, kept beside it), and the cause names how many publishers this process knows on
     its topics and where its main thread was. A process that has died, or has been heard, is
     the case's own failure (None).
