@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 def answer_only_on_stdout(enabled: bool):
     """While a ``--json`` command runs, keep everything but its Python output off stdout.
 
-    Fast DDS writes its own log lines to file descriptor 1, in colour (a loaded run's
+    Fast DDS writes its own log lines to file descriptor 1, in colour (e.g.
     ``[RTPS_TRANSPORT_SHM Error] ... open_and_lock_file failed``: the shared-memory transport
     fell back to UDP), and a child process started without a log file inherits descriptor 1
     too. Either would break ``json.loads`` of the command's output. Inside this block

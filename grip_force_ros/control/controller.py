@@ -292,12 +292,11 @@ class GripController:
         """Continue from the current the actuator measures now, after a stall of the controller.
 
         During a stall longer than the watchdog nobody knows what the drive did with the last
-        command: a drive with a command timeout has cut it to 0 A (the sim, issue 11), a dVRK
+        command: a drive with a command timeout has cut it to 0 A (the sim's does), a dVRK
         holds it. The measured current says which; with no fresh, valid one the command is
         kept. The step after a stall is safe, and the safe ramp only goes toward 0 A: the
-        measured current is taken only between 0 A and the last command (the property test's
-        random sequences found a stall in the safe state taking the command back up to a
-        measured current above it).
+        measured current is taken only between 0 A and the last command, so that a stall in
+        the safe state cannot take the command back up to a measured current above it.
         """
         age = now - inputs.actuator_time
         if inputs.actuator_fault is None and 0.0 <= age <= self.watchdog_timeout:

@@ -41,10 +41,9 @@ PAIRS = (('pivot_coulomb_friction', 'sensor_delay'), ('viscoelastic_creep', 'for
          ('cable_hysteresis', 'torque_constant_drift'), ('backlash', 'tension_dependent_friction'))
 
 
-#: Seeds of the blind set (``cases(seed=s)``), fixed before the parameter re-identification was
-#: written (issue 10) and never changed after: the development seeds are the ones the thresholds,
-#: grids and strengths were tuned on (seed 0 before issue 10, 0-4 since); the held-out seeds give
-#: the headline figures and were run once, at the end; the CI seeds are the test's, never tuned on.
+#: Seeds of the blind set (``cases(seed=s)``), fixed: the development seeds are the ones the
+#: thresholds, grids and strengths were tuned on; the held-out seeds give the headline figures and
+#: are never tuned on; the CI seeds are the test's, never tuned on either.
 DEVELOPMENT_SEEDS = (0, 1, 2, 3, 4)
 HELD_OUT_SEEDS = tuple(range(100, 110))
 CI_SEEDS = (50, 51, 52, 53)
@@ -325,7 +324,7 @@ def _score(per_log: list) -> dict:
             'confusion': confusion, 'per_log': per_log}
 
 
-#: Plant parameters whose mismatch the issue's item 2 is about (the sim's friction_scale, stiffness_scale).
+#: Plant parameters the mismatch figures are about (the sim's friction_scale, stiffness_scale).
 MISMATCHED = ('pulley_friction_coefficient', 'cable_modulus')
 
 
@@ -335,7 +334,7 @@ def _off(r: dict) -> list[str]:
 
 
 def _mismatch(per_log: list) -> dict:
-    """Figures of the logs whose plant has its pulley friction or cable stiffness off (issue 10, item 2).
+    """Figures of the logs whose plant has its pulley friction or cable stiffness off.
 
     ``logs``: effect-free logs with a parameter off; ``none``: their share reported ``none``;
     ``within_5pct``: the share of their off parameters named off with the fitted value within

@@ -90,7 +90,7 @@ class PooledData:
         self.force_base_width = self.base.shape[1]
         # angle calibration: the encoder zero, the cable's elastic stretch on the drum side and on
         # the jaw side (their coefficients: the re-identified stiffness refitted, and the split
-        # of the cable left free as before issue 10), the lag of the jaw behind the drum in motion
+        # of the cable left free), the lag of the jaw behind the drum in motion
         # and the wrist (the re-identified coupling refitted); the scale r0/r_n is geometry:
         # kept, so the target is jaw - jaw_model
         self.angle_target = self.jaw - self.jaw_model

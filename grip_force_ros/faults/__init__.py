@@ -1,4 +1,4 @@
-"""Fault catalogue and fault check (issue 5: reliability).
+"""Fault catalogue and fault check: the controller's reliability.
 
 * :mod:`.catalogue` (ROS-free): every fault with its defined outcome (:data:`OUTCOMES`).
 * :mod:`.probe` (rclpy): a plant + fault injector node that closes the loop with a real

@@ -1,4 +1,4 @@
-"""Fault cases of the dVRK interface and the drive, on real node processes (issue 11.8).
+"""Fault cases of the dVRK interface and the drive, on real node processes.
 
 Each case starts ``sim_instrument``, ``controller`` and ``master`` as processes
 (:class:`~grip_force_ros.nodes.processes.NodeProcess`; the dvrk profile in the sourced ROS
@@ -68,7 +68,7 @@ KILL_STATE_WAIT = 5.0
 SILENT_TO_ZERO = 0.4
 #: Longest wait (s) after the master went silent for a safe /diagnostics status that names
 #: it: its 100 ms watchdog and a 10 Hz /diagnostics period, with room for a starved probe
-#: (its receipt gaps of 0.33-0.5 s, stops 37-38).
+#: (receipt gaps of 0.33-0.5 s on a loaded machine).
 MASTER_NAMED_WAIT = 2.0
 #: |current| below this many standard deviations of the sim's current noise counts as 0 A.
 ZERO_NOISE_STD = 5.0
@@ -228,8 +228,8 @@ class _Loop:
         """Send a crtk state command to the arm with the ros2 CLI (crtk_msgs, sourced env).
 
         The CLI stays up for STATE_COMMAND_KEEP_ALIVE after publishing: with the default
-        0.1 s a loaded run's disable never reached the sim (its log shows no transition,
-        the case failed as if the controller had ignored a disabled arm).
+        0.1 s the disable may never reach the sim on a loaded machine, and the case would
+        fail as if the controller had ignored a disabled arm.
         """
         ros2 = shutil.which('ros2', path=self.env.get('PATH')) or 'ros2'
         done = subprocess.run([ros2, 'topic', 'pub', '--once', '-w', '1',
@@ -411,7 +411,7 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     detail['safe_after_s'] = round(reacted, 3)
     detail['reason_when_safe'] = first['values'].get('reasons') if first else None
     # the safe state may come first for another input (a controller or sim stall on a loaded
-    # machine: loaded run 38/c1/6); the stale master must be named while it stays silent, by
+    # machine); the stale master must be named while it stays silent, by
     # its own watchdog, a step and a /diagnostics period, or later if the probe was starved
     named = loop.probe.wait(lambda: _safe_naming(loop, 'stale master'), MASTER_NAMED_WAIT)
     detail['master_named_after_s'] = round(time.time() - stopped, 3) if named else None
@@ -420,8 +420,8 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
     status = loop.probe.latest('controller')
     detail['reason'] = status['values'].get('reasons') if status else None
     detail['diagnostics_gap_max_s'] = loop.probe.diagnostics_gap_since(stopped)
-    # the master's own watchdog (issue 13.2: 100 ms; this bound used the instrument's 30 ms
-    # and left ~50 ms of slack for a stale master), two steps, a /diagnostics period (10 Hz)
+    # the master's own watchdog (100 ms, not the instrument's 30 ms), two steps, a
+    # /diagnostics period (10 Hz)
     bound = source_timeouts(loop.params)['master'] + 2.0 / loop.params.expected_state_rate + \
         1.0 / 10.0 + REACTION_SLACK
     detail['bound_s'] = round(bound, 3)
@@ -436,8 +436,8 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
         with loop.probe.lock:
             return [i for t, i in loop.probe.states if t > stopped + SILENT_TO_ZERO]
     # on a starved machine the sim's states of that time (or the probe taking them) can come
-    # later still: wait for one, as the kill case does (a loaded run, load 14.5, failed here
-    # as "did not ramp" with its states not told)
+    # later still: wait for one, as the kill case does, rather than fail as "did not ramp"
+    # with no state to tell
     loop.probe.wait(lambda: bool(silent_states()), KILL_STATE_WAIT)
     late = silent_states()
     detail['states_while_silent'] = len(late)
@@ -447,7 +447,7 @@ def _master_case(loop: _Loop, detail: dict) -> list[str]:
                         f'went silent within {KILL_STATE_WAIT} s')
     elif max(map(abs, late)) >= _zero_current(loop):
         problems.append('the current did not ramp to 0')
-    if problems:      # what the next failure tells (loaded run 46/1: 0.15 A on 3 states, why?)
+    if problems:      # the states and commands around the pause, to tell why
         _record_silence(loop, detail, stopped)
     master.resume()
     if not loop.probe.wait(lambda: _gripping(loop.probe), 10.0):
@@ -520,7 +520,7 @@ def run_process_case_redoing_spoiled(case: FaultCase, config: Path, log_root: Pa
     """Run a process case; a trial the machine spoiled is redone, at most twice.
 
     Spoiled: the sim's own process was not scheduled for most of a late timeout check (it
-    says so in its cut line; seen once in CI: 2.6 s, with the master 3.7 s late as well).
+    says so in its cut line).
     The third spoiled trial fails with its cause. The logs are the last trial's.
     """
     return redo_spoiled(lambda: run_process_case(case, config, log_root), 'a stalled machine')

@@ -131,10 +131,9 @@ class LimitMonitor:
         are ``k - 1`` commands lost (counted by :meth:`check`), and the change spans ``k``
         steps. Steps not yet followed by two control steps wait, unless ``final``.
 
-        (Until stop 44 the losses came from rmw's message-lost event, which can deadlock
-        with the rmw_fastrtps of the Jazzy wheels, ros2/rmw_fastrtps#890: loaded run 44/1
-        hung so; the message's sequence numbers, the other way, do not reach a callback
-        under the EventsExecutor of these wheels: docs/reliability.md.)
+        (Not from rmw's message-lost event, which can deadlock with the rmw_fastrtps of the
+        Jazzy wheels, ros2/rmw_fastrtps#890; the message's sequence numbers, the other way,
+        do not reach a callback under the EventsExecutor of these wheels.)
         """
         if not self.pending:
             return

@@ -41,8 +41,8 @@ from grip_force_ros.params.files import instrument_path
 
 #: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
 GRIP_MASTER_ANGLE = 0.1
-#: How long a case may take to recover after its fault window (s): ~0.1 s on a quiet machine;
-#: a loaded one (load 11 on 2 cores) took more than 2 s once. Never resuming is the fault.
+#: How long a case may take to recover after its fault window (s): ~0.1 s on a quiet machine,
+#: more than 2 s on a loaded one (load 11 on 2 cores). Never resuming is the fault.
 RECOVERY_TIMEOUT = 10.0
 #: Longest wait for the controller to grip before a case starts (s): ~0.1 s on a quiet
 #: machine; more than 5 s once at load 8 (never gripping is the fault).
@@ -283,7 +283,7 @@ def _first_safe_step(rows: list[tuple], until: float) -> float | None:
 
     By the controller's own stamp, not by when the probe received the step: on a loaded
     machine the safe steps of a short fault window can reach the probe after the window
-    (a loaded run: 12 steps in a 60 ms window, the safe ones received later).
+    (e.g. 12 steps in a 60 ms window, the safe ones received later).
     """
     return next((r[1] for r in rows if r[3] == 0.0 and r[1] <= until), None)
 
@@ -470,12 +470,11 @@ def _watchdog_trial_spoiled(steps: int | None, own_reason_seen: bool, diagnostic
     A trial measured nothing when the output went safe before the silenced input's own
     timeout (``steps == 0``), or when the silenced input's staleness never showed in
     /diagnostics, and a stall of the controller's process or another lost input did (received
-    by ``until``, probe clock s). Found in a loaded run
-    (``silence_actuator@sim_instrument``: no text 'stale actuator'); reproduced by stalling
-    the test process, whose one executor thread runs the probe and the controller, for
-    150 ms from 10 ms into the 120 ms window: the first step after the stall found a fresh
-    actuator state and went safe for 'the controller was stalled' alone (3 of 3 trials, and
-    2 of 2 of ``frozen_stamp_actuator``).
+    by ``until``, probe clock s). For example, a stall of the process that runs the probe
+    and the controller, 150 ms from 10 ms into the 120 ms window of
+    ``silence_actuator@sim_instrument``: the first step after the stall finds a fresh
+    actuator state and goes safe for 'the controller was stalled' alone, never 'stale
+    actuator'.
     """
     if steps != 0 and own_reason_seen:
         return None
@@ -721,7 +720,7 @@ def run_param_file_cases(cases: list[FaultCase], config: Path, timeout: float = 
             code = proc.returncode
         except subprocess.TimeoutExpired:
             # where it was, from its Python stacks (a process with no line on stderr after
-            # 30 s was seen once under load: starting, or stuck?)
+            # 30 s: still starting, or stuck?)
             request_stacks(proc.pid)
             proc.kill()
             out, err = proc.communicate()
