@@ -4,8 +4,8 @@
 def raise_as_pybind11_does(*args, **kwargs):
     """Raise the TypeError pybind11 raises when a Ctrl-C comes while it converts a value.
 
-    rclpy's ``deserialize_message`` did so in stop 32's fresh-clone CI: "Unable to convert
-    function return value to a Python type!", caused by the KeyboardInterrupt.
+    rclpy's ``deserialize_message`` raises it so: "Unable to convert function return value
+    to a Python type!", caused by the KeyboardInterrupt.
     """
     try:
         raise KeyboardInterrupt

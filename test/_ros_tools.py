@@ -61,10 +61,10 @@ def sourced(*args: str) -> list[str]:
     return ['bash', '-c', 'source "$0" && exec "$@"', str(SETUP_FILE), *args]
 
 
-#: A Fast DDS log line, which Fast DDS writes to stdout, in colour: a loaded run's
-#: ``ros2 lifecycle get`` printed ``<ESC>[37;1m2026-11-27 ... [RTPS_TRANSPORT_SHM Error]
-#: ... open_and_lock_file failed -> Function open_port_internal<ESC>[m`` before its answer
-#: (the shared-memory transport falls back to UDP; the answer was right).
+#: A Fast DDS log line, which Fast DDS writes to stdout, in colour: ``ros2 lifecycle get``
+#: can print ``<ESC>[37;1m2026-11-27 ... [RTPS_TRANSPORT_SHM Error] ... open_and_lock_file
+#: failed -> Function open_port_internal<ESC>[m`` before its answer (the shared-memory
+#: transport falls back to UDP; the answer is right).
 FASTDDS_LOG_LINE = re.compile(r'^\x1b\[[0-9;]*m\d{4}-\d\d-\d\d .*\b(Error|Warning|Info)\b')
 
 
@@ -165,9 +165,8 @@ def start(*args: str, log: Path, cwd: Path | str | None = None,
 def retry(fn, ok, timeout: float = 60.0, pause: float = 0.5):
     """Call ``fn()`` until ``ok(result)`` or the timeout; return the last result.
 
-    A ros2 CLI call that hangs past its own timeout (seen once in CI: ``ros2 lifecycle get``
-    before the node's services were discovered) is a failed try (return code -1), not the end
-    of the test.
+    A ros2 CLI call that hangs past its own timeout (e.g. ``ros2 lifecycle get`` before the
+    node's services are discovered) is a failed try (return code -1), not the end of the test.
     """
     deadline = time.monotonic() + timeout
     while True:
@@ -210,8 +209,8 @@ def stop_launch(proc: subprocess.Popen, log: Path, timeout: float = 30.0) -> int
     deadlock shows only there); then wait as :func:`stop`, and add the native stacks to the
     log once launch has ended.
 
-    Launch kills a node that ignores its SIGINT and SIGTERM without asking where it was (a
-    loaded run, stop 32: the master). ``run_node``'s own teardown limit covers a hang after
+    Launch kills a node that ignores its SIGINT and SIGTERM without asking where it was.
+    ``run_node``'s own teardown limit covers a hang after
     the node's loop; this covers one anywhere.
     """
     if proc.poll() is None:
@@ -311,15 +310,14 @@ def _socket_inodes(pid: int) -> set[str]:
 def dds_ports_report(domain_id: int, pids) -> str:
     """Tell what Fast DDS's transports hold for ``domain_id``, for a CLI that saw nothing.
 
-    The hypothesis it tests (the CLI's blind spell, stops 33-36): a new participant reuses
+    The hypothesis it tests (a CLI that sees no node of the domain): a new participant reuses
     the participant id, so the ports, of one that was killed; it finds a port's shared-memory
     segment a zombie and makes a new one, while the long-lived nodes keep writing into the old
     one they have mapped (eProsima/Fast-DDS#4728). For each of ``pids``: the UDP ports it binds
     in the domain and the ``fastrtps_port`` segments it maps, a ``(deleted)`` one being such
     an orphan; then each segment named (age, lock file). Fast DDS 2.14 maps, beside the
     domain's own port numbers, a segment from one pool shared by every domain on the machine
-    (``fastrtps_port7000`` up, the lowest free number; docs/reliability.md, twenty-first
-    round). Called only once a test has failed.
+    (``fastrtps_port7000`` up, the lowest free number). Called only once a test has failed.
     """
     ports = domain_ports(domain_id)
     lines, named = [f'Fast DDS ports of domain {domain_id}:'], set()

@@ -1,4 +1,4 @@
-"""The project's rosbag2 files are what rosbag2 (Jazzy) itself writes and reads (issue 14.6).
+"""The project's rosbag2 files are what rosbag2 (Jazzy) itself writes and reads.
 
 Both writers, ``grip_force_ros.logs.write_bag`` (logs, the blind check) and the demo's
 ``RecorderNode`` (grip_force_ros/demo/recorder.py), write with the ``rosbags`` library:

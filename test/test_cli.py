@@ -5,7 +5,7 @@ import sys
 import textwrap
 
 #: A subcommand that, like a run with Fast DDS in the process, has C-level output on file
-#: descriptor 1 (the line is one a loaded run's ``ros2 lifecycle get`` printed), a child
+#: descriptor 1 (a line ``ros2 lifecycle get`` can print), a child
 #: process that inherits it, and then prints its JSON answer.
 NOISY_COMMAND = textwrap.dedent('''
     import os, subprocess, sys, types

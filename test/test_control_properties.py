@@ -1,10 +1,10 @@
-"""Safety properties of the controller over random and garbage input sequences (issue 5).
+"""Safety properties of the controller over random and garbage input sequences.
 
 For every step: |current command| <= max_current, |change| <= max_current_slew * dt (the step
 time, test/_control_oracle.py),
 every output finite, 0 <= target force <= min(grip_force_max, max_grip_force).
 
-CI runs ``test_random_sequences``: 120 000 steps (>= 100k, issue 5) over 30 seeded numpy
+CI runs ``test_random_sequences``: 120 000 steps (at least 100k) over 30 seeded numpy
 sequences, about 2-3 s, plus the hypothesis examples. ``test_random_sequences_full`` (marked
 ``slow``) runs GRIP_FORCE_PROPERTY_STEPS steps (default 500 000), e.g.
 ``./dev test test/test_control_properties.py -m slow``.

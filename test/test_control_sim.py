@@ -51,8 +51,8 @@ def test_needle_grasp_holds_the_target_force(paper, sensor):
     # them as designed at gain_design_rate; crossover ~29 Hz). While the master closes at 1.6
     # rad/s the drum damping (6e-3 N*m*s/rad at ~1 rad/s, 3.4 mA through 1.77 N*m/A) needs an
     # error of 3.4 mA / jaw_kp 0.369 A/rad = 0.009 rad and the sim's stick-slip pulleys about as
-    # much again (measured 0.015 rad rms, seed 3); 0.03 rad is the bound the 1 kHz design met
-    # before issue 11.6 (the slow 100 Hz-only gains needed 0.07)
+    # much again (measured 0.015 rad rms, seed 3); 0.03 rad is the 1 kHz design's bound (gains
+    # designed for 100 Hz only would need 0.07)
     assert np.sqrt(np.mean((free[:, 2] - free[:, 3]) ** 2)) < 0.03
     assert np.all(log[-50:, 7] == 0)                                       # released: free again
     assert np.max(np.abs(np.diff(log[:, 6]))) <= paper.max_current_slew * PERIOD + 1e-12

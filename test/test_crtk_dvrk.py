@@ -1,4 +1,4 @@
-"""crtk_msgs built here, and the CRTK / dVRK Python clients (issue 11.4).
+"""crtk_msgs built here, and the CRTK / dVRK Python clients.
 
 ``crtk_msgs.msg.OperatingState`` goes from one process to another over loopback DDS and
 arrives field for field; ``import dvrk; dvrk.psm`` works with Debian's PyKDL. Both after

@@ -123,8 +123,7 @@ def test_ctrl_c_stops_every_node(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     # A suite started as a background job (`./dev test ... &`, nohup, CI runners) inherits
     # SIGINT ignored, and Python then keeps it ignored: the demo would run its whole task
-    # (found by loaded runs: exit 0 after 29.6 s). The demo gets SIGINT's default, as in a
-    # terminal.
+    # (exit 0 after ~30 s). The demo gets SIGINT's default, as in a terminal.
     demo = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
                              '20', '--quiet', '--out', str(tmp_path / 'run')],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,

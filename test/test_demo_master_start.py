@@ -1,11 +1,11 @@
 """The demo's start of the master's task when a parameter answer is lost (no ROS graph).
 
-Loaded run 13/3 (docs/reliability.md, seventh round): the master took its trajectory
-parameters and ran its 4 s task while the runner, its spin thread receiving messages
-all along, never got the set's answer; the runner then read the master's exit as a
-death. These tests drive :func:`set_parameters_confirmed` with a stand-in for the
-master's parameter services that loses answers or requests on purpose: the task must be
-started exactly once, whatever is lost.
+The fault: the master takes its trajectory parameters and runs its 4 s task while the
+runner, its spin thread receiving messages all along, never gets the set's answer; the
+runner would then read the master's exit as a death. These tests drive
+:func:`set_parameters_confirmed` with a stand-in for the master's parameter services that
+loses answers or requests on purpose: the task must be started exactly once, whatever is
+lost.
 """
 from __future__ import annotations
 
@@ -87,8 +87,8 @@ def test_an_answered_set_is_sent_once():
 
 
 def test_a_lost_answer_is_confirmed_by_a_read_and_the_task_not_restarted():
-    # the failure of loaded run 13/3: taken, answer lost (the code before waited
-    # for the answer alone, until the master had finished its task and exited)
+    # taken, answer lost: waiting for the answer alone would last until the master had
+    # finished its task and exited
     master = LossyMaster(lose=['answer'])
     assert set_parameters_confirmed(master, TASK, alive, timeout=5.0,
                                     answer_wait=WAIT) == 'confirmed by a read'
@@ -143,8 +143,8 @@ def test_a_dead_master_is_reported_while_waiting():
 
 
 def test_a_master_that_finished_its_task_before_any_answer_came_took_the_set():
-    # loaded run 17/3: the set's answer and the confirming read were both lost while the
-    # master ran its 4 s task and exited with code 0 (the runner raised "master exited")
+    # the set's answer and the confirming read both lost while the master runs its 4 s
+    # task and exits with code 0: not "master exited"
     master = LossyMaster(lose=['answer'], lose_reads=1000)
     exited = []
 
@@ -167,8 +167,8 @@ def test_an_answer_that_came_wins_over_a_finished_master():
 
 # ---------------------------------------------------------------- bounded retry
 def test_a_late_answer_to_the_first_set_is_taken_after_reads_went_unanswered():
-    # issue 46: "no answer to setting [...] within 15 s": each request was awaited 2 s and
-    # dropped; an answer that came after its wait (behind the recorder's backlog) was lost
+    # not "no answer to setting [...] within 15 s": an answer that comes after its request's
+    # 2 s wait (behind the recorder's backlog) is still taken
     master = LossyMaster(lose=['late'], lose_reads=1000, late=6 * WAIT)
     assert set_parameters_confirmed(master, TASK, alive, timeout=5.0,
                                     answer_wait=WAIT) == 'answered'

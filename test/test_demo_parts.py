@@ -96,7 +96,8 @@ def _times(log: str) -> dict[str, float]:
 def test_group_stops_in_reverse_start_order_one_after_another_or_all_at_once(tmp_path, one_at_a_time):
     """One after another: the first started gets SIGINT only once the last started has exited.
 
-    Stop 42: two nodes torn down at once hung one of them inside Fast DDS. All at once (as
+    Two nodes torn down at once can hang one of them inside Fast DDS (eProsima/Fast-DDS#6513).
+    All at once (as
     ``ros2 launch``), the first started gets SIGINT while the other still takes its 1 s.
     """
     group = ProcessGroup(dict(os.environ), log_dir=tmp_path, grace=5.0, one_at_a_time=one_at_a_time)
@@ -185,8 +186,8 @@ def test_a_child_started_from_the_main_thread_ends_with_its_parent(tmp_path):
     A child started from another thread does not: the kernel signals when the *forking
     thread* ends, and the fault check's sim restart starts the sim from a short-lived thread.
     The parent dies as soon as the children's pids are out, while they may still be starting
-    Python: the signal used to be SIGINT, which a starting Python lost 27 times in 7200
-    (this test failed once so, stop 39; see the next test).
+    Python: the signal is SIGTERM, not SIGINT, which a starting Python can lose (about 27
+    times in 7200; see the next test).
     """
     code = (
         'import sys, threading, time\n'
@@ -482,8 +483,8 @@ sys.stdin.readline()
         recorder.subscribe_all()
         assert proc.stdout.readline().strip() == 'matched'
         # 'matched' is the writers' side; the recorder's readers may match them later, and a
-        # writer keeps only its last 10 messages: loaded run 37/c3/1 lost the first 3 of each
-        # stream (2997 of 3000). The streams start once both sides have matched.
+        # writer keeps only its last 10 messages, so a late reader would lose the first ones of
+        # each stream. The streams start once both sides have matched.
         assert wait_until(lambda: all(recorder.matched_publishers(t) for t in streams), 30.0), \
             {t: recorder.matched_publishers(t) for t in streams}
         proc.stdin.write('go\n')
@@ -554,8 +555,8 @@ def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
 
 
 def test_a_ctrl_c_a_c_extension_wrapped_is_still_an_interrupt(tmp_path, capsys, monkeypatch):
-    """Fresh-clone CI, stop 32: the demo, interrupted inside rclpy's deserialize_message, exited 1
-    with pybind11's TypeError (caused by the KeyboardInterrupt) instead of 130."""
+    """The demo, interrupted inside rclpy's deserialize_message, exits 130, not 1 with
+    pybind11's TypeError (caused by the KeyboardInterrupt)."""
     from grip_force_ros.cli import main as cli_main
     from grip_force_ros.demo import run as demo_run
     monkeypatch.setattr(demo_run, 'run_task', raise_as_pybind11_does)
@@ -623,9 +624,9 @@ def test_a_run_is_spoiled_by_a_loss_in_the_hold_or_the_pull_test_only():
 def test_a_run_the_bag_does_not_hold_is_spoiled_not_an_error(monkeypatch, tmp_path):
     """The bag's 1 kHz streams end early in the hold: the run is spoiled (redone), no error.
 
-    Loaded run 16/1: the recorder fell 4.6 s behind, the nodes were stopped at the task's end
-    and the bag held no force sample in the steady hold window; the analysis raised, and the
-    demo test and the comparison failed with an error instead of redoing the run.
+    For example the recorder 4.6 s behind, the nodes stopped at the task's end and the bag
+    without a force sample in the steady hold window: the analysis must not raise, and the
+    demo and the comparison redo the run.
     """
     from grip_force_ros.demo import series as series_module
     from grip_force_ros.demo.messages import FIELDS
@@ -671,9 +672,10 @@ def test_the_recording_has_caught_up_when_every_received_stream_reaches_the_time
 
 def test_a_comparison_run_that_cannot_be_completed_is_reported_and_the_rest_is_written(
         tmp_path, monkeypatch):
-    """Issue 46: ``--compare-instruments`` ended with "no answer to setting [...]", exit 1, no
-    figure. A run no attempt completes is reported (which instrument, which run, why); the
-    other runs, the JSON and compare.png are still written. No nodes: a stand-in run_task."""
+    """``--compare-instruments`` with a run no attempt completes ("no answer to setting [...]").
+
+    That run is reported (which instrument, which run, why); the other runs, the JSON and
+    compare.png are still written. No nodes: a stand-in run_task."""
     import json
     from pathlib import Path
     from types import SimpleNamespace

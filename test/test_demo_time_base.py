@@ -1,9 +1,9 @@
 """The demo's figure and figures follow the samples' header stamps (no ROS graph).
 
-Issue 46: in a run where a process stalled, the summary figure showed the master's trace
-about 2.5 s off the jaw and force traces. The recorder's queue of the 250 Hz master holds
-4 s of it (1000 messages), so a master stream that fell behind once stayed 2.5 s late for
-the rest of the run, and a time base that follows the receive times moves the whole trace.
+In a run where a process stalls, a time base that follows the receive times moves the
+master's whole trace: the recorder's queue of the 250 Hz master holds 4 s of it (1000
+messages), so a master stream that falls behind once stays late (e.g. 2.5 s off the jaw
+and force traces) for the rest of the run.
 These tests write a synthetic bag (rosbags, as the recorder writes one) whose receive times
 are delayed by stalls while the header stamps are right, and check the arrays handed to
 the plot, the analysis' figures and the safe-state entries against the stamps.

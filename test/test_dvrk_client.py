@@ -1,4 +1,4 @@
-"""The dVRK's own Python client drives the simulated instrument as PSM1 (issue 11.5).
+"""The dVRK's own Python client drives the simulated instrument as PSM1.
 
 The unmodified ``dvrk.psm`` (../shared/vendor/dvrk_python, built into .venv by ./dev setup)
 runs in the sourced environment (test/_ros_tools.py), as a dVRK user runs it, against

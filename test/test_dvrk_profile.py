@@ -1,4 +1,4 @@
-"""The dvrk interface profile with real node processes (issue 11.1-11.3).
+"""The dvrk interface profile with real node processes.
 
 * PSM1 and PSM2 side by side in one ROS domain, each with its own sim, controller and master
   (MTML, MTMR): neither sees the other (PSM1's master closes, PSM2's stays open).

@@ -1,4 +1,4 @@
-"""The fault catalogue and its check against the real controller node (issue 5).
+"""The fault catalogue and its check against the real controller node.
 
 ROS-free tests check the catalogue itself (kinds, outcomes, mutators). The ``ros`` tests run
 whole catalogue against a real in-process controller node over loopback DDS (and the
@@ -116,12 +116,13 @@ def test_a_spoiled_trial_is_redone_at_most_twice():
 
 
 def test_a_safe_state_before_the_timeout_is_blamed_on_the_machine_only_for_a_stall_or_another_input():
-    """Fresh-clone CI (stop 26): ``silence_master`` went safe 87 ms after the last master
-    sample (timeout 100 ms) and the trial passed with "period 0": the only other cause checked
-    was another stale input. Reproduced by holding the test process's GIL for 32-38 ms during
-    the silence: the controller's reason was ``step interval 36.2 ms > 30.0 ms (the controller
-    was stalled)`` alone. A stall or another stale input spoils the trial (redone); the
-    silenced input's own staleness, or a fault of the product, does not."""
+    """A safe state before the silenced input's timeout, blamed on the machine or not.
+
+    E.g. ``silence_master`` safe 87 ms after the last master sample (timeout 100 ms) because
+    the test process held its GIL for 32-38 ms: the controller's reason is ``step interval
+    36.2 ms > 30.0 ms (the controller was stalled)`` alone. A stall or another stale input
+    spoils the trial (redone); the silenced input's own staleness, or a fault of the product,
+    does not."""
     from grip_force_ros.faults.runner import _machine_cause
     stall = 'controller | safe: step interval 36.2 ms > 30.0 ms (the controller was stalled)'
     other = 'controller | safe: stale instrument input: 32.7 ms old > 30.0 ms'
@@ -135,9 +136,9 @@ def test_a_safe_state_before_the_timeout_is_blamed_on_the_machine_only_for_a_sta
 
 
 def test_a_watchdog_trial_is_spoiled_when_a_stall_not_its_own_input_made_the_output_safe():
-    """A loaded run (stop 27): ``silence_actuator@sim_instrument`` went safe in time but
-    /diagnostics never said 'stale actuator': a stall over the whole window, and the first
-    step after it found a fresh actuator state. That trial measured nothing (redone); a
+    """``silence_actuator@sim_instrument`` safe in time but /diagnostics never saying 'stale
+    actuator': a stall over the whole window, and the first step after it found a fresh
+    actuator state. That trial measured nothing (redone); a
     missing reason with no machine cause, or a safe state before the timeout for a reason
     of the product, is the product's."""
     from grip_force_ros.faults.runner import _watchdog_trial_spoiled
@@ -160,11 +161,11 @@ def test_a_watchdog_trial_is_spoiled_when_a_stall_not_its_own_input_made_the_out
 
 @pytest.mark.ros
 def test_a_stall_of_the_test_process_over_a_silence_window_spoils_the_trial_not_fails_it():
-    """The loaded run's failure, made on purpose: the test process (whose one executor thread
+    """A machine stall, made on purpose: the test process (whose one executor thread
     runs the fault probe and the controller) sleeps 150 ms, 10 ms into a 120 ms silence of
-    the ``sim_instrument`` process's actuator state. Before the fix this failed 3 of 3
-    trials with "no /diagnostics text matching 'stale actuator'"; now such a trial is spoiled
-    by the stall (and redone), and one whose controller still saw the actuator stale passes."""
+    the ``sim_instrument`` process's actuator state. Such a trial is spoiled by the stall
+    (and redone), not failed with "no /diagnostics text matching 'stale actuator'", and one
+    whose controller still saw the actuator stale passes."""
     import time
 
     from grip_force_ros.faults.runner import Session, run_message_case
@@ -218,9 +219,9 @@ Current thread 0x00007f0 (most recent call first):
 
 
 def test_a_bad_parameter_file_case_whose_node_is_still_running_says_where_it_was(monkeypatch):
-    """A loaded run: the controller on a bad file had written nothing after 30 s. The case
-    now asks the process for its Python stacks before it kills it and says where its main
-    thread was (here a stand-in that hangs in a function of its own)."""
+    """A controller on a bad file that has written nothing after 30 s: the case asks the
+    process for its Python stacks before it kills it and says where its main thread was
+    (here a stand-in that hangs in a function of its own)."""
     import sys
 
     from grip_force_ros.faults import runner
@@ -287,8 +288,8 @@ def test_a_restarted_sim_that_runs_but_is_never_heard_spoils_the_trial_which_is_
 
 
 def test_the_first_safe_step_is_found_by_the_controllers_stamp_up_to_the_recovery():
-    """A loaded run: a 60 ms window held 12 steps, all gripping as received; the safe ones
-    reached the probe after the window. What counts is what the controller did, by its own
+    """A 60 ms window that holds 12 steps, all gripping as received; the safe ones reach the
+    probe after the window. What counts is what the controller did, by its own
     stamp, until it gripped again; a safe step after the recovery is another event."""
     from grip_force_ros.faults.runner import _first_safe_step
     # (probe receive time, controller stamp, command, target)
@@ -413,8 +414,8 @@ def test_limit_monitor_across_a_stall_of_its_own_process():
 def test_a_jump_received_after_a_gap_is_judged_on_the_controllers_step():
     """A missing slew limit jumps max_current -> 0 A in one 1 ms step at the safe state; the
     probe, stalled, receives it 40 ms after the command before. Receipt gaps cannot excuse
-    it: only the controller's own step time can (a loaded run's negative control missed
-    slew_limit_off so, 2026-11-25)."""
+    it: only the controller's own step time can (else the negative control misses
+    slew_limit_off)."""
     from grip_force_ros.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
     steps = [(0.001 * k, 0.5, 0.001 * k + 0.0002) for k in range(5)]
@@ -523,9 +524,9 @@ class _RecordingPublisher:
 @pytest.mark.ros
 def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late():
     """The probe builds a burst's message once (10 publishes, 10 stamps), and a relayed state
-    runs the probe's tick when the timer is a period late: loaded runs saw the master go
-    100 ms stale behind the probe's own relayed 10 kHz burst (burst_10x_all@sim_instrument;
-    A/B at load 3.8-5.9: 11 of 48 trials spoiled before, 0 of 48 after)."""
+    runs the probe's tick when the timer is a period late: otherwise the master goes 100 ms
+    stale behind the probe's own relayed 10 kHz burst on a loaded machine
+    (burst_10x_all@sim_instrument)."""
     import os
 
     import rclpy
@@ -542,8 +543,8 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
         probe = FaultProbe(load_params_file(instrument_path(None)), context=ctx,
                            relay='/test_relay')
         probe.timer.cancel()                       # the test drives the probe by hand
-        clock = [1000.0]                           # and its clock (s): a loaded run took
-        probe.now = lambda: clock[0]               # over a period between two lines
+        clock = [1000.0]                           # and its clock (s): a loaded machine can
+        probe.now = lambda: clock[0]               # take over a period between two lines
         out = probe._pubs['instrument'] = _RecordingPublisher()
         master = probe._pubs['master'] = _RecordingPublisher()
         built = []

@@ -31,7 +31,7 @@ def test_the_cases_are_in_the_catalogue_with_defined_outcomes():
 
 def test_the_kill_case_reads_the_sims_cut_after_the_kill_only():
     """The sim can cut at start-up too, before the controller's commands flow; the kill case
-    read that first cut (334.5 ms) as its own check running late (a loaded run, 2026-11-25)."""
+    must not read that first cut (334.5 ms) as its own check running late."""
     log = ('[INFO] [1795635729.361478012] [sim_instrument]: paper_needle_driver: crtk interface, '
            'drive command timeout 30 ms\n'
            '[WARN] [1795635729.836104930] [sim_instrument]: no command for 334.5 ms (command '
@@ -49,11 +49,11 @@ def test_the_kill_case_reads_the_sims_cut_after_the_kill_only():
 
 
 def test_the_sims_cut_line_says_when_its_own_process_was_not_scheduled():
-    """CI, quiet machine (2026-11-25): the kill case failed on 'the sim's timeout check came
-    2627 ms late' while the master was 3.7 s late too: the machine stalled, not the sim. The
-    sim now says in its cut line how long its process went unscheduled before the check, and
-    the case counts such a trial as spoiled (redone, at most twice) only when that accounts
-    for the lateness; a cut line without it is judged as before."""
+    """A stalled machine, not the sim: 'the sim's timeout check came 2627 ms late' while the
+    master was 3.7 s late too. The sim says in its cut line how long its process went
+    unscheduled before the check, and the case counts such a trial as spoiled (redone, at
+    most twice) only when that accounts for the lateness; a cut line without it is judged on
+    the lateness alone."""
     starved = ('[WARN] [1795649286.115476958] [sim_instrument]: no command for 2658.2 ms (command '
                'timeout 30 ms): drive current cut from 0.1906 A to 0 A; this process was not '
                'scheduled for 2630.4 ms before the check')
@@ -162,9 +162,9 @@ class _TimeoutParams(dict):
 
 
 def test_the_master_case_waits_for_the_states_of_the_silence(monkeypatch):
-    """A loaded run (load 14.5, stop 33): 'the current did not ramp to 0', with no word of
-    whether any state of the silence had come in by the judging, 0.5 s after the safe
-    state. They are waited for, as in the kill case, and their absence is told apart."""
+    """The states of the silence, which a loaded machine can deliver after the judging (0.5 s
+    after the safe state), are waited for, as in the kill case, and their absence is told
+    apart from 'the current did not ramp to 0'."""
     assert _master_case(_SilencedLoop(current=0.0, delay=1.5), detail := {}) == []
     assert detail['states_while_silent'] == 10 and detail['largest_current_while_silent_A'] == 0.0
     held = _master_case(_SilencedLoop(current=0.2, delay=0.0), detail := {})
@@ -198,8 +198,7 @@ def test_dvrk_and_drive_faults_on_real_processes():
 
 
 def test_the_master_case_names_the_master_after_a_safe_state_for_another_input():
-    """Loaded run 38/c1/6: 'the reason does not name the stale master', the reason unknown.
-    A safe state that comes first for another input (a stall of the sim or the controller as
+    """A safe state that comes first for another input (a stall of the sim or the controller as
     the master stops) passes once a later status names the stale master; a controller that
     never names it fails, with both reasons it gave."""
     stall = 'stale instrument input: 31.0 ms old > 30.0 ms'

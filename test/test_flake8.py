@@ -1,7 +1,6 @@
 """flake8 (pycodestyle + pyflakes) over grip_force_ros/ and test/, as ament_flake8 runs it in ROS 2.
 
-Settings: the [flake8] section of setup.cfg. Files the house-tools branch is moving are
-left out until it has merged (``lint_files.EXCLUDED``, issue 12).
+Settings: the [flake8] section of setup.cfg. Files left out: ``lint_files.EXCLUDED``.
 """
 import subprocess
 import sys

@@ -1,4 +1,4 @@
-"""The package's launch files (launch/*.launch.py, issue 14.2) with the real ``ros2 launch``.
+"""The package's launch files (launch/*.launch.py) with the real ``ros2 launch``.
 
 The grasp (master, sim_instrument, controller) is launched as a user would; the force is
 read with ``ros2 topic echo --once``, a gain set and read back with ``ros2 param``; SIGINT
@@ -79,8 +79,8 @@ def _node_topics(node, env, needed, timeout=90.0):
     """Topics ``node`` publishes or subscribes to (``ros2 node info``), once ``needed`` shows.
 
     What a node's own entities are named, immune to other processes in the domain: the
-    domain-wide topic list of a fresh CI run twice held the crtk names of an earlier test's
-    stopped nodes beside a launch's namespaced ones (docs/reliability.md, eighth round).
+    domain-wide topic list can hold the crtk names of an earlier test's stopped nodes beside
+    a launch's namespaced ones.
     """
     info = _graph(env, 'node', 'info', node, ok=lambda r: needed in r.stdout, window=timeout)
     assert needed in info.stdout, (info.stdout, info.stderr)
@@ -274,7 +274,7 @@ def test_controller_launch_alone(tmp_path):
 
 
 def test_grasp_launch_managed_controller_waits_for_lifecycle_set(tmp_path):
-    """autostart:=false (issue 14.3): the controller is a launch_ros LifecycleNode that waits
+    """autostart:=false: the controller is a launch_ros LifecycleNode that waits
     unconfigured, the drive gets no command; ``ros2 lifecycle set`` configures and activates
     it, launch logs each transition, and the loop closes (the command echoed)."""
     require_ros_tools()

@@ -1,4 +1,4 @@
-"""The managed controller and its services with the real ros2 CLI (issue 14.3, 14.4).
+"""The managed controller and its services with the real ros2 CLI.
 
 ``sim_instrument`` and ``controller`` run as ``ros2 run`` processes, the master as ``ros2
 topic pub`` of a gripper angle the test sets (open, or closed on the needle: a light process
@@ -118,8 +118,7 @@ def rig(tmp_path):
                    'velocity: [0.0]}')
             # under SCHED_FIFO below the 1 kHz nodes where permitted: at normal priority the
             # tests' own ros2 CLI calls (a second of Python start-up on one of the 2 cores)
-            # starved it past the controller's 100 ms master watchdog, three tares in a row
-            # in a fresh-clone CI run (docs/reliability.md, fourth round)
+            # can starve it past the controller's 100 ms master watchdog
             prefix = ['chrt', '-f', str(MASTER_RT_PRIORITY)] if RT else []
             self._master = start(*prefix, 'ros2', 'topic', 'pub', '-r', '250', '-p', '0',
                                  f'/{topics.MASTER_JS}', 'sensor_msgs/msg/JointState', msg,
@@ -136,8 +135,8 @@ def rig(tmp_path):
 
             Each try gives the CLI a longer discovery spin (2, 4, 8 s, then 10): a new
             participant on a loaded machine may need more than 2 s to hear every endpoint
-            (loaded run 36/c1/5: 30 s of 2 s tries saw "Unknown topic", and once one
-            subscription of two and no publisher, where the probe's own view had them).
+            (30 s of 2 s tries can all see "Unknown topic", or one subscription of two and no
+            publisher, where the probe's own view has them).
             """
             spins = iter(('2', '4', '8'))
             info = retry(lambda: cli(env, 'topic', 'info', topic, '--no-daemon', '--spin-time',
@@ -147,9 +146,9 @@ def rig(tmp_path):
             return info
 
         def report(self, topic):
-            """Tell what is known when ``ros2`` CLI calls did not see ``topic`` (a loaded run of
-            stop 33: 30 s of "Unknown topic" for the topic the sim and the probe subscribe):
-            the probe's own view of it, one CLI given 10 s, each process's state and stacks."""
+            """Tell what is known when ``ros2`` CLI calls did not see ``topic`` (e.g. 30 s of
+            "Unknown topic" for the topic the sim and the probe subscribe): the probe's own
+            view of it, one CLI given 10 s, each process's state and stacks."""
             seen = self.probe.get_publishers_info_by_topic(topic) + \
                 self.probe.get_subscriptions_info_by_topic(topic)
             slow = cli_once(env, 'topic', 'info', topic, '--no-daemon', '--spin-time', '10')
@@ -425,7 +424,7 @@ def test_tare_set_object_and_calibrate_with_the_jaw_open(rig):
     # staircase (test_procedures.py), the plateaus fix mu to a few thousandths
     assert fitted == pytest.approx(0.8 * PARAMS.pulley_friction_coefficient, abs=0.004), message
     # the message gives the fit to 5 decimals, the file to 6 (round(value, 6)): 0.119965 in
-    # the file and 0.11996 in the message are one fit (a loaded run read them as two)
+    # the file and 0.11996 in the message are one fit, not two
     said = re.search(r'pulley_friction_coefficient ([0-9.]+) \+/-', message)
     assert said and abs(float(said[1]) - fitted) <= 6e-6, message
     assert str(written) in message
@@ -449,10 +448,8 @@ def test_autostart_false_waits_unconfigured_without_command(rig):
     assert probe.commands == []
     servo = f'/{topics.SERVO_CURRENT}'
     # the sim's subscription and the probe's (this test's): a new CLI process has to discover
-    # both, and the controller's participant; tried again, with a longer spin, until it has.
-    # (It waited for "Subscription count: 1", which two subscriptions never give: every run
-    # spent its 30 s and judged the last try, and a loaded run's last try had not discovered
-    # the topic yet, "Unknown topic".)
+    # both, and the controller's participant; tried again, with a longer spin, until it has
+    # ("Subscription count: 2": the two subscriptions).
     assert wait_until(lambda: 'controller' in probe.get_node_names(), 30.0), rig.report(servo)
     assert probe.count_publishers(servo) == 0      # the probe's own view of the graph
     rig.topic_info(servo, 'Subscription count: 2', 'Publisher count: 0')
@@ -504,13 +501,12 @@ def _dds_participants() -> int:
 def test_a_destroyed_controller_leaves_no_lifecycle_services_behind():
     """A controller destroyed in this process leaves the graph with its participant.
 
-    rclpy's LifecycleNode (Jazzy) left its state machine, and so the node and its DDS
-    participant, to the garbage collector. Found in loaded runs: the in-process controllers
-    of earlier tests left ``/controller/get_state`` etc. served by a node nobody spun, and a
-    ``ros2 lifecycle get /controller`` that matched such a server first never had an answer
-    (quiet A/B, 3 leaked controllers, a new controller process a round: 3 of 26 calls hung,
-    0 of 26 with the fix); a collection in a spinning thread hung a whole test run in a
-    Fast DDS deadlock of a leaked participant (eProsima/Fast-DDS#6502). Participant removal
+    rclpy's LifecycleNode (Jazzy) leaves its state machine, and so the node and its DDS
+    participant, to the garbage collector: the in-process controllers of earlier tests would
+    leave ``/controller/get_state`` etc. served by a node nobody spins, and a ``ros2
+    lifecycle get /controller`` that matched such a server first would never have an answer;
+    a collection in a spinning thread can hang a whole test run in a Fast DDS deadlock of a
+    leaked participant (eProsima/Fast-DDS#6502). Participant removal
     reaches the observer by a message; the timeout is the 20 s lease should that be lost.
     """
     with RosRunner() as watching:

@@ -131,8 +131,8 @@ def test_loadcheck_groups_failures_by_test(tmp_path):
 
 def test_a_failed_run_keeps_its_temporary_files_and_a_passed_one_does_not(tmp_path):
     """A failed loaded run's node logs are its best witness: loadcheck gives each run its own
-    pytest temporary folder (``run<k>.tmp``) and removes it only when the run passed (loaded
-    run 35/c4/1 lost them to pytest's rotation of the user's numbered folders)."""
+    pytest temporary folder (``run<k>.tmp``) and removes it only when the run passed (not
+    left to pytest's rotation of the user's numbered folders)."""
     from grip_force_ros.bench.loadcheck import run_once
     for name, verdict in (('test_ok.py', 'True'), ('test_bad.py', 'False')):
         (tmp_path / name).write_text(textwrap.dedent(f"""
@@ -209,7 +209,7 @@ def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
     and one of another: clean of complete per code; a run stopped midway (exit code 2, or
     fewer tests than its folder's others without a record, or no record where the others
     have one: its loadcheck stopped) is neither clean nor failed; a run killed at its timeout,
-    which leaves only its record, is a failure (loaded run 44/1 went uncounted so)."""
+    which leaves only its record, is a failure, not left uncounted."""
     same = {'commit': 'a' * 40, 'fingerprint': 'f1', 'dirty': False}
     docs_later = {'commit': 'b' * 40, 'fingerprint': 'f1', 'dirty': False}
     other = {'commit': 'c' * 40, 'fingerprint': 'f2', 'dirty': False}
@@ -296,10 +296,9 @@ def test_a_stopped_loadcheck_stops_its_run_and_what_the_run_started(tmp_path):
 
 
 def test_a_run_that_does_not_answer_is_killed_with_the_processes_it_started(tmp_path, monkeypatch):
-    """Loaded run 44/1: pytest deadlocked in rmw with the GIL held, answered no signal, and the
-    timeout's SIGKILL to its session left the nodes its test had started (each in a session of
-    its own) running beside the next run. A run past its timeout that ignores SIGINT: it and
-    the process it started in another session are both gone when ``run_once`` returns."""
+    """A run past its timeout that ignores SIGINT (e.g. pytest deadlocked in rmw with the GIL
+    held): it and the process it started in another session are both gone when ``run_once``
+    returns, not left running beside the next run."""
     (tmp_path / 'test_stuck.py').write_text(textwrap.dedent(f"""
         import os, signal, subprocess, time
 

@@ -237,8 +237,8 @@ def test_table_errors_and_their_figure(tmp_path):
     errors = table_errors(m, np.linspace(0.01, 1.0, 60))
     assert errors['efficiency'].max() <= m.EFFICIENCY_FIT_TOLERANCE
     assert errors['inverse'].max() <= m.CURRENT_FIT_TOLERANCE
-    # the inverse table covers the current range (to 2 max_current = 1 A; with the 0.3 mm cable
-    # of issue 13 it stopped short of the torque peak, before 1 A)
+    # the inverse table covers the current range (to 2 max_current = 1 A), not stopping short
+    # at the torque peak (before 1 A with a 0.3 mm cable)
     assert FOUR.max_current < errors['table_end_current'] <= 2 * FOUR.max_current * (1 + 1e-12)
     # M concave, far from the peak
     assert np.all((errors['condition'] >= 1.0) & (errors['condition'] < 10.0))

@@ -98,7 +98,7 @@ def test_monitor_redraws_in_place_on_a_tty():
 
 
 def test_a_ctrl_c_inside_a_deserialization_ends_the_monitor_as_a_ctrl_c(monkeypatch):
-    """The demo's CI failure of stop 32, in the monitor: its main thread deserializes too."""
+    """A Ctrl-C inside rclpy's deserialize_message (in the monitor's main thread) is a Ctrl-C."""
     from grip_force_ros.demo import monitor as monitor_module
 
     domain = int(os.environ['ROS_DOMAIN_ID'])

@@ -1,8 +1,7 @@
 """pydocstyle (PEP 257) over grip_force_ros/ and test/, as ament_pep257 runs it in ROS 2.
 
 Settings: the [pydocstyle] section of setup.cfg (the 'ament' convention for numpydoc
-docstrings). Files the house-tools branch is moving are left out until it has merged
-(``lint_files.EXCLUDED``, issue 12).
+docstrings). Files left out: ``lint_files.EXCLUDED``.
 """
 import subprocess
 import sys

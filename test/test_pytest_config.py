@@ -11,8 +11,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_a_failed_assertion_keeps_its_whole_message(tmp_path):
     """At the default verbosity (and under ``-q``) pytest cuts a non-string assertion message
     to 240 characters, keeping its two ends. The ROS tests' failure reports are such messages
-    (a tuple of the CLI's result and the processes' states and stacks): loaded run 35/c4/1 kept
-    only the report's last line. With the suite's pytest.ini the middle survives. (The inner
+    (a tuple of the CLI's result and the processes' states and stacks), whose middle matters.
+    With the suite's pytest.ini the middle survives. (The inner
     pytest keeps its temporary files here: the user's numbered ones, which keep the last three
     sessions' node logs, are left to the sessions that made them.)"""
     test = tmp_path / 'test_cut.py'

@@ -1,4 +1,4 @@
-"""Watchdog timing and read-only hardware limits on real nodes (issue 5).
+"""Watchdog timing and read-only hardware limits on real nodes.
 
 An in-process controller node (parameter overrides from the paper's needle driver YAML)
 and a fault probe that closes the loop with a simulated instrument over loopback DDS
@@ -97,8 +97,8 @@ def test_resume_from_a_partial_ramp_has_no_current_jump(session):
                        'instrument', silence(), ticks=31, reason='stale instrument',
                        master_angle=0.0)
     resumed_from = []
-    # a loaded machine can let every ramp finish before the inputs are back (a loaded run,
-    # load 6: six resumes, all from 0 A): the six trials are redone, at most twice, until
+    # a loaded machine can let every ramp finish before the inputs are back (all six resumes
+    # from 0 A): the six trials are redone, at most twice, until
     # one resume comes mid-ramp; every trial's resume is checked for bumps all the same
     for _ in range(CASE_ATTEMPTS):
         for case in (silent, single_nan) * 3:

@@ -1,4 +1,4 @@
-"""Safety properties of the controller core under runtime retuning (issue 5).
+"""Safety properties of the controller core under runtime retuning.
 
 ``test/test_control_properties.py`` checks the three properties of the issue (current and
 slew limits, finite outputs, target force <= the configured maximum) over >= 100k random

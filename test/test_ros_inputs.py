@@ -98,7 +98,7 @@ def test_malformed_inputs_are_rejected_keeping_the_last_good_one(loop):
         return {kv.key: kv.value for kv in status[-1].values} if status else {}
 
     # /diagnostics comes at its own rate: the newest status received may predate the last
-    # rejection (a loaded run read 4 of 5); wait for one that counts every case
+    # rejection; wait for one that counts every case
     ros.wait_for(lambda: int(last_status().get('rejected_inputs', 0)) >= len(cases), 5.0)
     last = last_status()
     assert int(last['rejected_inputs']) >= len(cases), last

@@ -261,8 +261,8 @@ def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path)
           f'the input became stale (period {1e3 * period:.1f} ms)')
     # while safe the command ramps to 0 A at the slew limit, never away from 0, in each
     # stretch of safe rows: a stall of this process between the freeze mark and the pause
-    # lets control resume in between (one reading of loaded run 30/1: safe rows 0 -> 0.085 A
-    # -> 0, 706 ms late; the other, a stall inside the safe state, is mended in the controller)
+    # lets control resume in between (safe rows 0 -> 0.085 A -> 0; a stall inside the safe
+    # state cannot do that: the controller's safe ramp only goes toward 0 A)
     command = rec.column('command')
     safe_rows = np.arange(safe_since, thaw)
     safe_rows = safe_rows[mode[safe_rows] == 'safe']
@@ -278,9 +278,9 @@ def test_stale_input_trips_watchdog_and_control_resumes_without_a_jump(tmp_path)
     resumed = np.flatnonzero(mode[thaw:] == 'grip')
     assert resumed.size, 'control did not resume after the inputs came back'
     k = resumed[0] + thaw
-    # the controller steps on the measured time between states (issue 11), so a step after
-    # a late state may move the current by the slew limit times that longer step (seen at
-    # load 13: a 1.39 ms step, 0.139 A at 100 A/s)
+    # the controller steps on the measured time between states, so a step after a late state
+    # may move the current by the slew limit times that longer step (e.g. a 1.39 ms step,
+    # 0.139 A at 100 A/s)
     allowed = params.max_current_slew * np.maximum(np.diff(now), period) * (1 + 1e-9)
     assert abs(command[k] - command[k - 1]) <= allowed[k - 1]
     jumps = np.abs(np.diff(command[k - 5:k + 200]))

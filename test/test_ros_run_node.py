@@ -1,9 +1,9 @@
 """run_node: a clean exit when the context shuts down under a callback, errors otherwise.
 
-Found by a fresh-clone CI run: on SIGINT, rclpy shuts the context down while the
-executor may still run a queued callback, whose publish then fails ("publisher's
-context is invalid"); the node process exited with 1 in 5 of 15 stops of a loop. A loaded
-run (stop 22) found the other order: the callback's error just before the context is down.
+On SIGINT, rclpy shuts the context down while the executor may still run a queued
+callback, whose publish then fails ("publisher's context is invalid"); or, the other
+order, the callback's error comes just before the context is down. Neither is an error
+exit of the node.
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ def test_an_error_while_running_is_not_swallowed():
 
 
 class _FailsThenShutsDown(Node):
-    """A callback error just before the context goes down (launch's Ctrl-C, a loaded run).
+    """A callback error just before the context goes down (launch's Ctrl-C on a loaded machine).
 
     The SIGINT handler wakes the executor, then shuts the context down: a queued callback
     may fail in between, with the context still up when ``run_node`` sees the error.
@@ -153,8 +153,8 @@ class _RecordingExecutor:
 
 @pytest.mark.parametrize('kind', ['events', 'single'])
 def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
-    """Stops 29-30: a node destroyed first left its handles to the EventsExecutor's destructor,
-    where the sim hung at a demo's stop (2 of 14 loaded runs). The order is the mend."""
+    """The executor shuts down first: a node destroyed first leaves its handles to the
+    EventsExecutor's destructor, which can hang the process at its stop."""
     events = []
     real_make = common.make_executor
     monkeypatch.setattr(common, 'make_executor',
@@ -173,7 +173,7 @@ def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
     monkeypatch.setattr(rclpy, 'try_shutdown', recording_shutdown)
     assert run_node(_FinishesAndRecords, 'finishes', []) == 0
     # The executor is dropped (its C++ destructor run) inside the teardown limit, before the
-    # context goes down, not as run_node returns (stop 32).
+    # context goes down, not as run_node returns.
     assert events == ['executor shutdown', 'node destroyed', 'executor dropped', 'context shut down']
     assert not rclpy.ok()
 
@@ -182,9 +182,9 @@ class _SignalsItselfInsideItsTick(Node):
     """Its 1 kHz tick sends ``signum`` to its own process at the 50th step, then goes on.
 
     Python runs the handler at the tick's next line: inside the callback, where a Ctrl-C
-    mostly lands in a node stepping at 1 kHz. rclpy's own handler raised KeyboardInterrupt
-    there; the EventsExecutor logged "[FATAL] Exception in 'timers' callback:" (2 of 6 stops
-    of the sim, stop 37) and queued callbacks published into a dead context.
+    mostly lands in a node stepping at 1 kHz. rclpy's own handler raises KeyboardInterrupt
+    there; the EventsExecutor then logs "[FATAL] Exception in 'timers' callback:" and queued
+    callbacks publish into a dead context.
     """
 
     signum = signal.SIGINT
@@ -346,8 +346,8 @@ class _SignalDiscardedWhileStarting(Node):
     """A SIGTERM handled inside a weakref callback while the node starts.
 
     Python discards what such a callback raises ("Exception ignored in"): the
-    KeyboardInterrupt of the start phase is lost, as a starting Python lost a parent-death
-    SIGINT inside importlib's ``_get_module_lock`` callback (stop 40). Should the node spin
+    KeyboardInterrupt of the start phase is lost, as a starting Python can lose a parent-death
+    SIGINT inside importlib's ``_get_module_lock`` callback. Should the node spin
     anyway, its own timer ends the spin after 1 s and says so.
     """
 
@@ -453,13 +453,12 @@ def _watchers_of(pid: int) -> list[str]:
 
 
 def test_a_teardown_that_does_not_end_leaves_its_stacks_and_is_killed():
-    """Stop 32: the master, deaf to SIGINT and SIGTERM after its loop, was SIGKILLed by
-    ``ros2 launch`` with nothing in its log. A teardown stuck past the limit (here: 60 s in
-    ``destroy_node``, limit 2 s) leaves every thread's stack and is killed: the native ones
-    (gdb) first, which say where in the middleware a real teardown waits (stop 35: the
-    controller's ``destroy_node`` ran past the limit in a loaded run, and its Python stack
-    alone could not tell a Fast DDS deadlock from a slow teardown), then Python's
-    (faulthandler) at the limit."""
+    """A teardown stuck past the limit leaves every thread's stack and is killed.
+
+    Here: 60 s in ``destroy_node``, limit 2 s. The native stacks (gdb) come first, which say
+    where in the middleware a real teardown waits (a Python stack alone cannot tell a Fast
+    DDS deadlock from a slow teardown), then Python's (faulthandler) at the limit; not a
+    node deaf to SIGINT and SIGTERM that ``ros2 launch`` SIGKILLs with nothing in its log."""
     done, took, pid = _run_teardown(destroy=60.0, after=0.0)
     assert done.returncode == -signal.SIGKILL, (done.returncode, done.stdout, done.stderr)
     assert took < 60.0                        # not waited out: ended by the limit
@@ -474,10 +473,10 @@ def test_a_teardown_that_does_not_end_leaves_its_stacks_and_is_killed():
 
 
 def test_the_time_stopped_for_native_stacks_does_not_count_against_the_limit(tmp_path):
-    """Stop 37: gdb held a slow teardown (the master's, in Fast DDS's ``destroy_participant``)
-    for over a second, and a wall-clock limit, running on meanwhile, ended it once gdb let go.
-    Here a gdb that takes 3 s (a stand-in on PATH) holds a teardown of 1 s (limit 2 s, stacks
-    at 0.2 s): the teardown gets the rest of its limit after the stop and ends cleanly."""
+    """gdb can hold a slow teardown (e.g. in Fast DDS's ``destroy_participant``) for over a
+    second; a wall-clock limit, running on meanwhile, would end it once gdb let go. Here a
+    gdb that takes 3 s (a stand-in on PATH) holds a teardown of 1 s (limit 2 s, stacks at
+    0.2 s): the teardown gets the rest of its limit after the stop and ends cleanly."""
     slow_gdb = tmp_path / 'gdb'
     slow_gdb.write_text('#!/bin/sh\necho "[slow gdb] reading"\nsleep 3\n')
     slow_gdb.chmod(0o755)

@@ -1,4 +1,4 @@
-"""The ROS 2 tools of the development environment (tools/ros_tools.sh, issue 14.1).
+"""The ROS 2 tools of the development environment (tools/ros_tools.sh).
 
 After ``source .venv/ros_setup.bash``: the real ``ros2`` CLI finds grip_force_ros through
 the ament index (colcon, symlink install), ``ros2 run`` starts its executables,
@@ -113,8 +113,8 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
         assert helped.returncode == 0, helped.stderr
         assert {'get', 'list', 'nodes', 'set'} <= set(re.findall(r'^\s+(\w+)\s', helped.stdout, re.M))
         # a new CLI process discovers the graph in its spin time: on a loaded machine 2 s can
-        # pass before it has the controller's services (loaded run 15/1: an empty list), as
-        # for node and topic list above
+        # pass before it has the controller's services (an empty list), as for node and
+        # topic list above
         lifecycle = retry(lambda: run('ros2', 'lifecycle', 'nodes', '--no-daemon', '--spin-time',
                                       '2', env=env),
                           lambda r: '/controller' in r.stdout.split(), timeout=30)
@@ -134,7 +134,7 @@ def test_ros2_run_param_node_topic_lifecycle(tmp_path):
 def _graph_seen(env: dict[str, str]) -> str:
     """What a new CLI process sees of the graph: its nodes, and its services with their types.
 
-    For a ``ros2 lifecycle nodes`` that printed nothing (the blind spell, stops 33-37): it
+    For a ``ros2 lifecycle nodes`` that printed nothing: it
     lists the nodes that have a ``<node>/get_state`` service of type
     ``lifecycle_msgs/srv/GetState``, so an empty answer alone cannot say whether the node or
     its service was missing.
@@ -183,8 +183,8 @@ Thread 7 (Thread 0x7f83fd9fa6c0 (LWP 25207) "dds.ev.0"):
 """
 
 
-#: gdb's stacks of stop 42's controller, past 3 s in its teardown (a loaded run), two of its 16
-#: threads, frames cut to their names.
+#: gdb's stacks of a controller past 3 s in its teardown (eProsima/Fast-DDS#6513), two of its
+#: 16 threads, frames cut to their names.
 _SPINNING_SET_LISTENER = """\
 Thread 10 (Thread 0x7fbc52f136c0 (LWP 31783) "dds.udp.13164"):
 #3  ___pthread_mutex_lock (mutex=0x2c2312d0) at ./nptl/pthread_mutex_lock.c:93
@@ -224,9 +224,9 @@ def test_dev_ros2_runs_the_cli_from_the_callers_directory(tmp_path):
 
 
 def test_fast_dds_log_lines_are_told_from_a_commands_answer():
-    """A loaded run: ``ros2 lifecycle get`` printed a Fast DDS shared-memory error on stdout
-    before ``unconfigured [1]``, and the test read the error as the answer. ``run`` moves
-    such lines to stderr; the answer, and a command's own error text, stay."""
+    """``ros2 lifecycle get`` can print a Fast DDS shared-memory error on stdout before
+    ``unconfigured [1]``, not to be read as the answer. ``run`` moves such lines to stderr;
+    the answer, and a command's own error text, stay."""
     logged = ('\x1b[37;1m2026-11-27 00:48:12.123 \x1b[31;1m[\x1b[37;1mRTPS_TRANSPORT_SHM\x1b[31;1m '
               'Error\x1b[37;1m] Failed init_port fastrtps_port7413: open_and_lock_file failed'
               '\x1b[34;1m -> Function \x1b[36mopen_port_internal\x1b[m')
@@ -258,7 +258,7 @@ node.wait()
 
 
 def test_a_launched_node_still_running_before_launch_s_sigterm_leaves_its_stacks(tmp_path):
-    """Stop 32: ``ros2 launch`` SIGKILLed a master deaf to SIGINT/SIGTERM, nothing in its log."""
+    """A node ``ros2 launch`` SIGKILLs (deaf to SIGINT/SIGTERM) leaves its stacks in the log."""
     from _ros_tools import stop_launch
     log = tmp_path / 'launch.log'
     with open(log, 'w') as out:
@@ -274,7 +274,7 @@ def test_a_launched_node_still_running_before_launch_s_sigterm_leaves_its_stacks
 
 
 def test_log_errors_sees_a_callback_error_the_events_executor_caught():
-    """A loaded run's sim log (stop 36): a KeyboardInterrupt caught in a timer callback."""
+    """A sim log with a KeyboardInterrupt caught in a timer callback."""
     caught = ("[sim_instrument-1] [FATAL] [1795825648.018376419] [sim_instrument]: Exception in "
               "'timers' callback: \n"
               "[sim_instrument-1] [WARN] [1795825648.022793734] [sim_instrument]: Error occurred at:\n"

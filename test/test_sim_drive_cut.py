@@ -1,10 +1,10 @@
-"""The simulated drive tells a cut of a held current from a cut at 0 A (issue 13.1).
+"""The simulated drive tells a cut of a held current from a cut at 0 A.
 
 A calibration staircase whose drive cut a held current (a starved node, no command for
-30 ms) gives a friction fit that is off: loaded run 14/4 fitted the long-jaw grasper's
-mu at 0.1149 where its other runs gave 0.1189-0.1194, and the calibrated spread failed
-(0.049 > 0.03). The sim counts such cuts on /diagnostics (``drive_cuts_under_current``)
-and the instrument comparison redoes a calibration run that has one.
+30 ms) gives a friction fit that is off (e.g. the long-jaw grasper's mu at 0.1149 where
+its other runs give 0.1189-0.1194, a calibrated spread of 0.049 > 0.03). The sim counts
+such cuts on /diagnostics (``drive_cuts_under_current``) and the instrument comparison
+redoes a calibration run that has one.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Rate independence (issue 11.6): the controller steps on the measured time between states.
+"""Rate independence: the controller steps on the measured time between states.
 
 ROS-free: the real GripController on the simulated instrument with states at 100 .. 1500 Hz
 (bench/state_rate.py, seeded sensor noise and +-10 % state-time jitter); the node refuses to
