@@ -28,10 +28,17 @@ SAFE_AT = 0.2               # s into the task, a safe-state entry (approach)
 ERROR = 0.05                # N, load cell - target where there is a target
 
 
-def _spec():
+def _spec(tmp_path=None):
+    """The run the synthetic bag stands for: a sim that sends its state split (two topics)."""
     from grip_force_ros.demo.run import RunSpec
     from grip_force_ros.params.files import instrument_path
-    return RunSpec(config=instrument_path('paper_needle_driver'), duration=4.0)
+    config = instrument_path('paper_needle_driver')
+    if tmp_path is not None:
+        split = tmp_path / 'split_state.yaml'
+        split.write_text(config.read_text().replace(
+            'ros__parameters:', 'ros__parameters:\n    state_message: split', 1))
+        config = split
+    return RunSpec(config=config, duration=4.0)
 
 
 def _target(tau, trajectory):
@@ -148,7 +155,7 @@ def test_every_topic_of_a_stalled_recording_is_on_its_header_stamps(stalled_bag)
     assert times == sorted(times) and times[0] == pytest.approx(T0 - 0.5, abs=1e-6)
 
 
-def test_the_figure_data_and_the_figures_line_up_on_the_stamps(stalled_bag, monkeypatch):
+def test_the_figure_data_and_the_figures_line_up_on_the_stamps(stalled_bag, monkeypatch, tmp_path):
     from grip_force_ros.demo import plot as plot_module
     from grip_force_ros.demo.run import RunResult, analyse_run
 
@@ -160,7 +167,7 @@ def test_the_figure_data_and_the_figures_line_up_on_the_stamps(stalled_bag, monk
         return original(data, windows, metrics, path, title=title, clocks=clocks)
 
     monkeypatch.setattr(plot_module, 'summary_plot', capture)
-    spec = _spec()
+    spec = _spec(tmp_path)
     trajectory = spec.trajectory()
     out = stalled_bag.parent
     result = analyse_run(RunResult(spec, out, stalled_bag, 0, {}, {}, trajectory), plot=True)
