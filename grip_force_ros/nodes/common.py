@@ -180,7 +180,7 @@ def make_executor(context=None, kind: str | None = None):
 
 #: How long after a callback error the context may still go down for the error to be read as
 #: a signal's shutdown racing the callback (s). The SIGINT handler shuts the context down
-#: moments after it wakes the executor: a loaded run saw the error first (launch's Ctrl-C, the
+#: moments after it wakes the executor, so the error may come first (launch's Ctrl-C, the
 #: EventsExecutor's "Unable to convert call argument '0' to Python object").
 SHUTDOWN_RACE_WAIT = 2.0
 
@@ -192,8 +192,8 @@ def freeze_heap() -> None:
     garbage collector, and a full collection scans the whole heap while the nodes wait. In a
     process that had collected this suite (~450 000 objects) the automatic full collections
     that building probe-like records set off took ~250 ms each (9 of 9); with the heap frozen
-    first, 0-4 ms (17 of them). Loaded runs had seen in-process controllers stalled by
-    125 ms, twice in a row (the fault check, stop 31), beyond every watchdog. The node
+    first, 0-4 ms (17 of them): an in-process controller stalled by 125 ms is beyond every
+    watchdog. The node
     processes do not need it: no collection at all in 20 s of their steady 1 kHz running
     (BENCHMARKS.md). :func:`unfreeze_heap` gives the objects back to the collector.
     """
@@ -208,25 +208,20 @@ def unfreeze_heap() -> None:
 
 #: Time a node's teardown (executor, node, context) may run before every thread's stack goes
 #: to stderr and the process is ended (s; time stopped for gdb's native stacks does not count,
-#: :func:`~grip_force_ros.nodes.processes.watch_own_teardown`). A loaded run
-#: (stop 32) saw the master ignore ``ros2 launch``'s SIGINT and SIGTERM at a stop and get
-#: SIGKILLed 15 s later, with nothing in its log of where it was; a teardown stuck in the
+#: :func:`~grip_force_ros.nodes.processes.watch_own_teardown`). A teardown stuck in the
 #: middleware is deaf to every signal rclpy handles: Fast DDS has an open deadlock of a
-#: participant's own threads (eProsima/Fast-DDS#6502, seen here once), and its
-#: ``set_listener(nullptr)``, the first step of rmw_fastrtps's ``destroy_participant``, spins
-#: for good when it starts while a discovery callback of that participant runs
-#: (eProsima/Fast-DDS#6513; tools/fast_dds_set_listener_spin.cpp, stop 43). The limit ends the
+#: participant's own threads (eProsima/Fast-DDS#6502), and its ``set_listener(nullptr)``, the
+#: first step of rmw_fastrtps's ``destroy_participant``, spins for good when it starts while a
+#: discovery callback of that participant runs (eProsima/Fast-DDS#6513). The limit ends the
 #: process before this package's runners signal it again (SIGTERM 5 s after SIGINT) and before
-#: ``ros2 launch`` does (15 s), so the stacks reach the log; docs/reliability.md (sixteenth
-#: round) gives the teardown times it is set against.
+#: ``ros2 launch`` does (15 s), so the stacks reach the log.
 TEARDOWN_LIMIT = 4.0
 #: Fraction of :data:`TEARDOWN_LIMIT` after which a teardown still running has its native
 #: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).
-#: Stop 35: the controller's ``destroy_node`` ran past the limit in a loaded run, and its
-#: Python stack could not tell a Fast DDS deadlock from a slow teardown. The process is stopped
-#: while gdb starts and reads (seconds on a loaded machine), which delays a teardown that would
-#: have ended, so it comes late: 3 s, 3.8 times the slowest loaded teardown measured (0.79 s,
-#: docs/reliability.md, sixteenth round).
+#: A Python stack alone cannot tell a Fast DDS deadlock from a slow teardown. The process is
+#: stopped while gdb starts and reads (seconds on a loaded machine), which delays a teardown
+#: that would have ended, so it comes late: 3 s, 3.8 times the slowest teardown measured on a
+#: loaded machine (0.79 s).
 NATIVE_STACKS_AT = 0.75
 
 
@@ -242,8 +237,7 @@ class SignalStop:
     rclpy's signal thread and raises KeyboardInterrupt in the main thread at its next Python
     line, which, in a node stepping at 1 kHz, is mostly inside a timer callback: the
     EventsExecutor logged ``[FATAL] Exception in 'timers' callback:`` (an empty message)
-    there, and callbacks already queued then published into a dead context (2 of 6 stops of
-    ``sim_instrument``, stop 37; five node logs of a loaded run, stop 36). This handler only
+    there, and callbacks already queued then published into a dead context. This handler only
     records the request and resets a stopped one-shot timer (the EventsExecutor of Jazzy takes
     no guard condition; a timer reset from inside a callback fires 0.6 ms later), whose
     callback completes the spin's future: the callback running then ends, the spin returns,
@@ -255,7 +249,7 @@ class SignalStop:
     be interrupted) and asks the stop too, so the spin never starts: Python discards an
     exception raised inside a weakref callback or finaliser ("Exception ignored in"), and an
     import's ``_get_module_lock`` callback is where a signal came during start-up in 27 of
-    7200 trials (docs/reliability.md, twenty-fourth round). During the spin, it asks the stop;
+    7200 trials. During the spin, it asks the stop;
     after it (the teardown, bounded by :data:`TEARDOWN_LIMIT`), it is noted and ignored.
     :meth:`restore` puts the previous handlers back (``run_node`` runs inside test processes
     too).
@@ -371,7 +365,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
             realtime.finish(node)     # the loop's queued log lines
             close_node(executor, node)
             # Dropped here, inside the limit, not as the function returns: the EventsExecutor's
-            # C++ destructor runs now (stop 30 caught the sim hung in one).
+            # C++ destructor runs now, where a hang is still watched.
             executor = node = finished = None
             shutdown_once()
         finally:
@@ -384,7 +378,7 @@ def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
 #: Longest a node's stop waits for the peers it leaves after (s; ``LEAVE_AFTER_ENV``) before its
 #: own teardown starts anyway. The sim waits for the controller, which waits for the master:
 #: two teardowns in a row, each 0.23 s (p50), 0.78 s (p99), 1.09 s (max) from signal to exit
-#: on a loaded machine (stop 43, docs/reliability.md, twenty-sixth round), and a settle. With
+#: on a loaded machine, and a settle. With
 #: the teardown's own limit after it (:data:`TEARDOWN_LIMIT`) a stop still ends before ``ros2
 #: launch``'s SIGKILL (10 s after SIGINT; its SIGTERM at 5 s is ignored while stopping).
 PEER_LEAVE_WAIT = 3.0
@@ -402,16 +396,15 @@ def wait_for_peers_to_leave(node, peers: Sequence[str], timeout: float = PEER_LE
 
     Fast DDS 2.14's ``set_listener(nullptr)``, the first step of rmw_fastrtps's
     ``destroy_participant``, spins for good when it starts while a discovery callback of that
-    participant runs (eProsima/Fast-DDS#6513, open; tools/fast_dds_set_listener_spin.cpp), and
-    a stop of several nodes at once brings exactly that callback: another participant leaving.
-    ``ProcessGroup`` stops its nodes one after another; ``ros2 launch`` sends SIGINT to all at
-    once (a fresh-clone CI run, stop 45: the controller hung there and was killed). So a node
+    participant runs (eProsima/Fast-DDS#6513, open), and a stop of several nodes at once
+    brings exactly that callback: another participant leaving. ``ProcessGroup`` stops its
+    nodes one after another; ``ros2 launch`` sends SIGINT to all at once. So a node
     launched with :data:`~grip_force_ros.nodes.processes.LEAVE_AFTER_ENV` stops after the
     nodes it names: in the package's launch files the master leaves first, then the
     controller, then the sim (the reverse start order of the demo). The pause ``settle`` follows
     even when no peer is in the graph any more at the first look: one that left a moment before
     may still be in the callback that took its leaving (the master, stopped at the same moment,
-    is mostly gone before the controller looks: tools/teardown_overlap.py). A peer still there
+    is mostly gone before the controller looks). A peer still there
     after ``timeout`` s (not stopping, or stuck) is left behind, and its name returned.
 
     Parameters
@@ -470,9 +463,9 @@ def close_node(executor, *nodes) -> None:
     """End ``executor`` first, then destroy each of ``nodes`` (None entries are skipped).
 
     The other order left a node's handles to be finalised inside the EventsExecutor's C++
-    destructor, when the executor is dropped after the node was destroyed: a loaded run caught
-    the sim's main thread there (``rclpy/event_handler.py`` ``__exit__``, the releasing of a
-    QoS event handle), never returning and deaf to signals (2 of 14 loaded runs, stops 29-30).
+    destructor, when the executor is dropped after the node was destroyed: the sim's main
+    thread hung there (``rclpy/event_handler.py`` ``__exit__``, the releasing of a QoS event
+    handle), never returning and deaf to signals, in 2 of 14 runs on a loaded machine.
     Shut down, the executor has released every handle while the node still owns them, and the
     node's own ``destroy_node`` finalises them in Python, as in any executor-less teardown.
     """

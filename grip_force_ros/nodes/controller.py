@@ -288,8 +288,8 @@ class ControllerNode(LifecycleNode):
         rclpy's ``LifecycleNode.destroy_node`` (Jazzy) leaves the state machine to the garbage
         collector, and the state machine holds the node, so the node's DDS participant lives
         on (its threads still taking discovery traffic) until a collection, in whichever
-        thread it runs. Found in a loaded run: the collection ran in a test's spinning
-        thread, under the GIL, while that leaked participant was caught in a Fast DDS
+        thread it runs: a collection in a test's spinning thread, under the GIL, while that
+        leaked participant was caught in a Fast DDS
         deadlock (eProsima/Fast-DDS#6502: ``unregister_timer`` against
         ``check_remote_participant_liveliness``): the whole test process hung.
         """

@@ -51,7 +51,7 @@ _STATE_JOINTS = (topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT)
 ARM_POLL_PERIOD = 0.5
 #: Longest wait for the answer of the operating_state service before it is asked again (s).
 #: A service answer can be lost (Fast DDS drops a reply whose client reader the server has
-#: not discovered 100 ms after the request; docs/reliability.md, seventh round); without a
+#: not discovered 100 ms after the request; ros2/rmw_fastrtps#890); without a
 #: new request the profile would wait for a state change of the arm that may never come.
 STATE_REPLY_WAIT = 2.0
 

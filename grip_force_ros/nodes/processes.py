@@ -291,8 +291,8 @@ def master_rt_priority(loop_priority: int) -> int:
 
     Ten below the 1 kHz loop, so that the loop preempts it and other work does not: on a
     busy 2-core machine a master at normal priority was starved past the controller's
-    0.1 s master watchdog by a second of Python start-up of a ros2 CLI call
-    (docs/reliability.md, fourth round). 0 (normal scheduling) when the loop is normal.
+    0.1 s master watchdog by a second of Python start-up of a ros2 CLI call. 0 (normal
+    scheduling) when the loop is normal.
     """
     return max(1, loop_priority - 10) if loop_priority else 0
 
@@ -303,7 +303,7 @@ def recorder_rt_priority(loop_priority: int) -> int:
     Ten below the master: the loop and the master preempt it, a busy worker does not. At
     normal priority, under two busy workers, its DDS threads were starved past the
     publishers' KEEP_LAST 10 and the bag lost 100-400 ms of every topic in the middle of a
-    task (docs/reliability.md, eleventh round). 0 (normal scheduling) when the loop is normal.
+    task. 0 (normal scheduling) when the loop is normal.
     """
     return max(1, loop_priority - 20) if loop_priority else 0
 
@@ -407,7 +407,7 @@ def end_with_parent(sig: int = signal.SIGTERM) -> bool:
     The signal is sent once, so it must not be one a starting Python loses: SIGINT is (Python
     handles it from its first line, and a KeyboardInterrupt raised inside an import's weakref
     callback is discarded: 27 of 7200 SIGINTs sent in a child's first 30 ms, none of 3000
-    SIGTERMs; docs/reliability.md, twenty-fourth round). SIGTERM ends a process that has no
+    SIGTERMs). SIGTERM ends a process that has no
     handler for it yet, and a node that has one (``nodes.common.SignalStop``) stops as on
     Ctrl-C; ``ros2 launch`` handles it too.
 
@@ -475,7 +475,7 @@ _PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
 #: SCHED_OTHER first: gdb reading stacks for seconds must not outrank the machine's other work.
 #: It stops the process (SIGSTOP) while gdb starts and reads and continues it after, then gives
 #: it the rest of its limit: the limit counts the time the process runs, not the time gdb held
-#: it (stop 37: a wall-clock limit, running on while gdb read for over a second, ended a slow
+#: it (a wall-clock limit, running on while gdb read for over a second, would end a slow
 #: teardown the moment gdb let go). A process still tearing down at the limit gets
 #: STACK_DUMP_SIGNAL (its Python stacks, ``faulthandler``), then SIGKILL. A lock (``flock`` on
 #: the process's temporary file ``$3``, opened anew through ``/proc``: a lock of its own, not
@@ -761,9 +761,7 @@ class ProcessGroup:
     next one ``settle`` seconds after the previous one has exited. A participant is then not
     torn down while another one's leaving reaches it: Fast DDS 2.14's ``set_listener``, the
     first step of a participant's deletion, spins for good when a discovery callback is in
-    progress (eProsima/Fast-DDS#6513; tools/fast_dds_set_listener_spin.cpp). Stop 42 caught
-    the controller there, stopped at the same moment as the sim; tools/teardown_overlap.py
-    compares both ways (docs/reliability.md, twenty-sixth round). With ``one_at_a_time``
+    progress (eProsima/Fast-DDS#6513). With ``one_at_a_time``
     False every process gets each signal at once, as ``ros2 launch`` does. Each process runs
     in its own session so that a Ctrl-C at the terminal reaches only the orchestrator, which
     then stops the nodes in order.
@@ -772,8 +770,8 @@ class ProcessGroup:
     env: dict[str, str]
     log_dir: Path | None = None
     #: Time (s) from SIGINT to SIGTERM. Past the nodes' own teardown limit (4 s,
-    #: ``common.TEARDOWN_LIMIT``): a SIGTERM at 3 s came while the teardown watch had gdb on
-    #: the node and cut its native stacks short (tools/teardown_overlap.py, stop 43).
+    #: ``common.TEARDOWN_LIMIT``): a SIGTERM sooner could come while the teardown watch has gdb
+    #: on the node and cut its native stacks short.
     grace: float = 5.0
     processes: list[NodeProcess] = field(default_factory=list)
     one_at_a_time: bool = True
