@@ -182,7 +182,8 @@ def test_bench_all_parts_tiny(tmp_path):
     for name, f in inputs.items():                            # every sensor was an input
         assert f['used'] > 100, name
         assert 0 <= f['age_at_step']['p50_ms'] <= f['to_command']['p50_ms'], name
-    assert set(loop['goals_met']) == {'p99_ratio', 'full_path_p99_ratio', 'missed_fraction'}
+    assert set(loop['goals_met']) == {'p99_ratio', 'full_path_p99_ratio', 'missed_fraction',
+                                      'controller_cpu_ratio'}
     assert loop['goals']['missed_fraction'] == pytest.approx(loop['floor_missed_fraction'] + 0.0005)
     assert 0 <= loop['missed_fraction'] <= 1
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
@@ -200,3 +201,119 @@ def test_bench_all_parts_tiny(tmp_path):
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
     assert 'timer skipped' in text and 'full path' in text and 'goals:' in text
     assert 'contract floor' in text
+
+
+def _synthetic_floor(p50=0.3, p99=0.5, missed=0.001, echo_cpu=20.0):
+    """A run_floor result with the figures given (ms, fraction, % of a core)."""
+    latency = {'p50_ms': p50, 'p99_ms': p99, 'max_ms': 3 * p99, 'samples': 20_000}
+    periods = {'missed_fraction': missed, 'late_fraction': missed}
+    return {'latency': latency, 'periods': periods, 'timer_periods': {'missed_fraction': missed / 2},
+            'cpu_percent': {'ping': 30.0, 'echo': echo_cpu}, 'lost_fraction': 0.0,
+            'sensors_same_sample_fraction': 0.999}
+
+
+def _synthetic_product(p99, full_p99, missed, controller_cpu, skew=0.0):
+    """A run_products arm result with the figures given (ms, fraction, % of a core)."""
+    def lat(p):
+        return {'p50_ms': p / 2, 'p99_ms': p, 'max_ms': 3 * p, 'samples': 19_000}
+    inputs = {name: {'to_command': lat(full_p99), 'age_at_step': lat(full_p99 / 2),
+                     'same_sample_fraction': 1.0, 'used': 19_000}
+              for name in ('actuator', 'jaw', 'load_cell')}
+    return {'latency': lat(p99), 'periods': {'missed_fraction': missed, 'late_fraction': missed},
+            'timer_periods': {'missed_fraction': 0.0},
+            'full_path': {'full_path': lat(full_p99), 'matched_fraction': 1.0, 'inputs': inputs},
+            'cpu_percent': {'sim': 30.0, 'controller': controller_cpu, 'master': 8.0},
+            'other_commands': 3, 'window_skew_s': skew, 'executor': 'node default'}
+
+
+def test_compare_arms_judges_each_arm_against_the_one_floor():
+    """Per arm the single-arm section's keys, its goals against the run's floor; all arms met or not."""
+    from grip_force_ros.bench.loop import compare, compare_arms
+    floor, contract = _synthetic_floor(), _synthetic_floor(p50=0.35, p99=0.6)
+    good = _synthetic_product(p99=0.6, full_p99=0.7, missed=0.0012, controller_cpu=25.0)
+    bad = _synthetic_product(p99=1.0, full_p99=1.2, missed=0.01, controller_cpu=40.0, skew=0.2)
+    single = compare(floor, good, contract)
+    loop = compare_arms(floor, {'PSM1': good, 'PSM2': bad}, contract)
+    assert list(loop['arms']) == ['PSM1', 'PSM2']
+    psm1, psm2 = loop['arms']['PSM1'], loop['arms']['PSM2']
+    assert set(single) <= set(psm1) and set(single) <= set(psm2)
+    for key in ('p99_ratio', 'full_path_p99_ratio', 'missed_fraction', 'controller_cpu_ratio',
+                'cpu_percent', 'goals', 'goals_met', 'contract_floor_p99_ratio'):
+        assert key in psm1, key
+    assert psm1['p99_ratio'] == pytest.approx(0.6 / 0.5)
+    assert psm1['full_path_p99_ratio'] == pytest.approx(0.7 / 0.5)
+    assert psm1['controller_cpu_ratio'] == pytest.approx(25.0 / 20.0)
+    assert psm1['goals']['missed_fraction'] == pytest.approx(0.001 + 0.0005)
+    assert all(psm1['goals_met'].values())
+    assert psm2['goals_met'] == {'p99_ratio': False, 'full_path_p99_ratio': False,
+                                 'missed_fraction': False, 'controller_cpu_ratio': False}
+    assert psm2['p99_ratio'] == pytest.approx(2.0) and psm2['window_skew_s'] == 0.2
+    assert loop['arms_goals_met'] is False
+    assert compare_arms(floor, {'PSM1': good, 'PSM2': good}, contract)['arms_goals_met'] is True
+    # the floor once, beside the arms
+    assert loop['floor']['p99_ms'] == 0.5 and loop['contract_floor']['p99_ms'] == 0.6
+    assert set(loop['cpu_percent']['arms']) == {'PSM1', 'PSM2'}
+
+
+def test_render_gives_one_block_per_arm():
+    from grip_force_ros.bench.loop import compare_arms
+    from grip_force_ros.cli.bench import render
+    floor, contract = _synthetic_floor(), _synthetic_floor(p99=0.6)
+    loop = compare_arms(floor, {'PSM1': _synthetic_product(0.6, 0.7, 0.001, 25.0),
+                                'PSM2': _synthetic_product(1.0, 1.2, 0.01, 40.0)}, contract)
+    loop.update(seconds=20.0, domain_id=201, rt_priority=0, pressure=None)
+    text = render({'machine': {'nproc': 2, 'cpu_model': 'x', 'python': '3', 'rclpy': '7',
+                               'load_average_1min': 1.0, 'load_average_1min_end': 1.5},
+                   'loop': loop})
+    assert 'arm /PSM1' in text and 'arm /PSM2' in text
+    assert text.count('goals: p99 ratio') == 2
+    assert 'every arm met every goal: NO' in text
+    assert 'product /PSM2 sim 30' in text
+
+
+def test_product_commands_put_each_arm_in_its_namespace():
+    """-r __ns:=/PSM1 in every node's ROS args of an arm; none in the single-arm run."""
+    from grip_force_ros.bench.loop import product_commands
+    for ns in ('PSM1', 'PSM2'):
+        cmds = product_commands('c.yaml', 'a.npz', 's.npz', 2.0, 1.0, ns, open_at_ns=123)
+        assert set(cmds) == {'controller', 'master', 'sim'}
+        for name, cmd in cmds.items():
+            ros = cmd[cmd.index('--ros-args'):]
+            assert ['-r', f'__ns:=/{ns}'] == ros[ros.index('-r'):ros.index('-r') + 2], name
+            assert '--params-file' in ros and 'c.yaml' in ros
+        assert cmds['sim'][cmds['sim'].index('--open-at-ns') + 1] == '123'
+        assert 'force_sensor_enabled:=true' in cmds['controller']
+        assert 'repeat:=true' in cmds['master']
+    single = product_commands('c.yaml', 'a.npz', 's.npz', 2.0, 1.0)
+    assert not any('__ns' in arg for cmd in single.values() for arg in cmd)
+    assert '--open-at-ns' not in single['sim']
+
+
+def test_contract_floor_sends_the_load_cell_then_one_combined_state():
+    """The contract floor's ping publishes two messages a period, the echo answers the combined one."""
+    from grip_force_ros import topics
+    from grip_force_ros.bench.child import _combined_state
+    from grip_force_ros.bench.loop import CONTRACT
+    msg = _combined_state()
+    assert list(msg.name) == [topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT]
+    assert len(msg.position) == len(msg.velocity) == len(msg.effort) == 3
+    assert '--sensors' in CONTRACT.args() and 'combined state' in CONTRACT.label()
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(300)
+def test_two_arms_answer_in_one_window():
+    """Two products (/PSM1, /PSM2: sim, controller, master each) at once in one domain: both loops answer."""
+    from grip_force_ros.bench.loop import run_products
+    from grip_force_ros.params.files import instrument_path
+    domain = int(os.environ['ROS_DOMAIN_ID'])
+    arms = run_products(1.0, domain, str(instrument_path('paper_needle_driver')),
+                        warmup=0.5, namespaces=('PSM1', 'PSM2'), window_delay=8.0)
+    assert list(arms) == ['PSM1', 'PSM2']
+    for name, arm in arms.items():
+        print(f"{name}: {arm['latency']['samples']} round trips, window opened "
+              f"{arm['window_skew_s']:.3f} s after the first (load {os.getloadavg()[0]:.1f})")
+        assert arm['namespace'] == f'/{name}'
+        assert arm['latency']['samples'] > 0, name           # its loop answered
+        assert arm['full_path']['full_path']['samples'] > 0, name
+        assert set(arm['cpu_percent']) == {'sim', 'controller', 'master'}

@@ -11,13 +11,14 @@ wall clock (``time.time_ns``, the clock of rclpy's ROS time); ``echo`` plays the
 controller at its barest: it answers every state in the subscription callback
 with a current command (``JointState`` on :data:`topics.SERVO_CURRENT`) that
 carries the state's stamp. With ``--sensors`` both play the topic contract's whole
-period: ``ping`` publishes the joint state (:data:`topics.INSTRUMENT_JS`) and the
-load cell (``geometry_msgs/WrenchStamped`` on :data:`topics.MEASURED_FORCE`) before
-the actuator state, as the sim node does, and ``echo`` takes both in (keeping their
-values) before it answers the actuator state: three messages out, one back, no
-model and no control law. The round trip is the receive time minus that stamp;
-a period is missed when its state got no answer. The product is measured the
-same way by the shipped sim node (:mod:`.product_sim`).
+period: ``ping`` publishes the load cell (``geometry_msgs/WrenchStamped`` on
+:data:`topics.MEASURED_FORCE`) and then ONE combined joint state (wrist_pitch, jaw,
+jaw_drum on :data:`topics.INSTRUMENT_JS`), as the sim node does by default
+(``state_message: combined``), and ``echo`` keeps the load cell's value and answers
+the combined state with a command computed from the jaw it carries and the load cell
+it holds: two messages out, one back, no model and no control law. The round trip is
+the receive time minus that stamp; a period is missed when its state got no answer.
+The product is measured the same way by the shipped sim node (:mod:`.product_sim`).
 
 Protocol on stdout (one line each, read by the parent): ``START`` when the
 measurement window opens (after discovery and a warm-up), then one JSON line
@@ -61,8 +62,12 @@ def make_executor(kind: str):
 class _Window:
     """Discovery, warm-up and measurement window of a measuring process."""
 
-    def __init__(self, node: Node, seconds: float, warmup: float, capacity: int, gc_freeze: bool):
+    def __init__(self, node: Node, seconds: float, warmup: float, capacity: int, gc_freeze: bool,
+                 open_at_ns: int = 0):
         self.node = node
+        # wall clock (ns) before which the window does not open (0: at the warm-up's end):
+        # several measuring processes (the arms of a two-arm run) then share one window
+        self.open_at_ns = open_at_ns
         self.seconds = seconds
         self.warmup = warmup
         self.gc_freeze = gc_freeze
@@ -119,7 +124,9 @@ class _Window:
                 'timer_periods': missed_periods(self.ticks[:self.n_ticks], period),
                 # the five longest round trips: (s into the window, ms)
                 'worst': [(float((answered[i] - t0) * 1e-9), float(round_trips[i] * 1e-6))
-                          for i in worst]}
+                          for i in worst],
+                # when the window opened (wall clock, ns): the windows of several arms compared
+                'opened_ns': int(self.opened_ns or 0)}
 
     def advance(self, summary) -> None:
         """Move through the states; call it from a periodic callback."""
@@ -127,7 +134,8 @@ class _Window:
         if self.state == 'discover' and now - self.t_created > DISCOVERY_TIMEOUT:
             self.result = {'error': f'no answer within {DISCOVERY_TIMEOUT:.0f} s (discovery failed?)'}
             self._finish()
-        elif self.state == 'warm' and now - self.t_state >= self.warmup:
+        elif (self.state == 'warm' and now - self.t_state >= self.warmup
+              and time.time_ns() >= self.open_at_ns):
             if self.gc_freeze:
                 gc.collect()
                 gc.freeze()
@@ -148,7 +156,11 @@ class _Window:
 
 
 class Ping(Node):
-    """The sim's side of the floor: 1 kHz stamped actuator state out, command back."""
+    """The sim's side of the floor: 1 kHz stamped state out, command back.
+
+    The floor sends the actuator state alone; the contract floor (``--sensors``) the load
+    cell, then the combined joint state (wrist_pitch, jaw, jaw_drum) that the echo answers.
+    """
 
     def __init__(self, opts):
         super().__init__('bench_ping')
@@ -158,34 +170,37 @@ class Ping(Node):
         self.window = _Window(self, opts.seconds, opts.warmup, capacity, opts.gc_freeze)
         group = _callback_group(opts.callback_groups)
         sub_group = _callback_group(opts.callback_groups)
-        self.pub = self.create_publisher(JointState, topics.ACTUATOR_JS, state_qos(opts.depth))
+        self.combined = opts.sensors
+        # the floor: the actuator state; the contract floor: the combined state (after the load cell)
+        self.pub = self.create_publisher(JointState, topics.INSTRUMENT_JS if self.combined
+                                         else topics.ACTUATOR_JS, state_qos(opts.depth))
         self.sub = self.create_subscription(JointState, topics.SERVO_CURRENT, self.on_answer,
                                             state_qos(opts.depth), callback_group=sub_group)
-        self.msg = _actuator_state()
+        self.msg = _combined_state() if self.combined else _actuator_state()
         self.sensors = None
         self.sensors_same_sample = 0
-        if opts.sensors:      # the contract's joint state and load cell, sent first
-            self.sensors = (
-                (self.create_publisher(JointState, topics.INSTRUMENT_JS, state_qos(opts.depth)),
-                 _instrument_state()),
-                (self.create_publisher(WrenchStamped, topics.MEASURED_FORCE, state_qos(opts.depth)),
-                 WrenchStamped()))
+        if opts.sensors:      # the contract's load cell, sent before the combined state
+            self.sensors = (self.create_publisher(WrenchStamped, topics.MEASURED_FORCE,
+                                                  state_qos(opts.depth)),
+                            WrenchStamped())
         self.timer = self.create_timer(opts.period, self.on_tick, callback_group=group)
 
     def on_tick(self) -> None:
         w = self.window
         if w.measuring:
             w.record_tick(time.perf_counter_ns())
-        msg = self.msg if self.prealloc else _actuator_state()
+        msg = self.msg if self.prealloc else (_combined_state() if self.combined
+                                              else _actuator_state())
         t = time.time_ns()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
-        msg.position[0] = (t % 1_000_000) * 1e-6
+        value = (t % 1_000_000) * 1e-6      # this period's value: the echo answers with it
+        msg.position[0] = value
         if self.sensors is not None:
-            jaw, force = self.sensors[0][1], self.sensors[1][1]
-            jaw.header.stamp = force.header.stamp = msg.header.stamp
-            jaw.position[1] = force.wrench.force.z = msg.position[0]   # the echo answers with them
-            for pub, sensor in self.sensors:
-                pub.publish(sensor)
+            pub, force = self.sensors
+            force.header.stamp = msg.header.stamp
+            msg.position[1] = force.wrench.force.z = value    # the jaw and the load cell
+            msg.position[2] = value                           # the drum
+            pub.publish(force)
         self.pub.publish(msg)
         if w.measuring:
             w.sent += 1
@@ -199,13 +214,13 @@ class Ping(Node):
         if w.counts(stamp):
             w.record_answer(stamp, round_trip)
             if self.sensors is not None and msg.effort[0] == (stamp % 1_000_000) * 1e-6:
-                self.sensors_same_sample += 1   # answered with the sensors of its own period
+                self.sensors_same_sample += 1   # answered with the load cell of its own period
 
     def summary(self) -> dict:
         w = self.window
         out = w.answer_summary(self.period)
         out.update({'sent': w.sent, 'received': w.received})
-        if self.sensors is not None:    # answers that used the joint state and load cell of their period
+        if self.sensors is not None:    # answers that used the load cell of their own period
             out['sensors_same_sample_fraction'] = (self.sensors_same_sample / w.received
                                                    if w.received else float('nan'))
         out['lost_fraction'] = 1.0 - w.received / w.sent if w.sent else float('nan')
@@ -215,7 +230,9 @@ class Ping(Node):
 class Echo(Node):
     """The controller's side of the floor: answer each state, its stamp carried.
 
-    ``--answer callback`` (the floor) answers in the subscription callback;
+    The floor answers the actuator state; the contract floor (``--sensors``) keeps the load
+    cell's value and answers the combined state (the controller steps on it) with the jaw it
+    carries and that load cell. ``--answer callback`` (the floor) answers in the subscription callback;
     ``--answer timer`` answers the newest state on its own 1 kHz timer, as the
     controller node does (the cost of an unsynchronised timer, measured bare).
     """
@@ -224,20 +241,20 @@ class Echo(Node):
         super().__init__('bench_echo')
         self.prealloc = opts.prealloc
         self.pub = self.create_publisher(JointState, topics.SERVO_CURRENT, state_qos(opts.depth))
-        self.sub = self.create_subscription(JointState, topics.ACTUATOR_JS, self.on_state,
+        self.combined = opts.sensors
+        self.sub = self.create_subscription(JointState, topics.INSTRUMENT_JS if self.combined
+                                            else topics.ACTUATOR_JS, self.on_state,
                                             state_qos(opts.depth),
                                             callback_group=_callback_group(opts.callback_groups))
         self.msg = _command()
         self.latest = None
-        self.jaw_angle = self.grip_force = 0.0   # rad, N: the sensors' last values (--sensors)
+        self.grip_force = 0.0   # N: the load cell's last value (--sensors)
         self.sensor_subs = ()
         if opts.sensors:
-            group = _callback_group(opts.callback_groups)
             self.sensor_subs = (
-                self.create_subscription(JointState, topics.INSTRUMENT_JS, self.on_instrument,
-                                         state_qos(opts.depth), callback_group=group),
                 self.create_subscription(WrenchStamped, topics.MEASURED_FORCE, self.on_force,
-                                         state_qos(opts.depth), callback_group=group))
+                                         state_qos(opts.depth),
+                                         callback_group=_callback_group(opts.callback_groups)),)
         self.answer_on_timer = opts.answer == 'timer'
         if self.answer_on_timer:
             self.timer = self.create_timer(opts.period, self.on_tick)
@@ -255,9 +272,6 @@ class Echo(Node):
         else:
             self.answer(msg)
 
-    def on_instrument(self, msg: JointState) -> None:
-        self.jaw_angle = msg.position[1]
-
     def on_force(self, msg: WrenchStamped) -> None:
         self.grip_force = msg.wrench.force.z
 
@@ -268,7 +282,9 @@ class Echo(Node):
     def answer(self, msg: JointState) -> None:
         out = self.msg if self.prealloc else _command()
         out.header.stamp = msg.header.stamp
-        out.effort[0] = (0.5 * (self.jaw_angle + self.grip_force) if self.sensor_subs
+        # the contract floor: from the state's jaw and the load cell held (equal when both
+        # are of the same period); the floor: from the actuator state
+        out.effort[0] = (0.5 * (msg.position[1] + self.grip_force) if self.combined
                          else msg.position[0] * 0.5)
         self.pub.publish(out)
 
@@ -290,11 +306,13 @@ def _actuator_state() -> JointState:
     return msg
 
 
-def _instrument_state() -> JointState:
+def _combined_state() -> JointState:
+    """Build the contract's one state message a period: wrist_pitch, jaw, jaw_drum."""
     msg = JointState()
-    msg.name = [topics.WRIST_JOINT, topics.JAW_JOINT]
-    msg.position = [0.0, 0.0]
-    msg.velocity = [0.0, 0.0]
+    msg.name = [topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT]
+    msg.position = [0.0, 0.0, 0.0]
+    msg.velocity = [0.0, 0.0, 0.0]
+    msg.effort = [float('nan'), float('nan'), 0.0]
     return msg
 
 
@@ -318,7 +336,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--answer', choices=('callback', 'timer'), default='callback',
                    help='echo: answer in the subscription callback or on a 1 kHz timer')
     p.add_argument('--sensors', action='store_true',
-                   help="the contract's joint state and load cell before each actuator state")
+                   help="the contract's period: the load cell, then one combined joint state "
+                        '(wrist_pitch, jaw, jaw_drum) that the echo answers')
     p.add_argument('--callback-groups', choices=('default', 'separate', 'reentrant'),
                    default='default')
     return p

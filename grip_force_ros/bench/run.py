@@ -8,7 +8,8 @@ import sys
 import time
 from importlib import metadata
 
-from grip_force_ros.bench.loop import BEST, VARIANTS, Variant, compare, run_floor, run_product
+from grip_force_ros.bench.loop import (ARM_NAMESPACES, BEST, VARIANTS, Variant, compare,
+                                       compare_arms, run_floor, run_product, run_products)
 from grip_force_ros.bench.procs import DomainLock
 from grip_force_ros.params.files import config_dir, instrument_path
 
@@ -59,7 +60,7 @@ LOOP_OVERHEAD = 300.0
 
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
              product_executor: str | None = None, rt_priority: int = 0, say=None,
-             pressure: str = 'none', pressure_options: dict | None = None) -> dict:
+             pressure: str = 'none', pressure_options: dict | None = None, arms: int = 1) -> dict:
     """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios.
 
     Parameters
@@ -77,7 +78,14 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
     pressure_options : dict, optional
         Keywords of :func:`~grip_force_ros.bench.pressure.make_pressure` (the disk
         pressure's sizes and rates, the CPU load's workers and duty).
+    arms : int
+        1: one product in the root namespace (the section's keys as ever). 2 or 3: that many
+        products at once (:data:`~grip_force_ros.bench.loop.ARM_NAMESPACES`: /PSM1, /PSM2,
+        ...), one domain, one window, each judged against the run's one floor
+        (:func:`~grip_force_ros.bench.loop.compare_arms`: ``arms``, ``arms_goals_met``).
     """
+    if not 1 <= arms <= len(ARM_NAMESPACES):
+        raise ValueError(f'arms must be 1..{len(ARM_NAMESPACES)}, got {arms}')
     from grip_force_ros.bench.load import MAX_SECONDS
     from grip_force_ros.bench.pressure import describe, make_pressure
 
@@ -94,13 +102,24 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
             floor = run_floor(seconds, domain, variant)
             say(f'loop: contract floor, {seconds:g} s ({contract.label()})')
             contract_floor = run_floor(seconds, domain, contract)
-            say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
-            product = run_product(seconds, domain, config, executor=product_executor,
-                                  rt_priority=rt_priority)
-    out = compare(floor, product, contract_floor)
+            if arms == 1:
+                say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
+                product = run_product(seconds, domain, config, executor=product_executor,
+                                      rt_priority=rt_priority)
+            else:
+                names = ARM_NAMESPACES[:arms]
+                say(f'loop: {arms} products at once ({", ".join("/" + n for n in names)}), '
+                    f'sim -> controller -> sim each, {seconds:g} s, {config}')
+                products = run_products(seconds, domain, config, executor=product_executor,
+                                        rt_priority=rt_priority, namespaces=names)
+    if arms == 1:
+        out = compare(floor, product, contract_floor)
+        out['product_fallback_commands'] = product['other_commands']
+    else:
+        out = compare_arms(floor, products, contract_floor)
+        product = next(iter(products.values()))
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
                 'floor_lost_fraction': floor['lost_fraction'],
-                'product_fallback_commands': product['other_commands'],
                 'product_executor': product['executor'], 'rt_priority': rt_priority,
                 'pressure': load.last_summary})
     return out
@@ -126,7 +145,7 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
               variant_seconds: float | None = None, product_executor: str | None = None,
               rt_priority: int = 0, pressure: str = 'none', pressure_options: dict | None = None,
-              say=None) -> dict:
+              arms: int = 1, say=None) -> dict:
     """Everything ``grip-force bench`` measures, as the nested JSON dict.
 
     Parameters
@@ -157,6 +176,9 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
         product run (:func:`run_loop`; the model and diagnosis parts run without it).
     pressure_options : dict, optional
         Keywords of :func:`~grip_force_ros.bench.pressure.make_pressure`.
+    arms : int
+        Products measured at once in the loop part (1, or 2-3 arms /PSM1, /PSM2, ...;
+        :func:`run_loop`).
     say : callable, optional
         ``say(message)`` before each step.
 
@@ -180,7 +202,7 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
     if 'loop' in parts:
         out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor,
                                rt_priority=rt_priority, say=say, pressure=pressure,
-                               pressure_options=pressure_options)
+                               pressure_options=pressure_options, arms=arms)
     if variants:
         out['variants'] = run_variants(variant_seconds or seconds, domains, say=say)
     if 'diagnosis' in parts:

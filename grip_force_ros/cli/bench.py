@@ -35,6 +35,11 @@ def add_arguments(parser) -> None:
     parser.add_argument('--rt-priority', type=int, default=0, metavar='N',
                         help='run the 1 kHz processes of the floor and the product under SCHED_FIFO N '
                              '(1..99, like chrt -f N; needs CAP_SYS_NICE; default 0 = normal)')
+    parser.add_argument('--arms', type=int, default=1, choices=(1, 2),
+                        help='products measured at once in the loop part, each with its own sim, '
+                             'controller and master in the ROS namespaces /PSM1, /PSM2, ... of one '
+                             'domain, in one window, each against the one floor (default 1: one '
+                             'product in the root namespace)')
     parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
                         help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
     parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
@@ -62,6 +67,41 @@ def _met(ok: bool) -> str:
     return 'met' if ok else 'UNMET'
 
 
+def _render_product(lines: list[str], loop: dict, pad: str) -> None:
+    """Append the lines of one product (one arm) against the floor: round trip, full path, goals."""
+    pr = loop['product']
+    lines.append(f"{pad}product sim->ctrl->sim  p50 {_f(pr['p50_ms'])} ms  p99 {_f(pr['p99_ms'])} ms  "
+                 f"max {_f(pr['max_ms'])} ms  missed {_f(loop['missed_fraction'] * 100)} %")
+    full, goals, met = loop['full_path'], loop['goals'], loop['goals_met']
+    lines.append(f"{pad}full path (sim sample of every input -> command; the load cell before the "
+                 "state)  "
+                 f"p50 {_f(full['p50_ms'])} ms  p99 {_f(full['p99_ms'])} ms  max {_f(full['max_ms'])} ms")
+    for name, f in full['inputs'].items():
+        to, age = f['to_command'], f['age_at_step']
+        lines.append(f"{pad}  {name:<9} to command p50 {_f(to['p50_ms'])} / p99 {_f(to['p99_ms'])} / max "
+                     f"{_f(to['max_ms'])} ms; age at the step p50 {_f(age['p50_ms'])} / p99 "
+                     f"{_f(age['p99_ms'])} ms; same sample as the state "
+                     f"{_f(f['same_sample_fraction'] * 100)} %")
+    lines.append(f"{pad}goals: p99 ratio {_f(loop['p99_ratio'])} <= {goals['p99_ratio']:g}: "
+                 f"{_met(met['p99_ratio'])}; full-path p99 ratio {_f(loop['full_path_p99_ratio'])} <= "
+                 f"{goals['full_path_p99_ratio']:g}: {_met(met['full_path_p99_ratio'])}; missed "
+                 f"{_f(loop['missed_fraction'] * 100)} % <= floor's + 0.05 % = "
+                 f"{_f(goals['missed_fraction'] * 100)} %: {_met(met['missed_fraction'])}"
+                 + (f"; controller cpu {_f(loop['controller_cpu_ratio'])} x the echo's <= "
+                    f"{goals['controller_cpu_ratio']:g}: {_met(met['controller_cpu_ratio'])}"
+                    if 'controller_cpu_ratio' in met else ''))
+    if 'contract_floor' in loop:
+        lines.append(f"{pad}full-path p99 = floor x {_f(loop['full_path_p99_ratio'])}: the topic contract's "
+                     f"two messages x {_f(loop['contract_floor_p99_ratio'])} (bare rclpy), this "
+                     f"package's code x {_f(loop['full_path_over_contract_p99_ratio'])} "
+                     f"(p50: x {_f(loop['contract_floor_p50_ratio'])}, "
+                     f"x {_f(loop['full_path_over_contract_p50_ratio'])})")
+    lines.append(f"{pad}of which the state publisher's own timer skipped: floor "
+                 f"{_f(loop['floor_timer_missed_fraction'] * 100)} %, product "
+                 f"{_f(loop['timer_missed_fraction'] * 100)} %; controller timer-fallback commands "
+                 f"{loop.get('product_fallback_commands', 'n/a')}")
+
+
 def render(result: dict) -> str:
     """Human-readable summary of :func:`grip_force_ros.bench.run.run_bench`'s result."""
     lines = []
@@ -70,43 +110,26 @@ def render(result: dict) -> str:
                  f"load {m['load_average_1min']:.1f} -> {m.get('load_average_1min_end', float('nan')):.1f}")
     loop = result.get('loop')
     if loop:
-        fl, pr = loop['floor'], loop['product']
+        fl = loop['floor']
         rt = f", SCHED_FIFO {loop['rt_priority']}" if loop.get('rt_priority') else ''
-        lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}{rt}):")
+        arms = loop.get('arms')
+        what = f", {len(arms)} arms at once ({', '.join('/' + a for a in arms)})" if arms else ''
+        lines.append(f"loop ({loop['seconds']:g} s each, ROS_DOMAIN_ID {loop['domain_id']}{rt}{what}):")
         lines.append(f"  floor   ping-pong       p50 {_f(fl['p50_ms'])} ms  p99 {_f(fl['p99_ms'])} ms  "
                      f"max {_f(fl['max_ms'])} ms  missed {_f(loop['floor_missed_fraction'] * 100)} %")
         if 'contract_floor' in loop:
             cf = loop['contract_floor']
-            lines.append(f"  contract floor (3 msgs) p50 {_f(cf['p50_ms'])} ms  p99 {_f(cf['p99_ms'])} ms  "
-                         f"max {_f(cf['max_ms'])} ms  missed "
+            lines.append(f"  contract floor (2 msgs: load cell, combined state) p50 {_f(cf['p50_ms'])} ms  "
+                         f"p99 {_f(cf['p99_ms'])} ms  max {_f(cf['max_ms'])} ms  missed "
                          f"{_f(loop['contract_floor_missed_fraction'] * 100)} %")
-        lines.append(f"  product sim->ctrl->sim  p50 {_f(pr['p50_ms'])} ms  p99 {_f(pr['p99_ms'])} ms  "
-                     f"max {_f(pr['max_ms'])} ms  missed {_f(loop['missed_fraction'] * 100)} %")
-        full, goals, met = loop['full_path'], loop['goals'], loop['goals_met']
-        order = 'after the command' if loop.get('sensors_deferred') else 'before the actuator state'
-        lines.append(f"  full path (sim sample of every input -> command; jaw and load cell {order})  "
-                     f"p50 {_f(full['p50_ms'])} ms  p99 {_f(full['p99_ms'])} ms  max {_f(full['max_ms'])} ms")
-        for name, f in full['inputs'].items():
-            to, age = f['to_command'], f['age_at_step']
-            lines.append(f"    {name:<9} to command p50 {_f(to['p50_ms'])} / p99 {_f(to['p99_ms'])} / max "
-                         f"{_f(to['max_ms'])} ms; age at the step p50 {_f(age['p50_ms'])} / p99 "
-                         f"{_f(age['p99_ms'])} ms; same sample as the state "
-                         f"{_f(f['same_sample_fraction'] * 100)} %")
-        lines.append(f"  goals: p99 ratio {_f(loop['p99_ratio'])} <= {goals['p99_ratio']:g}: "
-                     f"{_met(met['p99_ratio'])}; full-path p99 ratio {_f(loop['full_path_p99_ratio'])} <= "
-                     f"{goals['full_path_p99_ratio']:g}: {_met(met['full_path_p99_ratio'])}; missed "
-                     f"{_f(loop['missed_fraction'] * 100)} % <= floor's + 0.05 % = "
-                     f"{_f(goals['missed_fraction'] * 100)} %: {_met(met['missed_fraction'])}")
-        if 'contract_floor' in loop:
-            lines.append(f"  full-path p99 = floor x {_f(loop['full_path_p99_ratio'])}: the topic contract's "
-                         f"three messages x {_f(loop['contract_floor_p99_ratio'])} (bare rclpy), this "
-                         f"package's code x {_f(loop['full_path_over_contract_p99_ratio'])} "
-                         f"(p50: x {_f(loop['contract_floor_p50_ratio'])}, "
-                         f"x {_f(loop['full_path_over_contract_p50_ratio'])})")
-        lines.append(f"  of which the state publisher's own timer skipped: floor "
-                     f"{_f(loop['floor_timer_missed_fraction'] * 100)} %, product "
-                     f"{_f(loop['timer_missed_fraction'] * 100)} %; controller timer-fallback commands "
-                     f"{loop.get('product_fallback_commands', 'n/a')}")
+        if arms:
+            for arm, section in arms.items():
+                lines.append(f"  arm /{arm} (against the floor above; its window opened "
+                             f"{_f(section.get('window_skew_s', 0.0))} s after the first arm's):")
+                _render_product(lines, section, '    ')
+            lines.append(f"  every arm met every goal: {'yes' if loop['arms_goals_met'] else 'NO'}")
+        else:
+            _render_product(lines, loop, '  ')
         pressure = loop.get('pressure') or {}
         for part in ([pressure] if pressure.get('kind') != 'both' else [pressure['cpu'], pressure['disk']]):
             if part.get('kind') == 'disk':
@@ -119,9 +142,12 @@ def render(result: dict) -> str:
                              f"{part['duty']:g}, {part['worker_cpu_s']:.0f} s of CPU in "
                              f"{part['wall_s']:.0f} s")
         cpu = loop['cpu_percent']
+        products = cpu['arms'] if arms else {'': cpu['product']}
         lines.append('  cpu % of one core: floor '
                      + ', '.join(f'{k} {v:.0f}' for k, v in cpu['floor'].items())
-                     + '; product ' + ', '.join(f'{k} {v:.0f}' for k, v in cpu['product'].items()))
+                     + ''.join(f"; product{' /' + arm if arm else ''} "
+                               + ', '.join(f'{k} {v:.0f}' for k, v in c.items())
+                               for arm, c in products.items()))
     model = result.get('model')
     if model:
         lines.append(f"model ({model['config']}):")
@@ -196,7 +222,8 @@ def run(args) -> int:
                            log_minutes=args.log_minutes, model_size=args.model_size,
                            variants=args.variants, variant_seconds=args.variant_seconds,
                            product_executor=args.product_executor, rt_priority=args.rt_priority,
-                           pressure=args.pressure, pressure_options=pressure_options, say=say)
+                           pressure=args.pressure, pressure_options=pressure_options,
+                           arms=args.arms, say=say)
     except BenchError as exc:
         print(f'grip-force bench: {exc}', file=sys.stderr)
         return 1

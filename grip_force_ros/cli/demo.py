@@ -53,6 +53,10 @@ def add_arguments(parser) -> None:
     parser.add_argument('--arm', default='PSM1', help='--interface dvrk: the arm (default PSM1)')
     parser.add_argument('--master', default='MTML',
                         help='--interface dvrk: the master (default MTML)')
+    parser.add_argument('--arms', type=int, default=1, choices=(1, 2),
+                        help='needle grasps at once, each arm with its own sim, controller and master '
+                             'in the ROS namespaces /PSM1, /PSM2, ... of one domain, recorded and '
+                             'analysed apart (<out>/PSM1/, ...; crtk only; default 1)')
     parser.add_argument('--quiet', action='store_true', help='no live progress')
     parser.add_argument('--rt-priority', type=int, default=None, metavar='N',
                         help='SCHED_FIFO priority of the 1 kHz nodes (sim, controller), like chrt -f N '
@@ -129,6 +133,85 @@ def print_report(result: dict, stream=sys.stdout) -> None:
     w(f"plot              {result['plot']}\n")
 
 
+def print_arms_report(report: dict, stream=sys.stdout) -> None:
+    """Print the human-readable end of a several-arm demo run: one block per arm."""
+    w = stream.write
+    arms = report['arms']
+    w(f"{len(arms)} arms at once in ROS domain {report['domain_id']}: "
+      + ', '.join(f"/{name} {'held' if r['grasp_held'] else 'NOT held'}" for name, r in arms.items())
+      + f" (every grasp held: {'yes' if report['arms_held'] else 'NO'})\n")
+    for name, r in arms.items():
+        w(f"\n--- arm /{name} ---\n")
+        print_report(r, stream)
+    w(f"\nresults           {report['results']}\n")
+
+
+def _run_arms(args, config, params, out: Path, load) -> int:
+    """``--arms N`` (N > 1): the grasps of N arms at once, their reports and results.json."""
+    from grip_force_ros.bench.loop import ARM_NAMESPACES
+    from grip_force_ros.demo.run import Progress, RunSpec, grasp_held, run_arms
+    from grip_force_ros.nodes.processes import reserve_domains
+
+    names = ARM_NAMESPACES[:args.arms]
+    held = reserve_domains(1) if args.domain_id is None else None
+    domain = args.domain_id if held is None else held.domain_id
+    specs = [RunSpec(config=config, duration=args.duration or DEMO_DURATION,
+                     label=params.instrument_name, namespace=name,
+                     **({} if args.rt_priority is None else {'rt_priority': args.rt_priority}))
+             for name in names]
+    shown: list = []
+
+    def progress(name):
+        if args.quiet:
+            return None
+        p = Progress(_PlainStream(sys.stderr), label=f'/{name}')
+        shown.append(p)
+        return p
+
+    if not args.quiet:
+        sys.stderr.write(f"grip-force demo: {params.instrument_name}, {args.arms} arms "
+                         f"({', '.join('/' + n for n in names)}), ROS domain {domain}, output {out}\n")
+    try:
+        with load:
+            results = run_arms(specs, out, domain, progress=progress)
+    finally:
+        for p in shown:
+            p.close()
+        if held is not None:
+            held.release()
+    arms = {}
+    for name, result in results.items():
+        r = result.as_dict()
+        r['instrument'] = params.instrument_name
+        r['grasp_held'] = grasp_held(result.metrics, result.problems)
+        (result.out_dir / 'results.json').write_text(json.dumps(r, indent=1))
+        arms[name] = r
+    report = {'instrument': params.instrument_name, 'config': str(config), 'domain_id': domain,
+              'arms': arms, 'arms_held': all(r['grasp_held'] for r in arms.values()),
+              'out_dir': str(out), 'results': str(out / 'results.json')}
+    if args.pressure != 'none':
+        report['pressure'] = load.last_summary
+    (out / 'results.json').write_text(json.dumps(report, indent=1))
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print_arms_report(report)
+    return 0
+
+
+class _PlainStream:
+    """A stream that is never a TTY: several arms' progress as plain lines, not redrawn in place."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
 def _pressure(args):
     """Build the --pressure generator of ``args`` (not started); LoadError beyond its bounds."""
     from grip_force_ros.bench.pressure import make_pressure
@@ -164,6 +247,9 @@ def run(args) -> int:
     if args.pressure != 'none' and not args.quiet:
         sys.stderr.write(f'grip-force demo: under pressure, {describe(load)}\n')
     try:
+        if args.compare_instruments and args.arms > 1:
+            print('error: --compare-instruments runs one arm at a time (no --arms)', file=sys.stderr)
+            return 2
         if args.compare_instruments and args.interface != 'crtk':
             print('error: --compare-instruments runs the crtk profile only', file=sys.stderr)
             return 2
@@ -190,6 +276,11 @@ def run(args) -> int:
         config = instrument_path(args.config)
         params = load_params_file(config)
         out = Path(args.out) if args.out else _default_out('demo')
+        if args.arms > 1:
+            if args.interface != 'crtk':
+                print('error: --arms runs the crtk profile only', file=sys.stderr)
+                return 2
+            return _run_arms(args, config, params, out, load)
         # a free domain, held until this run ends (no other run on the machine takes it)
         held = reserve_domains(1) if args.domain_id is None else None
         domain = args.domain_id if held is None else held.domain_id

@@ -71,12 +71,23 @@ class RecorderNode(Node):
         only keep the latest message of each topic (the monitor uses that).
     topic_types : mapping
         Topic -> type name ('sensor_msgs/msg/JointState').
+    node_name : str
+        Name of the recorder's node.
+    context : rclpy.context.Context, optional
+        The context of the node (default rclpy's).
+    namespace : str
+        ROS namespace of the recorded nodes ('' : the root): one arm of several
+        (``PSM1``). Every topic, /diagnostics included (the demo remaps it into the arm's
+        namespace), is recorded under it (``/PSM1/instrument/measured_js``), and the
+        methods below take the topics' names in the root (``instrument/measured_js``).
+        The recorder's own node goes in that namespace too.
     """
 
     def __init__(self, bag_path: str | Path | None, topic_types: Mapping[str, str] = TOPIC_TYPES,
-                 node_name: str = 'grip_force_recorder', context=None):
-        super().__init__(node_name, context=context)
-        self.topic_types = {absolute(t): ty for t, ty in topic_types.items()}
+                 node_name: str = 'grip_force_recorder', context=None, namespace: str = ''):
+        self.prefix = '/' + namespace.strip('/') if namespace.strip('/') else ''
+        super().__init__(node_name, context=context, namespace=self.prefix or None)
+        self.topic_types = {self.full_name(t): ty for t, ty in topic_types.items()}
         self._lock = threading.Lock()
         self._latest: dict[str, tuple[float, bytes]] = {}
         self.counts: dict[str, int] = {t: 0 for t in self.topic_types}
@@ -90,6 +101,10 @@ class RecorderNode(Node):
             self._writer.open()
         self._discovery_timer = self.create_timer(0.05, self._discover)
         self._discover()
+
+    def full_name(self, topic: str) -> str:
+        """Return the recorded name of ``topic``: absolute, under the namespace if any."""
+        return self.prefix + absolute(topic)
 
     # -- subscriptions -----------------------------------------------------
     def subscribe_all(self, qos: QoSProfile | None = None) -> None:
@@ -143,7 +158,7 @@ class RecorderNode(Node):
     # -- live values ---------------------------------------------------------
     def latest(self, topic: str) -> tuple[float, Any] | None:
         """(receive time [s], deserialized message) of the newest message on ``topic``."""
-        topic = absolute(topic)
+        topic = self.full_name(topic)
         with self._lock:
             item = self._latest.get(topic)
         if item is None:
@@ -157,7 +172,7 @@ class RecorderNode(Node):
 
     def count(self, topic: str) -> int:
         with self._lock:
-            return self.counts[absolute(topic)]
+            return self.counts[self.full_name(topic)]
 
     def matched_publishers(self, topic: str) -> int:
         """Return how many publishers the subscription on ``topic`` has matched (0: none yet).
@@ -166,7 +181,7 @@ class RecorderNode(Node):
         in between reaches the subscription only while the publisher still keeps it (its
         history depth).
         """
-        subscription = self._subs.get(absolute(topic))
+        subscription = self._subs.get(self.full_name(topic))
         return 0 if subscription is None else subscription.get_publisher_count()
 
     # -- end -----------------------------------------------------------------

@@ -106,6 +106,12 @@ class RunSpec:
         (:func:`~grip_force_ros.nodes.processes.master_rt_priority`), and the recorder's
         threads, in this process, ten below the master
         (:func:`~grip_force_ros.nodes.processes.recorder_rt_priority`).
+    namespace : str
+        ROS namespace of the run's nodes ('' : the root): one arm of several
+        (:func:`run_arms`, ``PSM1``). Its nodes get ``-r __ns:=/<namespace>`` (the crtk
+        topics are relative, so they go under it) and ``-r /diagnostics:=/<namespace>/diagnostics``
+        (the arms' statuses carry the same names; each arm's recording and analysis read
+        its own).
     """
 
     config: Path
@@ -120,6 +126,12 @@ class RunSpec:
     arm: str = 'PSM1'
     master: str = 'MTML'
     rt_priority: int = DEFAULT_RT_PRIORITY
+    namespace: str = ''
+
+    def remaps(self) -> dict[str, str]:
+        """Return the nodes' remaps of the namespace (none in the root namespace)."""
+        ns = self.namespace.strip('/')
+        return {'__ns': f'/{ns}', topics.DIAGNOSTICS: f'/{ns}{topics.DIAGNOSTICS}'} if ns else {}
 
     def profile(self) -> dict[str, Any]:
         """Return the interface parameters every node gets (``-p``)."""
@@ -191,25 +203,30 @@ class RunResult:
             'late_inputs': self.late_inputs, 'scheduling': self.scheduling,
             'master_answer': self.master_answer, 'clocks': self.clocks,
             'problems': self.problems, 'timing': {k: round(v, 3) for k, v in self.timing.items()},
+            # one arm of several (run_arms): its namespace
+            **({'namespace': '/' + self.spec.namespace.strip('/')} if self.spec.namespace else {}),
         }
 
 
 def _node_argv(name: str, spec: RunSpec) -> list[str]:
     profile = spec.profile()
+    remaps = spec.remaps() or None
     if name == 'master':
         overrides = dict(spec.master_values())
         overrides.update(HOLD_MASTER, exit_when_done=True, **profile)
-        return node_command('master', spec.config, overrides)
+        return node_command('master', spec.config, overrides, remaps=remaps)
     if name == 'sim_instrument':
         return node_command('sim_instrument', spec.sim_config or spec.config,
-                            {**profile, **spec.sim_overrides})
+                            {**profile, **spec.sim_overrides}, remaps=remaps)
     if spec.controller == 'naive':
         if spec.interface != 'crtk':
             raise ValueError('the naive baseline speaks the crtk profile only')
         return (python_module('grip_force_ros.demo.naive_node')
-                + ros_args(spec.config, spec.controller_overrides, node_name='controller'))
+                + ros_args(spec.config, spec.controller_overrides, node_name='controller',
+                           remaps=remaps))
     own = {'request_enable': True} if spec.interface == 'dvrk' else {}
-    return node_command('controller', spec.config, {**profile, **own, **spec.controller_overrides})
+    return node_command('controller', spec.config, {**profile, **own, **spec.controller_overrides},
+                        remaps=remaps)
 
 
 def _poll(predicate: Callable[[], bool], seconds: float, check_alive: Callable[[], None],
@@ -281,11 +298,13 @@ def _start_master(recorder, spec: RunSpec, group: ProcessGroup, master: NodeProc
     from grip_force_ros.nodes.common import close_node
 
     values = spec.master_values()
-    node = rclpy.create_node('grip_force_demo_parameters', context=recorder.context)
+    ns = spec.namespace.strip('/')
+    node = rclpy.create_node('grip_force_demo_parameters', context=recorder.context,
+                             namespace=f'/{ns}' if ns else None)
     executor = SingleThreadedExecutor(context=recorder.context)
     executor.add_node(node)
     try:
-        client = AsyncParameterClient(node, 'master')
+        client = AsyncParameterClient(node, f'/{ns}/master' if ns else 'master')
         _wait_for(client.services_are_ready, group, timeout, "the master's parameter service")
 
         def alive() -> None:
@@ -528,7 +547,8 @@ class Progress:
 def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
              progress: Callable[[Mapping[str, Any]], None] | None = None,
              analyse: bool = True, plot: bool = True,
-             startup_timeout: float = STARTUP_TIMEOUT) -> RunResult:
+             startup_timeout: float = STARTUP_TIMEOUT,
+             cancelled: Callable[[], bool] | None = None) -> RunResult:
     """Run one task through the real ROS processes and record it.
 
     Parameters
@@ -546,6 +566,10 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
         Read the bag back and compute the figures / write the summary plot.
     startup_timeout : float
         Longest wait for the three nodes to publish (s).
+    cancelled : callable, optional
+        Polled wherever the run waits (every 20-50 ms); when it returns True the run stops
+        its nodes and raises KeyboardInterrupt (:func:`run_arms`: a Ctrl-C, or another arm
+        that failed).
 
     Raises
     ------
@@ -574,12 +598,21 @@ def run_task(spec: RunSpec, out_dir: str | Path, domain_id: int, *,
     rclpy.init(context=context, domain_id=domain_id)
     recorder = spinner = None
     group = ProcessGroup(env, log_dir=out_dir / 'logs')
+    if cancelled is not None:
+        check_alive = group.check_alive
+
+        def check_alive_or_cancelled(may_finish: tuple[str, ...] = ()) -> None:
+            if cancelled():
+                raise KeyboardInterrupt
+            check_alive(may_finish)
+        group.check_alive = check_alive_or_cancelled
     try:
         # the recorder's threads (DDS receive and events, its executor) under SCHED_FIFO
         # below the master: at normal priority a busy machine starved them past the
         # publishers' KEEP_LAST 10, and the bag lost 100-400 ms of every topic
         with realtime_threads(recorder_rt_priority(spec.rt_priority)) as scheduling['recorder']:
-            recorder = RecorderNode(bag_path, topic_types=recorded.types, context=context)
+            recorder = RecorderNode(bag_path, topic_types=recorded.types, context=context,
+                                    namespace=spec.namespace)
             recorder.subscribe_all()
             spinner = SpinThread(recorder).start()
         with group:
@@ -652,7 +685,9 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
     recorded = result.spec.recorded()
     names = recorded.names
     clocks: dict[str, str] = {}
-    series, diagnostics = read_bag_series(result.bag, recorded, clocks=clocks)
+    # one arm of several: its topics are under its namespace
+    in_namespace = {'namespace': result.spec.namespace} if result.spec.namespace else {}
+    series, diagnostics = read_bag_series(result.bag, recorded, clocks=clocks, **in_namespace)
     result.clocks = clocks
     raw = resample(series, rate=500.0, t0=0.0)
     try:
@@ -688,8 +723,117 @@ def analyse_run(result: RunResult, plot: bool = True) -> RunResult:
         shown = resample(series, rate=500.0, t0=0.0, max_gap=SHOWN_GAP)
         shown['t'] = shown['t'] - start
         where = (f', dvrk {result.spec.arm}/{result.spec.master}' if result.spec.interface == 'dvrk'
-                 else '')
+                 else f', /{result.spec.namespace.strip("/")}' if result.spec.namespace else '')
         result.plot = summary_plot(shown, windows, result.metrics, result.out_dir / 'summary.png',
                                    title=f'grip-force demo: needle grasp ({result.spec.label}{where})',
                                    clocks=clocks)
     return result
+
+
+#: A grasp is held when its run is not spoiled (:func:`analysis.run_problems`: no topic silent,
+#: no safe-state entry in the hold and pull phases) and its steady-hold error is within these
+#: fractions of the target: mean, rms (the end-to-end test's bounds).
+HOLD_MEAN_TOLERANCE = 0.10
+HOLD_RMS_TOLERANCE = 0.15
+
+
+def grasp_held(metrics: Mapping[str, Any] | None, problems: list) -> bool:
+    """Tell whether a run held its grasp (:data:`HOLD_MEAN_TOLERANCE`, :data:`HOLD_RMS_TOLERANCE`).
+
+    Parameters
+    ----------
+    metrics : mapping or None
+        :func:`analysis.force_metrics` of the run (N; ``target_force``, ``hold_error_mean``,
+        ``hold_error_rms``).
+    problems : list
+        The run's problems (a spoiled run holds nothing).
+    """
+    m = metrics or {}
+    target = m.get('target_force', float('nan'))
+    mean, rms = m.get('hold_error_mean', float('nan')), m.get('hold_error_rms', float('nan'))
+    if problems or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (target, mean, rms)):
+        return False
+    return target > 0 and abs(mean) <= HOLD_MEAN_TOLERANCE * target and rms <= HOLD_RMS_TOLERANCE * target
+
+
+#: Longest wait (s) for an arm's nodes to publish when several arms start at once: six node
+#: processes start, lock and pre-fault their memory together (a master took 10.9 s to do so
+#: at load 15 on the two cores, and that arm missed :data:`STARTUP_TIMEOUT`).
+ARMS_STARTUP_TIMEOUT = 2 * STARTUP_TIMEOUT
+
+
+def run_arms(specs: list[RunSpec], out_dir: str | Path, domain_id: int, *,
+             progress: Callable[[str], Callable[[Mapping[str, Any]], None] | None] | None = None,
+             analyse: bool = True, plot: bool = True,
+             startup_timeout: float = ARMS_STARTUP_TIMEOUT) -> dict[str, RunResult]:
+    """Run several arms' tasks at once in one ROS domain, each in its own namespace.
+
+    Each spec (its ``namespace`` set, e.g. ``PSM1``, ``PSM2``) is one :func:`run_task` on a
+    thread of this process: its own sim, controller and master, its own recorder (a node in
+    its namespace recording that namespace's topics into ``<out_dir>/<namespace>/bag``), its
+    own analysis and ``summary.png`` in ``<out_dir>/<namespace>/``. A Ctrl-C (or an arm that
+    fails) stops every arm's nodes; the first failure is raised after all have stopped.
+
+    Parameters
+    ----------
+    specs : list of RunSpec
+        One per arm, each with a distinct non-empty ``namespace``.
+    out_dir : path
+        Parent directory of the arms' directories.
+    domain_id : int
+        ROS_DOMAIN_ID of every arm's nodes and recorders.
+    progress : callable, optional
+        ``progress(namespace)`` -> that arm's progress callable (or None).
+    analyse, plot : bool
+        As :func:`run_task`.
+    startup_timeout : float
+        Longest wait for each arm's three nodes to publish (s; :data:`ARMS_STARTUP_TIMEOUT`).
+
+    Returns
+    -------
+    dict
+        Namespace -> that arm's :class:`RunResult`, in the order of ``specs``.
+    """
+    import threading
+
+    names = [spec.namespace.strip('/') for spec in specs]
+    if not all(names) or len(set(names)) != len(names):
+        raise ValueError(f'every arm needs its own namespace, got {names}')
+    out_dir = Path(out_dir)
+    stop = threading.Event()
+    results: dict[str, RunResult] = {}
+    errors: dict[str, BaseException] = {}
+
+    def one(spec: RunSpec, name: str) -> None:
+        try:
+            results[name] = run_task(spec, out_dir / name, domain_id,
+                                     progress=progress(name) if progress else None,
+                                     analyse=analyse, plot=plot, startup_timeout=startup_timeout,
+                                     cancelled=stop.is_set)
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread below
+            errors[name] = exc
+            stop.set()         # the other arms stop too
+
+    threads = [threading.Thread(target=one, args=(spec, name), name=f'arm-{name}', daemon=True)
+               for spec, name in zip(specs, names)]
+    for thread in threads:
+        thread.start()
+    try:
+        for thread in threads:
+            while thread.is_alive():
+                thread.join(timeout=0.1)
+    except KeyboardInterrupt:
+        stop.set()
+        for thread in threads:
+            thread.join()
+        raise
+    first = next(((name, e) for name, e in errors.items() if not isinstance(e, KeyboardInterrupt)),
+                 None)
+    if first is not None:
+        name, exc = first
+        if type(exc) is ProcessError:       # say which arm (a NoAnswer keeps its own fields)
+            raise ProcessError(f'arm /{name}: {exc}') from exc
+        raise exc
+    if errors:
+        raise next(iter(errors.values()))
+    return {name: results[name] for name in names}

@@ -81,7 +81,7 @@ def sample_clock(stamps: np.ndarray, received: np.ndarray, start: float | None =
 
 
 def read_bag_series(path: str | Path, recorded: RecordedTopics | None = None,
-                    clocks: MutableMapping[str, str] | None = None
+                    clocks: MutableMapping[str, str] | None = None, namespace: str = ''
                     ) -> tuple[dict[str, dict[str, np.ndarray]], list]:
     """Read a demo bag.
 
@@ -94,6 +94,10 @@ def read_bag_series(path: str | Path, recorded: RecordedTopics | None = None,
     clocks : mutable mapping, optional
         Filled with topic -> the clock its times are on (:func:`sample_clock`; the
         /diagnostics topic included).
+    namespace : str
+        ROS namespace the bag's topics are under ('' : the root): one arm of a several-arm
+        demo (``PSM1``: ``/PSM1/instrument/measured_js``, ``/PSM1/diagnostics``). The
+        series keep the names in the root.
 
     Returns
     -------
@@ -112,7 +116,9 @@ def read_bag_series(path: str | Path, recorded: RecordedTopics | None = None,
     path = Path(path)
     recorded = recorded or RecordedTopics(topics.topic_set('crtk'))
     fields = recorded.fields
-    wanted = {('/' + t.lstrip('/')): t for t in fields}
+    prefix = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    wanted = {(prefix + '/' + t.lstrip('/')): t for t in fields}
+    diagnostics_topic = prefix + topics.DIAGNOSTICS
     rows: dict[str, dict[str, list]] = {t: {'t': [], 'stamp': [], **{f: [] for f in fields[t]}}
                                         for t in fields}
     diagnostics = []
@@ -122,7 +128,7 @@ def read_bag_series(path: str | Path, recorded: RecordedTopics | None = None,
             for conn, stamp_ns, raw in reader.messages():
                 msg = reader.deserialize(raw, conn.msgtype)
                 t = stamp_ns * 1e-9
-                if conn.topic == topics.DIAGNOSTICS:
+                if conn.topic == diagnostics_topic:
                     diagnostics.append(diagnostic_summary(msg))
                     diagnostic_received.append(t)
                     diagnostic_stamps.append(stamp_seconds(msg))
