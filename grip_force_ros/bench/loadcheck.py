@@ -143,7 +143,7 @@ def stop_session(proc: subprocess.Popen) -> None:
 
     The tests start their nodes in sessions of their own (``test/_ros_tools.start``), which a
     signal to pytest's session does not reach; its fixtures stop them after SIGINT. A run
-    whose pytest does not answer (loaded run 44/1: deadlocked in rmw, the GIL held) would
+    whose pytest does not answer (e.g. deadlocked in rmw, the GIL held) would
     leave them running beside the next runs, so the processes it started, found before the
     signal, are killed with it.
     """
@@ -205,7 +205,7 @@ def run_once(index: int, out_dir: Path, workers: int | None = None, duty: float 
     log = out_dir / f'run{index}.log'
     # The run's own temporary files: pytest's numbered ones keep the last three sessions of
     # the user, and any pytest run beside the series (or after it) rotates a failed run's
-    # node logs away (loaded run 35/c4/1 lost them so).
+    # node logs away.
     basetemp = out_dir / f'run{index}.tmp'
     cmd = [sys.executable, '-m', 'pytest', '-q', '-p', 'no:cacheprovider', '-m', select,
            f'--junitxml={junit}', f'--basetemp={basetemp}', *(files or [str(tests)]),

@@ -443,8 +443,7 @@ def compare(floor: dict, product: dict, contract_floor: dict | None = None) -> d
         # gaps of the state publisher's own 1 kHz timer (part of the missed periods)
         'timer_missed_fraction': product['timer_periods']['missed_fraction'],
         'floor_timer_missed_fraction': floor['timer_periods']['missed_fraction'],
-        # gaps between answered states longer than 1.5 periods (missed or late): what the
-        # first round's gap-rounding count came close to
+        # gaps between answered states longer than 1.5 periods (missed or late)
         'late_fraction': product['periods']['late_fraction'],
         'floor_late_fraction': floor['periods']['late_fraction'],
         'floor': {k: fl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},

@@ -297,7 +297,7 @@ def drive_cuts_under_current(diagnostics, until: float) -> int:
     A cut means the drive got no command for its timeout (30 ms) while it held a
     current: on a loaded machine, a starved node. A calibration staircase with one
     no longer loads the pulley friction in one direction, and its fit is off
-    (loaded run 14/4: long-jaw mu 0.1149 against 0.1189-0.1194 in the other runs).
+    (seen on a loaded machine: long-jaw mu 0.1149 against 0.1189-0.1194 in other runs).
 
     Parameters
     ----------

@@ -206,8 +206,8 @@ def interrupt_behind(exc: BaseException) -> bool:
     A KeyboardInterrupt raised while a pybind11 extension converts its return value comes out
     as a ``TypeError`` ("Unable to convert function return value to a Python type!") caused by
     it, as in :meth:`RecorderNode.latest` (rclpy's ``deserialize_message``) called from a
-    main thread: the fresh-clone CI of stop 32 saw the demo, interrupted there, exit 1 with
-    that traceback instead of 130. The demo and the monitor read it as the Ctrl-C it is.
+    main thread: a demo interrupted there exited 1 with that traceback instead of 130. The
+    demo and the monitor read it as the Ctrl-C it is.
     """
     seen: set[int] = set()
     while exc is not None and id(exc) not in seen:

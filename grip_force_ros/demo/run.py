@@ -47,8 +47,8 @@ READY_MODES = (Mode.FREE, Mode.GRIP)
 #: Longest wait (s) for the master's answer to a parameter request before asking it what it
 #: holds. An answer can be lost: Fast DDS drops a service reply when the server has not
 #: discovered the client's reader 100 ms after the request (rmw_fastrtps #390, #467); on a
-#: loaded machine the master took its task and ran it while no answer came
-#: (docs/reliability.md, seventh round). An answer normally takes milliseconds.
+#: loaded machine the master took its task and ran it while no answer came. An answer
+#: normally takes milliseconds.
 ANSWER_WAIT = 2.0
 #: Longest wait (s) for one answer: each request unanswered doubles the wait of the next one
 #: from :data:`ANSWER_WAIT` up to this (an answer that comes late is taken all the same).
@@ -62,7 +62,7 @@ MASTER_START_TIMEOUT = 30.0
 #: Longest wait (s), once the master's task has ended, for the recorder to take the task's
 #: last messages before the nodes are stopped. The recorder runs in this process at normal
 #: priority and falls behind on a loaded machine: at load 4.6 on two cores it took the
-#: 1 kHz messages up to 4.6 s after they were sent (loaded run 16/1), and stopping the
+#: 1 kHz messages up to 4.6 s after they were sent, and stopping the
 #: nodes at the task's end lost the steady hold window from the bag. Normally it is
 #: milliseconds behind.
 RECORDING_CATCH_UP = 20.0
