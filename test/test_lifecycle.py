@@ -107,8 +107,9 @@ def rig(tmp_path):
             return proc
 
         def controller(self, *args):
+            # the recorder reads the controller's steps off its estimated forces: one a step
             return self.ros2_run('controller', '-p', f'calibration_file:={tmp_path / "cal.yaml"}',
-                                 *args)
+                                 '-p', 'force_output_rate:=1500.0', *args)
 
         def master(self, angle):
             """Publish the master gripper ``angle`` (rad) at 250 Hz, stamped, from now on."""

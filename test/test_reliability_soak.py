@@ -43,14 +43,15 @@ def test_recorder_bins_minutes_and_joins_them():
     stamps = np.arange(13_000) * 1e-3 + 1000.0       # controller step stamps, 1 ms apart
     stamps[7000:] += 0.004                           # one 5 ms gap in the second minute
     import grip_force_ros.faults.soak as soak
-    real = soak.time.monotonic
-    soak.time.monotonic = lambda: next(clock)
+    real = soak.time
+    # the recorder's clock only, not the time module's (other threads of the process read it)
+    soak.time = types.SimpleNamespace(monotonic=lambda: next(clock))
     try:
         for i, s in enumerate(stamps):
             rec.on_step(_target(float(s)))
             rec.on_command(_command(float(s) - 2e-4, 0.2 if i % 2 else float('nan')))
     finally:
-        soak.time.monotonic = real
+        soak.time = real
     rec.finish()
     assert [m['minute'] for m in rec.minutes] == [1, 2, 3]
     # every interval counted once, across the minute boundaries too

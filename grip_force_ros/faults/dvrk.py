@@ -123,7 +123,9 @@ class _Probe:
             with self.lock:
                 self.diagnostics += [(now, s) for s in statuses]
 
-        self.node.create_subscription(JointState, names.actuator_js, on_state, RECORD_QOS)
+        # the drum's current: dvrk in the jaw's state; crtk in the sim's combined state
+        state_topic = names.actuator_js if effort else names.instrument_js
+        self.node.create_subscription(JointState, state_topic, on_state, RECORD_QOS)
         self.node.create_subscription(JointState, names.command, on_command, RECORD_QOS)
         self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, RECORD_QOS)
         self.publisher = self.node.create_publisher(JointState, names.command, RECORD_QOS)

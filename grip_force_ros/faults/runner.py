@@ -37,6 +37,7 @@ from grip_force_ros.faults.catalogue import (SOURCES, FaultCase, bad_params_text
                                              redo_spoiled)
 from grip_force_ros.nodes.processes import STACK_THREAD_HEADER, request_stacks
 from grip_force_ros.params import load_params_file, read_params_yaml
+from grip_force_ros.params.controller import STATE_RATE_MAX
 from grip_force_ros.params.files import instrument_path
 
 #: Default master angle of the probe (rad): below master_contact_angle, so the controller grips.
@@ -108,6 +109,9 @@ class Session:
         values = read_params_yaml(config)
         if sensor:
             values['force_sensor_enabled'] = True
+        # the probe reads the controller's steps off its target forces (published right
+        # after each step's command): one a step, whatever the shipped output rate
+        values['force_output_rate'] = STATE_RATE_MAX
         self.params = load_params_file(config, **({'force_sensor_enabled': True} if sensor else {}))
         self.context = Context()
         rclpy.init(context=self.context)
@@ -155,9 +159,11 @@ class Session:
         from grip_force_ros.nodes.processes import NodeProcess, node_command
         log = Path(tempfile.gettempdir()) / f'grip_force_faultcheck_sim_{os.getpid()}.log'
         # normal scheduling, as the controller and the probe in this process: a SCHED_FIFO
-        # sim beside them starved them (the probe's master 437 ms stale at load 3)
+        # sim beside them starved them (the probe's master 437 ms stale at load 3). Its state
+        # split (joints, actuator on their own topics): the probe faults each input apart.
         return NodeProcess('sim_instrument', command=node_command(
-            'sim_instrument', self.config, remaps=relay_remaps(RELAY_PREFIX)), log_path=log)
+            'sim_instrument', self.config, {'state_message': 'split'},
+            remaps=relay_remaps(RELAY_PREFIX)), log_path=log)
 
     def restart_plant(self, ticks: int, stamp_offset: float = 0.0) -> threading.Event:
         """Restart the instrument: the probe's plant, or kill and start the sim process.
