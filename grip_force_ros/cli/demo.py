@@ -72,6 +72,25 @@ def add_arguments(parser) -> None:
     add_pressure_arguments(parser, prefix='disk-')
 
 
+def _write_report(report: dict, out: Path, args, load, show) -> None:
+    """Add the pressure summary, write ``out/results.json``, print it (--json) or ``show`` it."""
+    if args.pressure != 'none':
+        report['pressure'] = load.last_summary
+    (out / 'results.json').write_text(json.dumps(report, indent=1))
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        show(report)
+
+
+def _print_with_pressure(report: dict) -> None:
+    """Print the single-arm report, then the pressure summary when there was a load."""
+    print_report(report)
+    if 'pressure' in report:
+        from grip_force_ros.cli.load import say_summary
+        say_summary(report['pressure'])
+
+
 def _default_out(kind: str) -> Path:
     return Path('out') / kind / time.strftime('%Y%m%d-%H%M%S', time.gmtime())
 
@@ -189,13 +208,7 @@ def _run_arms(args, config, params, out: Path, load) -> int:
     report = {'instrument': params.instrument_name, 'config': str(config), 'domain_id': domain,
               'arms': arms, 'arms_held': all(r['grasp_held'] for r in arms.values()),
               'out_dir': str(out), 'results': str(out / 'results.json')}
-    if args.pressure != 'none':
-        report['pressure'] = load.last_summary
-    (out / 'results.json').write_text(json.dumps(report, indent=1))
-    if args.json:
-        print(json.dumps(report, indent=1))
-    else:
-        print_arms_report(report)
+    _write_report(report, out, args, load, print_arms_report)
     return 0
 
 
@@ -300,16 +313,7 @@ def run(args) -> int:
                 progress.close()
         report = result.as_dict()
         report['instrument'] = params.instrument_name
-        if args.pressure != 'none':
-            report['pressure'] = load.last_summary
-        (out / 'results.json').write_text(json.dumps(report, indent=1))
-        if args.json:
-            print(json.dumps(report, indent=1))
-        else:
-            print_report(report)
-            if args.pressure != 'none':
-                from grip_force_ros.cli.load import say_summary
-                say_summary(report['pressure'])
+        _write_report(report, out, args, load, _print_with_pressure)
         return 0
     except KeyboardInterrupt:
         return _interrupted_exit()
