@@ -148,7 +148,7 @@ def test_bench_all_parts_tiny(tmp_path):
     spoiled = []
     for attempt in range(TINY_ATTEMPTS):
         r = run_bench(1.0, config=str(instrument_path('paper_needle_driver')), log_minutes=1.0,
-                      model_size=2000)
+                      model_size=2000, load_cell=True)
         short = {side: r['loop'][side]['samples'] for side in LOOP_SIDES
                  if r['loop'][side]['samples'] <= 100}
         if not short:
@@ -170,9 +170,9 @@ def test_bench_all_parts_tiny(tmp_path):
     full, product = loop['full_path'], loop['product']
     assert all(full[k] >= product[k] for k in ('p50_ms', 'p99_ms', 'max_ms'))
     assert loop['full_path_p99_ratio'] >= loop['p99_ratio']
-    # the split of the full path's excess: contract floor / floor x full path / contract floor
-    assert loop['contract_floor_p99_ratio'] * loop['full_path_over_contract_p99_ratio'] == \
-        pytest.approx(loop['full_path_p99_ratio'])
+    # on the load cell the goals are judged against the contract floor, whose messages it has
+    assert loop['load_cell'] is True and loop['reference'] == 'contract_floor'
+    assert loop['full_path_over_contract_p99_ratio'] == pytest.approx(loop['full_path_p99_ratio'])
     # the contract floor's echo answered with the sensors of the period (quiet: ~100 %)
     assert loop['contract_floor_same_sample_fraction'] > 0.1
     inputs = full['inputs']
@@ -184,7 +184,8 @@ def test_bench_all_parts_tiny(tmp_path):
         assert 0 <= f['age_at_step']['p50_ms'] <= f['to_command']['p50_ms'], name
     assert set(loop['goals_met']) == {'p99_ratio', 'full_path_p99_ratio', 'missed_fraction',
                                       'controller_cpu_ratio'}
-    assert loop['goals']['missed_fraction'] == pytest.approx(loop['floor_missed_fraction'] + 0.0005)
+    assert loop['goals']['missed_fraction'] == pytest.approx(
+        loop['contract_floor_missed_fraction'] + 0.0005)
     assert 0 <= loop['missed_fraction'] <= 1
     assert set(loop['cpu_percent']['floor']) == {'ping', 'echo'}
     assert set(loop['cpu_percent']['contract_floor']) == {'ping', 'echo'}
@@ -199,7 +200,7 @@ def test_bench_all_parts_tiny(tmp_path):
     assert diag['rows'] == 60_000 and diag['load_s'] > 0 and diag['diagnose_peak_mb'] > 0
     text = render(r)
     assert 'p99 ratio' in text and 'control step' in text and 'diagnosis' in text
-    assert 'timer skipped' in text and 'full path' in text and 'goals:' in text
+    assert 'timer skipped' in text and 'full path' in text and 'goals (against the contract floor):' in text
     assert 'contract floor' in text
 
 
@@ -255,6 +256,23 @@ def test_compare_arms_judges_each_arm_against_the_one_floor():
     assert set(loop['cpu_percent']['arms']) == {'PSM1', 'PSM2'}
 
 
+def test_a_load_cell_product_is_judged_against_the_contract_floor():
+    """Sensorless: ratios over the floor; on the load cell: over the contract floor, which it needs."""
+    from grip_force_ros.bench.loop import compare
+    floor, contract = _synthetic_floor(), _synthetic_floor(p50=0.35, p99=0.6)
+    product = _synthetic_product(p99=0.72, full_p99=0.84, missed=0.0012, controller_cpu=25.0)
+    sensorless = compare(floor, product, contract)
+    assert sensorless['reference'] == 'floor' and sensorless['load_cell'] is False
+    assert sensorless['p99_ratio'] == pytest.approx(0.72 / 0.5)
+    cell = compare(floor, {**product, 'load_cell': True}, contract)
+    assert cell['reference'] == 'contract_floor' and cell['load_cell'] is True
+    assert cell['p99_ratio'] == pytest.approx(0.72 / 0.6)
+    assert cell['full_path_p99_ratio'] == pytest.approx(0.84 / 0.6)
+    assert cell['goals']['missed_fraction'] == pytest.approx(contract['periods']['missed_fraction'] + 0.0005)
+    with pytest.raises(ValueError, match='contract floor'):
+        compare(floor, {**product, 'load_cell': True})
+
+
 def test_render_gives_one_block_per_arm():
     from grip_force_ros.bench.loop import compare_arms
     from grip_force_ros.cli.bench import render
@@ -266,7 +284,7 @@ def test_render_gives_one_block_per_arm():
                                'load_average_1min': 1.0, 'load_average_1min_end': 1.5},
                    'loop': loop})
     assert 'arm /PSM1' in text and 'arm /PSM2' in text
-    assert text.count('goals: p99 ratio') == 2
+    assert text.count('goals (against the floor): p99 ratio') == 2
     assert 'every arm met every goal: NO' in text
     assert 'product /PSM2 sim 30' in text
 
@@ -282,8 +300,10 @@ def test_product_commands_put_each_arm_in_its_namespace():
             assert ['-r', f'__ns:=/{ns}'] == ros[ros.index('-r'):ros.index('-r') + 2], name
             assert '--params-file' in ros and 'c.yaml' in ros
         assert cmds['sim'][cmds['sim'].index('--open-at-ns') + 1] == '123'
-        assert 'force_sensor_enabled:=true' in cmds['controller']
+        assert 'force_sensor_enabled:=false' in cmds['controller']   # sensorless, as shipped
         assert 'repeat:=true' in cmds['master']
+    with_cell = product_commands('c.yaml', 'a.npz', 's.npz', 2.0, 1.0, load_cell=True)
+    assert 'force_sensor_enabled:=true' in with_cell['controller']
     single = product_commands('c.yaml', 'a.npz', 's.npz', 2.0, 1.0)
     assert not any('__ns' in arg for cmd in single.values() for arg in cmd)
     assert '--open-at-ns' not in single['sim']

@@ -10,9 +10,12 @@
 * :func:`run_product`: the shipped ``master`` executable, the shipped sim node
   (measuring its own loop, :mod:`.product_sim`) and the shipped controller node
   (noting the input stamps of each step, :mod:`.product_controller`) with an
-  instrument YAML, the load cell in the loop; :func:`run_products` runs several such
-  arms at once (``/PSM1``, ``/PSM2``: one ROS namespace each, one domain, one window),
-  and :func:`compare_arms` judges each against the one floor of the run.
+  instrument YAML, sensorless as shipped or with the load cell in the loop;
+  :func:`run_products` runs several such arms at once (``/PSM1``, ``/PSM2``: one ROS
+  namespace each, one domain, one window), and :func:`compare_arms` judges each against
+  the one floor of the run. A product is judged against the floor that carries its
+  messages: the sensorless controller (one state message a period) against the floor,
+  the load-cell controller (two) against the contract floor.
 
 Both are measured by the process that publishes the state, on its own clock:
 the answer carries the stamp of the state it answers. Both return the same
@@ -203,7 +206,7 @@ def arm_ros_args(namespace: str = '', *args, **kwargs) -> list[str]:
 
 def product_commands(config: str, answers: str, steps: str, seconds: float, warmup: float,
                      namespace: str = '', controller_params: dict | None = None,
-                     open_at_ns: int = 0) -> dict[str, list[str]]:
+                     open_at_ns: int = 0, load_cell: bool = False) -> dict[str, list[str]]:
     """Return the command lines of one arm's product: controller, master, sim (in start order).
 
     Parameters
@@ -220,12 +223,16 @@ def product_commands(config: str, answers: str, steps: str, seconds: float, warm
         Further controller parameters over the file's.
     open_at_ns : int
         Wall clock (ns) before which the sim's window does not open (0: after its warm-up).
+    load_cell : bool
+        The controller's ``force_sensor_enabled``: False, sensorless (the shipped default,
+        one state message a period); True, the load cell closes the force loop (two).
     """
     sim_extra = ['--open-at-ns', str(int(open_at_ns))] if open_at_ns else []
     return {
         'controller': python_module(
             'grip_force_ros.bench.product_controller', '--record', steps,
-            *arm_ros_args(namespace, config, {'force_sensor_enabled': True, **(controller_params or {})},
+            *arm_ros_args(namespace, config, {'force_sensor_enabled': load_cell,
+                                              **(controller_params or {})},
                           log_level='warn')),
         'master': node_executable('master') + arm_ros_args(
             namespace, config, {'repeat': True}, log_level='warn'),
@@ -264,7 +271,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
                  executor: str | None = None, rt_priority: int = 0,
                  controller_params: dict | None = None,
                  namespaces: tuple[str, ...] = ('',),
-                 window_delay: float = ARMS_WINDOW_DELAY) -> dict[str, dict]:
+                 window_delay: float = ARMS_WINDOW_DELAY, load_cell: bool = False) -> dict[str, dict]:
     """Measure one product per arm, all at once in one ROS domain, each in its own namespace.
 
     Each arm is what :func:`run_product` starts (controller, master, sim), its nodes in
@@ -274,7 +281,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
 
     Parameters
     ----------
-    seconds, domain_id, config, warmup, executor, rt_priority, controller_params
+    seconds, domain_id, config, warmup, executor, rt_priority, controller_params, load_cell
         As :func:`run_product`.
     namespaces : tuple of str
         ROS namespaces of the arms ('' : the root namespace, one arm).
@@ -299,7 +306,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
                 tag = arm or 'arm'
                 files[arm] = f'{tmp}/{tag}_answers.npz', f'{tmp}/{tag}_steps.npz'
                 cmds = product_commands(config, *files[arm], seconds, warmup, arm,
-                                        controller_params, open_at_ns)
+                                        controller_params, open_at_ns, load_cell)
                 controller = Child('controller', cmds['controller'], env, rt_priority=rt_priority)
                 master = Child('master', cmds['master'], env)
                 sim = Child('sim', cmds['sim'], env, rt_priority=rt_priority)
@@ -328,6 +335,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
         result['config'] = config
         result['executor'] = executor or 'node default'
         result['rt_priority'] = rt_priority
+        result['load_cell'] = load_cell
         if len(namespaces) > 1:
             result['namespace'] = '/' + arm
             result['window_skew_s'] = (result.get('opened_ns', 0) - min(opened)) * 1e-9
@@ -336,12 +344,11 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
 
 def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
                 executor: str | None = None, rt_priority: int = 0,
-                controller_params: dict | None = None) -> dict:
+                controller_params: dict | None = None, load_cell: bool = False) -> dict:
     """Measure the sim -> controller -> sim round trip and the full path at 1 kHz, the shipped nodes.
 
     Starts the shipped controller node as :mod:`.product_controller` (it notes the input
-    stamps of each step) with ``force_sensor_enabled`` (the load cell is one of the
-    inputs whose path is measured), a ``master`` repeating the needle grasp (the shipped
+    stamps of each step), sensorless or with the load cell in the loop, a ``master`` repeating the needle grasp (the shipped
     executable), all with ``--params-file config``, and the shipped sim node as
     :mod:`.product_sim`, which keeps its loop's round trips for the window.
 
@@ -364,6 +371,9 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
     controller_params : dict, optional
         Further controller parameters (name -> value) over the instrument file's, e.g.
         ``{'control_rate': 250.0}``.
+    load_cell : bool
+        False: sensorless, the shipped default (one state message a period). True:
+        ``force_sensor_enabled``, the load cell is one of the inputs whose path is measured.
 
     Returns
     -------
@@ -375,12 +385,13 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
         fallback), ``worst``.
     """
     return run_products(seconds, domain_id, config, warmup, executor, rt_priority,
-                        controller_params, namespaces=('',))['']
+                        controller_params, namespaces=('',), load_cell=load_cell)['']
 
 
-#: The loop's goals: product p99 and full-path p99 at most this many times the floor's p99,
-#: missed periods at most the floor's plus :data:`MISSED_OVER_FLOOR`, the controller's CPU
-#: at most :data:`CPU_RATIO_GOAL` times the bare echo's.
+#: The loop's goals: product p99 and full-path p99 at most this many times the reference
+#: floor's p99, missed periods at most its plus :data:`MISSED_OVER_FLOOR`, the controller's
+#: CPU at most :data:`CPU_RATIO_GOAL` times its echo's. The reference floor carries the
+#: product's messages: the floor (sensorless), the contract floor (load cell).
 P99_RATIO_GOAL = 1.5
 MISSED_OVER_FLOOR = 0.0005
 CPU_RATIO_GOAL = 1.5
@@ -389,33 +400,42 @@ CPU_RATIO_GOAL = 1.5
 def compare(floor: dict, product: dict, contract_floor: dict | None = None) -> dict:
     """Build the ``loop`` section: product/floor ratios beside both runs' figures, the goals judged.
 
-    ``contract_floor`` (a :func:`run_floor` result with ``Variant.sensors``), when given,
-    splits the full path's excess over the floor in two: ``contract_floor_p99_ratio``
-    (contract floor p99 / floor p99: the topic contract's second message a period, the load
-    cell before the combined state, bare rclpy) and ``full_path_over_contract_p99_ratio``
+    The goals are judged against the floor that carries the product's messages
+    (``reference``): the floor for a sensorless product (one state message a period), the
+    contract floor for one with the load cell (``product['load_cell']``: the load cell and
+    the combined state). ``contract_floor`` (a :func:`run_floor` result with
+    ``Variant.sensors``), when given, also splits the full path's excess over the floor
+    in two: ``contract_floor_p99_ratio`` (contract floor p99 / floor p99: the topic
+    contract's second message a period, bare rclpy) and ``full_path_over_contract_p99_ratio``
     (full-path p99 / contract floor p99: this package's code: message checks, model,
     control law, force outputs).
 
     Parameters
     ----------
     floor, contract_floor : dict
-        :func:`run_floor` results (the floor; the contract floor, optional).
+        :func:`run_floor` results (the floor; the contract floor, needed for a load-cell product).
     product : dict
         A :func:`run_product` result (or one arm's of :func:`run_products`).
 
     Returns
     -------
     dict
-        Ratios (-), latencies (ms), fractions (-), CPU (% of one core), ``goals`` and
-        ``goals_met`` (judged in this run; NaN is not met).
+        Ratios (-), latencies (ms), fractions (-), CPU (% of one core), ``reference``
+        ('floor' or 'contract_floor'), ``goals`` and ``goals_met`` (judged in this run;
+        NaN is not met).
     """
-    fl, pl = floor['latency'], product['latency']
+    load_cell = bool(product.get('load_cell', False))
+    if load_cell and contract_floor is None:
+        raise ValueError('a load-cell product is judged against the contract floor: none given')
+    ref = contract_floor if load_cell else floor
+    fl, rl, pl = floor['latency'], ref['latency'], product['latency']
     fp = product['full_path']
-    missed, floor_missed = product['periods']['missed_fraction'], floor['periods']['missed_fraction']
-    full_path_ratio = ratio(fp['full_path']['p99_ms'], fl['p99_ms'])
-    # the controller's CPU (% of a core) over the bare echo's: what the node costs beyond rclpy
+    missed, ref_missed = product['periods']['missed_fraction'], ref['periods']['missed_fraction']
+    p99_ratio = ratio(pl['p99_ms'], rl['p99_ms'])
+    full_path_ratio = ratio(fp['full_path']['p99_ms'], rl['p99_ms'])
+    # the controller's CPU (% of a core) over the reference echo's: what the node costs beyond rclpy
     cpu_ratio = ratio(product['cpu_percent'].get('controller', math.nan),
-                      floor['cpu_percent'].get('echo', math.nan))
+                      ref['cpu_percent'].get('echo', math.nan))
     split = {}
     if contract_floor is not None:
         cl = contract_floor['latency']
@@ -431,15 +451,18 @@ def compare(floor: dict, product: dict, contract_floor: dict | None = None) -> d
             'contract_floor': {k: cl[k] for k in ('p50_ms', 'p99_ms', 'max_ms', 'samples')},
         }
     return {
-        'p99_ratio': ratio(pl['p99_ms'], fl['p99_ms']),
-        'p50_ratio': ratio(pl['p50_ms'], fl['p50_ms']),
-        'max_ratio': ratio(pl['max_ms'], fl['max_ms']),
+        'load_cell': load_cell,
+        'reference': 'contract_floor' if load_cell else 'floor',
+        'p99_ratio': p99_ratio,
+        'p50_ratio': ratio(pl['p50_ms'], rl['p50_ms']),
+        'max_ratio': ratio(pl['max_ms'], rl['max_ms']),
         # sensing to actuation: the oldest input of each step (actuator state, jaw angle,
-        # load cell) to its command's arrival, p99 / the floor's round-trip p99
+        # load cell when used) to its command's arrival, p99 / the reference's round-trip p99
         'full_path_p99_ratio': full_path_ratio,
         'controller_cpu_ratio': cpu_ratio,
         'missed_fraction': missed,
-        'floor_missed_fraction': floor_missed,
+        'floor_missed_fraction': floor['periods']['missed_fraction'],
+        'reference_missed_fraction': ref_missed,
         # gaps of the state publisher's own 1 kHz timer (part of the missed periods)
         'timer_missed_fraction': product['timer_periods']['missed_fraction'],
         'floor_timer_missed_fraction': floor['timer_periods']['missed_fraction'],
@@ -456,12 +479,12 @@ def compare(floor: dict, product: dict, contract_floor: dict | None = None) -> d
         # the product's longest round trips: (s into the window, ms)
         'product_worst': product.get('worst', []),
         'goals': {'p99_ratio': P99_RATIO_GOAL, 'full_path_p99_ratio': P99_RATIO_GOAL,
-                  'missed_fraction': floor_missed + MISSED_OVER_FLOOR,
+                  'missed_fraction': ref_missed + MISSED_OVER_FLOOR,
                   'controller_cpu_ratio': CPU_RATIO_GOAL},
         # judged in this run (NaN -> not met)
-        'goals_met': {'p99_ratio': _at_most(ratio(pl['p99_ms'], fl['p99_ms']), P99_RATIO_GOAL),
+        'goals_met': {'p99_ratio': _at_most(p99_ratio, P99_RATIO_GOAL),
                       'full_path_p99_ratio': _at_most(full_path_ratio, P99_RATIO_GOAL),
-                      'missed_fraction': _at_most(missed, floor_missed + MISSED_OVER_FLOOR),
+                      'missed_fraction': _at_most(missed, ref_missed + MISSED_OVER_FLOOR),
                       'controller_cpu_ratio': _at_most(cpu_ratio, CPU_RATIO_GOAL)},
     }
 

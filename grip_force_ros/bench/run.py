@@ -60,7 +60,8 @@ LOOP_OVERHEAD = 300.0
 
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
              product_executor: str | None = None, rt_priority: int = 0, say=None,
-             pressure: str = 'none', pressure_options: dict | None = None, arms: int = 1) -> dict:
+             pressure: str = 'none', pressure_options: dict | None = None, arms: int = 1,
+             load_cell: bool = False) -> dict:
     """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios.
 
     Parameters
@@ -83,6 +84,9 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
         products at once (:data:`~grip_force_ros.bench.loop.ARM_NAMESPACES`: /PSM1, /PSM2,
         ...), one domain, one window, each judged against the run's one floor
         (:func:`~grip_force_ros.bench.loop.compare_arms`: ``arms``, ``arms_goals_met``).
+    load_cell : bool
+        False (default): the controller sensorless, as shipped, judged against the floor.
+        True: its force loop on the load cell, judged against the contract floor.
     """
     if not 1 <= arms <= len(ARM_NAMESPACES):
         raise ValueError(f'arms must be 1..{len(ARM_NAMESPACES)}, got {arms}')
@@ -103,15 +107,17 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
             say(f'loop: contract floor, {seconds:g} s ({contract.label()})')
             contract_floor = run_floor(seconds, domain, contract)
             if arms == 1:
-                say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}')
+                say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}, '
+                    f"{'load cell' if load_cell else 'sensorless'}")
                 product = run_product(seconds, domain, config, executor=product_executor,
-                                      rt_priority=rt_priority)
+                                      rt_priority=rt_priority, load_cell=load_cell)
             else:
                 names = ARM_NAMESPACES[:arms]
                 say(f'loop: {arms} products at once ({", ".join("/" + n for n in names)}), '
                     f'sim -> controller -> sim each, {seconds:g} s, {config}')
                 products = run_products(seconds, domain, config, executor=product_executor,
-                                        rt_priority=rt_priority, namespaces=names)
+                                        rt_priority=rt_priority, namespaces=names,
+                                        load_cell=load_cell)
     if arms == 1:
         out = compare(floor, product, contract_floor)
         out['product_fallback_commands'] = product['other_commands']
@@ -145,7 +151,7 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
               variant_seconds: float | None = None, product_executor: str | None = None,
               rt_priority: int = 0, pressure: str = 'none', pressure_options: dict | None = None,
-              arms: int = 1, say=None) -> dict:
+              arms: int = 1, load_cell: bool = False, say=None) -> dict:
     """Everything ``grip-force bench`` measures, as the nested JSON dict.
 
     Parameters
@@ -179,6 +185,9 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
     arms : int
         Products measured at once in the loop part (1, or 2-3 arms /PSM1, /PSM2, ...;
         :func:`run_loop`).
+    load_cell : bool
+        The product's controller on the load cell, judged against the contract floor
+        (:func:`run_loop`; default sensorless, against the floor).
     say : callable, optional
         ``say(message)`` before each step.
 
@@ -202,7 +211,8 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
     if 'loop' in parts:
         out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor,
                                rt_priority=rt_priority, say=say, pressure=pressure,
-                               pressure_options=pressure_options, arms=arms)
+                               pressure_options=pressure_options, arms=arms,
+                               load_cell=load_cell)
     if variants:
         out['variants'] = run_variants(variant_seconds or seconds, domains, say=say)
     if 'diagnosis' in parts:
