@@ -32,7 +32,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from grip_force_ros.nodes.launch_actions import PACKAGE, controller_actions
-from grip_force_ros.nodes.processes import leave_after_environment
+from grip_force_ros.nodes.lifetime import leave_after_environment
 from grip_force_ros.params.files import DEFAULT_INSTRUMENT, instrument_path
 from grip_force_ros.params.interface import INTERFACES
 

@@ -271,7 +271,7 @@ def test_a_peer_still_up_at_the_timeout_is_left_behind_and_named():
 
 
 def test_the_peers_to_leave_after_come_from_the_environment():
-    from grip_force_ros.nodes.processes import leave_after_environment, leave_after_peers
+    from grip_force_ros.nodes.lifetime import leave_after_environment, leave_after_peers
     env = leave_after_environment(('controller', 'master'))
     assert leave_after_peers(env) == ('controller', 'master')
     assert leave_after_peers({'GRIP_FORCE_LEAVE_AFTER': ' master, ,'}) == ('master',)
@@ -495,7 +495,7 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
     """A node run SCHED_FIFO (the demo's under load) must not hand that class to the watcher
     and its gdb. Checked from a SCHED_BATCH parent, which needs no privilege: the watcher
     runs SCHED_OTHER (without ``chrt -o`` in its script it stays SCHED_BATCH)."""
-    from grip_force_ros.nodes.processes import stop_watch, watch_own_teardown
+    from grip_force_ros.nodes.lifetime import stop_watch, watch_own_teardown
 
     parent = os.sched_getscheduler(0), os.sched_getparam(0)
     os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
@@ -517,17 +517,17 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
 def test_a_teardown_goes_on_without_its_watcher_where_none_can_start(monkeypatch):
     """No temporary file (a full /tmp) or no ``sh``: no watcher, and no exception out of the
     teardown's ``finally`` (which would skip the node's destruction)."""
-    from grip_force_ros.nodes import processes
+    from grip_force_ros.nodes import lifetime
 
     def no_file():
         raise OSError(28, 'No space left on device')
 
-    monkeypatch.setattr(processes.tempfile, 'TemporaryFile', no_file)
-    assert processes.watch_own_teardown(60.0, 60.0) is None
+    monkeypatch.setattr(lifetime.tempfile, 'TemporaryFile', no_file)
+    assert lifetime.watch_own_teardown(60.0, 60.0) is None
     monkeypatch.undo()
     monkeypatch.setenv('PATH', '/nonexistent')
-    assert processes.watch_own_teardown(60.0, 60.0) is None
-    processes.stop_watch(None)                  # what run_node then does
+    assert lifetime.watch_own_teardown(60.0, 60.0) is None
+    lifetime.stop_watch(None)                  # what run_node then does
 
 
 def test_a_teardown_within_the_limit_leaves_no_timer_behind():

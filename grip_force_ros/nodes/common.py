@@ -36,8 +36,8 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 
 from grip_force_ros.nodes import realtime
-from grip_force_ros.nodes.processes import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
-from grip_force_ros.nodes.processes import leave_after_peers, stop_watch, watch_own_teardown
+from grip_force_ros.nodes.lifetime import STACK_DUMP_SIGNAL, wait_until  # noqa: F401 (re-exported)
+from grip_force_ros.nodes.lifetime import leave_after_peers, stop_watch, watch_own_teardown
 
 
 def state_qos(depth: int) -> QoSProfile:
@@ -208,7 +208,7 @@ def unfreeze_heap() -> None:
 
 #: Time a node's teardown (executor, node, context) may run before every thread's stack goes
 #: to stderr and the process is ended (s; time stopped for gdb's native stacks does not count,
-#: :func:`~grip_force_ros.nodes.processes.watch_own_teardown`). A teardown stuck in the
+#: :func:`~grip_force_ros.nodes.lifetime.watch_own_teardown`). A teardown stuck in the
 #: middleware is deaf to every signal rclpy handles: Fast DDS has an open deadlock of a
 #: participant's own threads (eProsima/Fast-DDS#6502), and its ``set_listener(nullptr)``, the
 #: first step of rmw_fastrtps's ``destroy_participant``, spins for good when it starts while a
@@ -217,7 +217,7 @@ def unfreeze_heap() -> None:
 #: ``ros2 launch`` does (15 s), so the stacks reach the log.
 TEARDOWN_LIMIT = 4.0
 #: Fraction of :data:`TEARDOWN_LIMIT` after which a teardown still running has its native
-#: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.processes.watch_own_teardown`).
+#: stacks written to stderr (gdb; :func:`~grip_force_ros.nodes.lifetime.watch_own_teardown`).
 #: A Python stack alone cannot tell a Fast DDS deadlock from a slow teardown. The process is
 #: stopped while gdb starts and reads (seconds on a loaded machine), which delays a teardown
 #: that would have ended, so it comes late: 3 s, 3.8 times the slowest teardown measured on a
@@ -399,7 +399,7 @@ def wait_for_peers_to_leave(node, peers: Sequence[str], timeout: float = PEER_LE
     participant runs (eProsima/Fast-DDS#6513, open), and a stop of several nodes at once
     brings exactly that callback: another participant leaving. ``ProcessGroup`` stops its
     nodes one after another; ``ros2 launch`` sends SIGINT to all at once. So a node
-    launched with :data:`~grip_force_ros.nodes.processes.LEAVE_AFTER_ENV` stops after the
+    launched with :data:`~grip_force_ros.nodes.lifetime.LEAVE_AFTER_ENV` stops after the
     nodes it names: in the package's launch files the master leaves first, then the
     controller, then the sim (the reverse start order of the demo). The pause ``settle`` follows
     even when no peer is in the graph any more at the first look: one that left a moment before

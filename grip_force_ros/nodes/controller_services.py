@@ -50,7 +50,7 @@ from grip_force_ros.control import Mode
 from grip_force_ros.objects import OBJECTS
 from grip_force_ros.identify.procedures import (CurrentStaircase, GraspRecording, SensorZero,
                                                 calibration_current)
-from grip_force_ros.nodes.processes import python_module
+from grip_force_ros.nodes.lifetime import python_module
 from grip_force_ros.params import to_yaml
 
 #: Longest wait for the first load-cell sample after subscribing to it (s).

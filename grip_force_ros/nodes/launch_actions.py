@@ -15,7 +15,7 @@ from launch.actions import LogInfo, OpaqueFunction, RegisterEventHandler
 from launch_ros.actions import LifecycleNode, Node
 from launch_ros.event_handlers import OnStateTransition
 
-from grip_force_ros.nodes.processes import leave_after_environment
+from grip_force_ros.nodes.lifetime import leave_after_environment
 
 PACKAGE = 'grip_force_ros'
 
@@ -40,7 +40,7 @@ def controller_actions(namespace: str, parameters: list, autostart: bool,
         True: a plain node that brings itself up; False: a managed LifecycleNode that waits.
     leave_after : tuple of str
         Nodes of the same launch (names in ``namespace``) whose leaving the controller waits
-        for at Ctrl-C before its own teardown (``processes.LEAVE_AFTER_ENV``).
+        for at Ctrl-C before its own teardown (``lifetime.LEAVE_AFTER_ENV``).
     """
     parameters = list(parameters) + [{'autostart': autostart}]
     common = dict(executable='controller', name='controller', namespace=namespace,

@@ -20,7 +20,9 @@ The one owner of
 
 The demo, the benchmarks, the fault check, the soak and the tests start nodes
 through this module. Nodes inside this process (a test reaching into a node):
-:class:`grip_force_ros.nodes.harness.RosRunner`.
+:class:`grip_force_ros.nodes.harness.RosRunner`. What a node does about its own process
+(the peers it leaves after, its stack signal, its teardown watcher, ``python_module``):
+:mod:`grip_force_ros.nodes.lifetime`, which this module builds on.
 """
 from __future__ import annotations
 
@@ -37,7 +39,10 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, MutableMapping, NamedTuple, Sequence
+from typing import Any, Callable, Iterable, Mapping, MutableMapping, Sequence
+
+from grip_force_ros.nodes.lifetime import PRCTL, STACK_DUMP_SIGNAL, STACK_DUMP_WAIT, python_module
+from grip_force_ros.nodes.lifetime import wait_until  # noqa: F401 (re-exported)
 
 #: The node executables of the package (console scripts of setup.py).
 NODE_EXECUTABLES = ('controller', 'sim_instrument', 'master')
@@ -67,16 +72,6 @@ class ProcessError(RuntimeError):
     """A node process could not be started or died early."""
 
 
-def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(poll)
-    return bool(predicate())
-
-
 # ---------------------------------------------------------------- environment
 def ensure_local_discovery(env: MutableMapping[str, str] | None = None) -> MutableMapping[str, str]:
     """Keep DDS discovery on this machine unless a range was chosen.
@@ -95,25 +90,6 @@ def ensure_local_discovery(env: MutableMapping[str, str] | None = None) -> Mutab
     env = os.environ if env is None else env
     env.setdefault(DISCOVERY_RANGE, LOCAL_DISCOVERY)
     return env
-
-
-#: Environment variable of a node process: the names of the nodes (comma-separated, in the
-#: node's namespace) whose leaving the node waits for when a signal stops it
-#: (``common.wait_for_peers_to_leave``). ``ros2 launch`` sends SIGINT to every node at once;
-#: the package's launch files set it so that the master leaves first, then the controller,
-#: then the sim (:func:`leave_after_environment`).
-LEAVE_AFTER_ENV = 'GRIP_FORCE_LEAVE_AFTER'
-
-
-def leave_after_environment(peers: Sequence[str]) -> dict[str, str]:
-    """Return the environment entry that makes a node stop after ``peers`` (node names)."""
-    return {LEAVE_AFTER_ENV: ','.join(peers)}
-
-
-def leave_after_peers(env: Mapping[str, str] | None = None) -> tuple[str, ...]:
-    """Return the node names in :data:`LEAVE_AFTER_ENV` of ``env`` (default ``os.environ``)."""
-    text = (os.environ if env is None else env).get(LEAVE_AFTER_ENV, '')
-    return tuple(name.strip() for name in text.split(',') if name.strip())
 
 
 def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | None = None,
@@ -238,11 +214,6 @@ def ros_args(params_file: str | os.PathLike | None = None,
     if log_level:
         out += ['--log-level', log_level]
     return out
-
-
-def python_module(module: str, *args: str) -> list[str]:
-    """Command line running ``python -m module args`` with this interpreter."""
-    return [sys.executable, '-m', module, *args]
 
 
 def node_executable(name: str) -> list[str]:
@@ -380,20 +351,6 @@ def scheduling_of(pid: int) -> str:
 _PR_SET_PDEATHSIG = 1  # prctl option, <linux/prctl.h>
 
 
-def _load_prctl() -> Callable[..., int] | None:
-    try:
-        import ctypes
-        return ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):  # not Linux
-        return None
-
-
-#: libc's ``prctl``, looked up here, in the parent: a child between ``fork`` and ``exec`` of
-#: a parent with threads (DDS has several) must not ``dlopen``, whose lock another thread
-#: may have held at the fork.
-_PRCTL = _load_prctl()
-
-
 def end_with_parent(sig: int = signal.SIGTERM) -> bool:
     """Ask the kernel to send ``sig`` to this process when the thread that forked it ends.
 
@@ -421,15 +378,9 @@ def end_with_parent(sig: int = signal.SIGTERM) -> bool:
     bool
         Whether the kernel took the request (False where ``prctl`` is not available).
     """
-    return _PRCTL is not None and _PRCTL(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
+    return PRCTL is not None and PRCTL(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) == 0
 
 
-#: A node started by :func:`grip_force_ros.nodes.common.run_node` writes every thread's
-#: Python stack to its log on this signal (``faulthandler``). A process about to be killed
-#: because it did not end on SIGINT and SIGTERM gets it first, so the log says where it hung.
-STACK_DUMP_SIGNAL = signal.SIGUSR1
-#: Time given to a process to write its stacks before it is killed (s).
-STACK_DUMP_WAIT = 0.3
 #: The line ``faulthandler`` begins each thread's stack with (``Thread 0x...``, and ``Current
 #: thread 0x...`` for the thread that handled the signal).
 STACK_THREAD_HEADER = re.compile(r'^(?:Current thread|Thread) 0x', re.M)
@@ -465,114 +416,6 @@ def request_stacks(pid: int, wait: float = STACK_DUMP_WAIT) -> bool:
         return False
     time.sleep(wait)
     return True
-
-
-_PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
-
-#: The watcher of :func:`watch_own_teardown`: plain ``sh`` and ``gdb``, outside this process,
-#: because a teardown stuck in C below Python may hold the GIL (no Python thread runs then).
-#: It leaves the scheduling class it inherits (SCHED_FIFO for the demo's nodes under load) for
-#: SCHED_OTHER first: gdb reading stacks for seconds must not outrank the machine's other work.
-#: It stops the process (SIGSTOP) while gdb starts and reads and continues it after, then gives
-#: it the rest of its limit: the limit counts the time the process runs, not the time gdb held
-#: it (a wall-clock limit, running on while gdb read for over a second, would end a slow
-#: teardown the moment gdb let go). A process still tearing down at the limit gets
-#: STACK_DUMP_SIGNAL (its Python stacks, ``faulthandler``), then SIGKILL. A lock (``flock`` on
-#: the process's temporary file ``$3``, opened anew through ``/proc``: a lock of its own, not
-#: the process's) makes each of the watcher's steps on the process and the process's own end
-#: of the watch (:func:`stop_watch`) exclude each other: a teardown that ends just then is never
-#: left stopped, and ``[ -ef ]`` (the same file) makes sure a pid reused meanwhile is not hit.
-#: Arguments: delay before the stacks (s), pid, fd of the lock file, rest of the limit (s), the
-#: limit (s, for the message), the stack signal's number, the time to write stacks (s).
-_TEARDOWN_WATCH = r'''exec 1>&2
-chrt -o -p 0 $$ >/dev/null 2>&1
-sleep "$1"
-exec 9<"/proc/$2/fd/$3" 2>/dev/null || exit 0
-flock -n 9 || exit 0
-kill -STOP "$2" 2>/dev/null || exit 0
-echo "[teardown] pid $2 still tearing down after $1 s; stopped for its native stacks (gdb):"
-if command -v gdb >/dev/null 2>&1; then
-  timeout 120 gdb -p "$2" -batch -nx -iex "set auto-load python-scripts off" -ex "thread apply all bt"
-else
-  echo "[teardown] no gdb on this machine"
-fi
-kill -CONT "$2"
-flock -u 9
-sleep "$4"
-flock -n 9 || exit 0
-[ "/proc/$2/fd/$3" -ef /dev/fd/9 ] || exit 0
-echo "[teardown] pid $2 still tearing down after $5 s of its own time; its Python stacks, then SIGKILL:"
-kill -"$6" "$2" 2>/dev/null || exit 0
-sleep "$7"
-kill -KILL "$2" 2>/dev/null'''
-
-
-class TeardownWatch(NamedTuple):
-    """A running :func:`watch_own_teardown` watcher and the lock it shares with this process."""
-
-    process: subprocess.Popen
-    lock: Any          # this process's temporary file, which the watcher locks while it has it stopped
-
-
-def watch_own_teardown(after: float, limit: float) -> TeardownWatch | None:
-    """Start a watcher of this process's teardown: native stacks at ``after`` s, an end at ``limit``.
-
-    For a teardown that may hang in the middleware: ``faulthandler`` shows the Python
-    frame (``destroy_node``), not where in Fast DDS it waits. The watcher sleeps ``after``
-    s, then, if this process still runs and :func:`stop_watch` has not begun, stops it,
-    attaches gdb (where installed), writes every thread's native stack to the stderr it
-    shares with this process (the node's log) and continues it. It then waits the rest of
-    ``limit``; a teardown still running then has its Python stacks written
-    (:data:`STACK_DUMP_SIGNAL`) and is killed (SIGKILL): the time gdb held the process does
-    not count. End it with :func:`stop_watch` once the teardown has ended.
-
-    Parameters
-    ----------
-    after : float
-        Delay (s) before the native stacks are taken.
-    limit : float
-        Time (s) the teardown may run, not counting the time stopped for gdb; not less than
-        ``after``.
-
-    Returns
-    -------
-    TeardownWatch or None
-        The watcher (its own session), None where it cannot be started (no ``sh``, no
-        temporary file): the teardown then goes on without it.
-    """
-    lock = None
-    try:
-        lock = tempfile.TemporaryFile()
-        watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
-                                    str(os.getpid()), str(lock.fileno()), f'{max(limit - after, 0.0):g}',
-                                    f'{limit:g}', str(int(STACK_DUMP_SIGNAL)), f'{STACK_DUMP_WAIT:g}'],
-                                   stdin=subprocess.DEVNULL, start_new_session=True)
-    except OSError:
-        if lock is not None:
-            lock.close()
-        return None
-    if _PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace: name the watcher
-        _PRCTL(_PR_SET_PTRACER, watcher.pid, 0, 0, 0)
-    return TeardownWatch(watcher, lock)
-
-
-def stop_watch(watch: TeardownWatch | None) -> None:
-    """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group).
-
-    Takes the watcher's lock first: a watcher that has this process stopped for gdb holds it
-    until it has continued the process (and one ending it at the limit, until it is killed).
-    """
-    if watch is None:
-        return
-    fcntl.flock(watch.lock.fileno(), fcntl.LOCK_EX)
-    try:
-        os.killpg(watch.process.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
-    watch.process.wait()
-    watch.lock.close()
-    if _PRCTL is not None:   # no tracer named any more (the pid may be reused)
-        _PRCTL(_PR_SET_PTRACER, 0, 0, 0, 0)
 
 
 def child_setup(preexec_fn: Callable[[], None] | None = None) -> Callable[[], None]:
