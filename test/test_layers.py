@@ -19,7 +19,7 @@ MAY_IMPORT = {
     'control': {'objects', 'effects', 'model', 'params'},
     'sim': {'objects', 'effects', 'model', 'params'},
     'closed_loop': {'control'},
-    'identify': {'objects', 'effects', 'model', 'params'},
+    'identify': {'objects', 'effects', 'model', 'params', 'logs'},
     'rig': {'plotting'},
     'diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'plotting'},
     'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},

@@ -8,7 +8,9 @@ comparison), and the diagnosis' re-identification of an instrument's parameters 
 logs. :mod:`.procedures`: what a controller runs on the instrument for it: the grasp's
 current staircase and its recording, and the tare of the load cell and current sensor
 (the demo's instrument comparison, the controller node's ``~/calibrate`` and ``~/tare``).
-It depends on the model and the parameter schema only.
+:mod:`.command`: the calibration fit as a command (``python -m``; ``grip-force calibrate``,
+and the child process of the controller's ``~/calibrate``), which reads the log with
+:mod:`grip_force_ros.logs`. The rest depends on the model and the parameter schema only.
 """
 from grip_force_ros.identify.calibration import (FITTABLE, CalibrationError, CalibrationResult,
                                                  ParameterFit, Plateaus, block_bootstrap_std,

@@ -234,9 +234,10 @@ def tare_refusal(node, out, inputs) -> str | None:
 class Calibration(Procedure):
     """``~/calibrate``: the load-cell grasp staircase, then ``grip-force calibrate`` on it.
 
-    The fit runs in a child process (``python -m grip_force_ros.cli calibrate --json``): in
-    this process it would hold the interpreter's lock (its scipy import alone for up to a
-    second on a loaded machine) and starve the loop, measured: a 30 ms gap of commands.
+    The fit runs in a child process (``python -m grip_force_ros.identify.command --json``, the
+    command of ``grip-force calibrate``): in this process it would hold the interpreter's lock
+    (its scipy import alone for up to a second on a loaded machine) and starve the loop,
+    measured: a 30 ms gap of commands.
 
     Raises
     ------
@@ -361,7 +362,7 @@ class Calibration(Procedure):
         self.recording.close()
         self.fit_deadline = now + FIT_TIMEOUT
         self.fit = subprocess.Popen(
-            python_module('grip_force_ros.cli', 'calibrate', '--config', str(self.config_path),
+            python_module('grip_force_ros.identify.command', '--config', str(self.config_path),
                           '--log', str(self.log_path), '--out', str(self.path),
                           '--object', self.obj, '--json'),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
