@@ -26,7 +26,7 @@ setup(
             'controller = grip_force_ros.nodes.controller:main',
             'sim_instrument = grip_force_ros.nodes.sim_instrument:main',
             'master = grip_force_ros.nodes.master:main',
-            'grip-force = grip_force_ros.cli:main',
+            'grip-force = grip_force_ros.lab.cli:main',
         ],
     },
 )

@@ -4,12 +4,12 @@ The names are the docs/design.md vocabulary. Each entry says what the effect is,
 and range of its strength, the strengths the blind check and the benches use, and who
 implements it: the simulated instrument (``sim/plant.py``, switched on by the
 parameter of the same name in the 'effects' group) and the diagnosis (a regressor
-builder in ``diagnosis/effects.py``). Everything else reads this module:
+builder in ``lab/diagnosis/effects.py``). Everything else reads this module:
 
 - ``params/sim.py`` declares the 'effects' parameter group from it;
-- ``sim/effects.py`` and ``diagnosis/effects.py`` take their vocabularies from it
+- ``sim/effects.py`` and ``lab/diagnosis/effects.py`` take their vocabularies from it
   (:data:`SIMULATED`, :data:`DIAGNOSED`);
-- the blind check (``diagnosis/blind.py``) takes its effects and strengths from it;
+- the blind check (``lab/diagnosis/blind.py``) takes its effects and strengths from it;
 - the sim benchmark switches every simulated effect on at :func:`strengths_at`.
 
 Adding an effect: an entry here, its physics in the sim and/or its builder in the

@@ -23,8 +23,8 @@ from pathlib import Path
 import pytest
 
 # log_errors: re-exported for the tests that import their helpers from here
-from grip_force_ros.nodes.processes import (STACK_DUMP_WAIT, child_setup, domain_ports,  # noqa: F401
-                                            log_errors, request_stacks)
+from grip_force_ros.lab.processes import (STACK_DUMP_WAIT, child_setup, domain_ports,  # noqa: F401
+                                          log_errors, request_stacks)
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
@@ -149,7 +149,7 @@ def start(*args: str, log: Path, cwd: Path | str | None = None,
           env: dict[str, str] | None = None) -> subprocess.Popen:
     """Start a long-running command (``exec``-ed: the pid is the command's) in its own session.
 
-    As the package's nodes (``nodes.processes.child_setup``): SIGINT at its default (a
+    As the package's nodes (``lab.processes.child_setup``): SIGINT at its default (a
     background suite inherits it ignored), and SIGTERM when pytest ends (a stopped loaded
     series once left a test's nodes running through the next CI run).
     """

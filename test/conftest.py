@@ -6,7 +6,7 @@ each other's nodes.
 """
 import os
 
-from grip_force_ros.nodes.processes import ProcessError, reserve_domains
+from grip_force_ros.lab.processes import ProcessError, reserve_domains
 
 # Set before anything imports rclpy.
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -39,8 +39,8 @@ settings.load_profile('ci' if os.environ.get('CI') else 'dev')
 
 # A load for the whole session (`./dev test --with-load ...`): one busy process per
 # core (or --load-workers), stopped at the end of the session whatever happens
-# (grip_force_ros/bench/load.py); `--load-kind disk` the disk pressure instead (fsync
-# writers, page-cache eviction of the package's files; grip_force_ros/bench/pressure.py),
+# (grip_force_ros/lab/bench/load.py); `--load-kind disk` the disk pressure instead (fsync
+# writers, page-cache eviction of the package's files; grip_force_ros/lab/bench/pressure.py),
 # `both` the two. `grip-force loadcheck` runs the ROS tests K times so.
 def pytest_addoption(parser):
     group = parser.getgroup('grip_force_ros')
@@ -59,8 +59,8 @@ def cpu_load(request):
     if not request.config.getoption('--with-load'):
         yield None
         return
-    from grip_force_ros.bench.load import MAX_SECONDS
-    from grip_force_ros.bench.pressure import make_pressure
+    from grip_force_ros.lab.bench.load import MAX_SECONDS
+    from grip_force_ros.lab.bench.pressure import make_pressure
     with make_pressure(request.config.getoption('--load-kind'), seconds=MAX_SECONDS,
                        workers=request.config.getoption('--load-workers')) as load:
         yield load

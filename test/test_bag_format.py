@@ -1,7 +1,7 @@
 """The project's rosbag2 files are what rosbag2 (Jazzy) itself writes and reads.
 
 Both writers, ``grip_force_ros.logs.write_bag`` (logs, the blind check) and the demo's
-``RecorderNode`` (grip_force_ros/demo/recorder.py), write with the ``rosbags`` library:
+``RecorderNode`` (grip_force_ros/lab/demo/recorder.py), write with the ``rosbags`` library:
 storage ``mcap``, serialization ``cdr``, rosbag2 metadata **version 9**, the version of
 rosbag2 0.26 (ROS 2 Jazzy), which ``ros2 bag info`` on a Jazzy machine reads.
 
@@ -300,7 +300,7 @@ def demo_bag(tmp_path_factory):
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
 
-    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.lab.demo.recorder import RecorderNode, SpinThread
     from grip_force_ros.nodes.common import wait_until
 
     path = tmp_path_factory.mktemp('demo') / 'bag'
@@ -368,7 +368,7 @@ def test_metadata_yaml_is_rosbag2_jazzy_version_9(which, request):
 
 
 def test_demo_bag_records_the_offered_qos_and_every_topic(demo_bag):
-    from grip_force_ros.demo.messages import TOPIC_TYPES, absolute
+    from grip_force_ros.lab.demo.messages import TOPIC_TYPES, absolute
     info = _metadata(demo_bag)['rosbag2_bagfile_information']
     by_name = {e['topic_metadata']['name']: e for e in info['topics_with_message_count']}
     assert set(by_name) == {absolute(t) for t in TOPIC_TYPES}

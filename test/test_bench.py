@@ -6,7 +6,7 @@ import os
 import numpy as np
 import pytest
 
-from grip_force_ros.bench.stats import latency_summary, missed_periods, ratio
+from grip_force_ros.lab.bench.stats import latency_summary, missed_periods, ratio
 
 
 def test_latency_summary_percentiles_in_ms():
@@ -67,7 +67,7 @@ def test_loop_latency_matches_commands_to_the_states_they_answer():
 
 def test_floor_and_product_count_unanswered_periods_alike():
     """Missed periods = gaps in the answered stamps, for ping and for the product sim."""
-    from grip_force_ros.bench.stats import missed_periods
+    from grip_force_ros.lab.bench.stats import missed_periods
     ms = 1_000_000
     answered = np.array([k * ms for k in range(20) if k not in (5, 6)], np.int64)
     assert missed_periods(answered, 1e-3)['missed'] == 2
@@ -75,7 +75,7 @@ def test_floor_and_product_count_unanswered_periods_alike():
 
 def test_full_path_joins_each_answer_to_the_stamps_its_step_used():
     """Arrival minus the oldest input's sample stamp; per input its path and its age at the step."""
-    from grip_force_ros.bench.stats import full_path
+    from grip_force_ros.lab.bench.stats import full_path
     ms, us = 1_000_000, 1_000
     n = 1000
     states = 10**18 + np.arange(n, dtype=np.int64) * ms          # ns, sim sample stamps at 1 kHz
@@ -105,7 +105,7 @@ def test_full_path_joins_each_answer_to_the_stamps_its_step_used():
 
 
 def test_model_speed_structure():
-    from grip_force_ros.bench.model_speed import run_model
+    from grip_force_ros.lab.bench.model_speed import run_model
     from grip_force_ros.params.files import instrument_path
     r = run_model(str(instrument_path('paper_needle_driver')), size=2000, steps=300, repeats=1)
     assert r['mode'] == 'grip' and r['feedforward']
@@ -116,7 +116,7 @@ def test_model_speed_structure():
 
 
 def test_cli_model_json(capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     assert main(['bench', '--json', '--parts', 'model', '--model-size', '2000']) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out) == {'machine', 'model'}
@@ -125,7 +125,7 @@ def test_cli_model_json(capsys):
 
 
 def test_cli_rejects_unknown_part(capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     assert main(['bench', '--parts', 'loop,warp']) == 2
     assert 'warp' in capsys.readouterr().err
 
@@ -142,8 +142,8 @@ TINY_ATTEMPTS = 3
 @pytest.mark.timeout(600)
 def test_bench_all_parts_tiny(tmp_path):
     """Floor, product (real node processes), model and diagnosis in one short run."""
-    from grip_force_ros.bench.run import run_bench
-    from grip_force_ros.cli.bench import render
+    from grip_force_ros.lab.bench.run import run_bench
+    from grip_force_ros.lab.cli.bench import render
     from grip_force_ros.params.files import instrument_path
     spoiled = []
     for attempt in range(TINY_ATTEMPTS):
@@ -229,7 +229,7 @@ def _synthetic_product(p99, full_p99, missed, controller_cpu, skew=0.0):
 
 def test_compare_arms_judges_each_arm_against_the_one_floor():
     """Per arm the single-arm section's keys, its goals against the run's floor; all arms met or not."""
-    from grip_force_ros.bench.loop import compare, compare_arms
+    from grip_force_ros.lab.bench.loop import compare, compare_arms
     floor, contract = _synthetic_floor(), _synthetic_floor(p50=0.35, p99=0.6)
     good = _synthetic_product(p99=0.6, full_p99=0.7, missed=0.0012, controller_cpu=25.0)
     bad = _synthetic_product(p99=1.0, full_p99=1.2, missed=0.01, controller_cpu=40.0, skew=0.2)
@@ -258,7 +258,7 @@ def test_compare_arms_judges_each_arm_against_the_one_floor():
 
 def test_a_load_cell_product_is_judged_against_the_contract_floor():
     """Sensorless: ratios over the floor; on the load cell: over the contract floor, which it needs."""
-    from grip_force_ros.bench.loop import compare
+    from grip_force_ros.lab.bench.loop import compare
     floor, contract = _synthetic_floor(), _synthetic_floor(p50=0.35, p99=0.6)
     product = _synthetic_product(p99=0.72, full_p99=0.84, missed=0.0012, controller_cpu=25.0)
     sensorless = compare(floor, product, contract)
@@ -274,8 +274,8 @@ def test_a_load_cell_product_is_judged_against_the_contract_floor():
 
 
 def test_render_gives_one_block_per_arm():
-    from grip_force_ros.bench.loop import compare_arms
-    from grip_force_ros.cli.bench import render
+    from grip_force_ros.lab.bench.loop import compare_arms
+    from grip_force_ros.lab.cli.bench import render
     floor, contract = _synthetic_floor(), _synthetic_floor(p99=0.6)
     loop = compare_arms(floor, {'PSM1': _synthetic_product(0.6, 0.7, 0.001, 25.0),
                                 'PSM2': _synthetic_product(1.0, 1.2, 0.01, 40.0)}, contract)
@@ -291,7 +291,7 @@ def test_render_gives_one_block_per_arm():
 
 def test_product_commands_put_each_arm_in_its_namespace():
     """-r __ns:=/PSM1 in every node's ROS args of an arm; none in the single-arm run."""
-    from grip_force_ros.bench.loop import product_commands
+    from grip_force_ros.lab.bench.loop import product_commands
     for ns in ('PSM1', 'PSM2'):
         cmds = product_commands('c.yaml', 'a.npz', 's.npz', 2.0, 1.0, ns, open_at_ns=123)
         assert set(cmds) == {'controller', 'master', 'sim'}
@@ -312,8 +312,8 @@ def test_product_commands_put_each_arm_in_its_namespace():
 def test_contract_floor_sends_the_load_cell_then_one_combined_state():
     """The contract floor's ping publishes two messages a period, the echo answers the combined one."""
     from grip_force_ros import topics
-    from grip_force_ros.bench.child import _combined_state
-    from grip_force_ros.bench.loop import CONTRACT
+    from grip_force_ros.lab.bench.child import _combined_state
+    from grip_force_ros.lab.bench.loop import CONTRACT
     msg = _combined_state()
     assert list(msg.name) == [topics.WRIST_JOINT, topics.JAW_JOINT, topics.DRUM_JOINT]
     assert len(msg.position) == len(msg.velocity) == len(msg.effort) == 3
@@ -324,7 +324,7 @@ def test_contract_floor_sends_the_load_cell_then_one_combined_state():
 @pytest.mark.timeout(300)
 def test_two_arms_answer_in_one_window():
     """Two products (/PSM1, /PSM2: sim, controller, master each) at once in one domain: both loops answer."""
-    from grip_force_ros.bench.loop import run_products
+    from grip_force_ros.lab.bench.loop import run_products
     from grip_force_ros.params.files import instrument_path
     domain = int(os.environ['ROS_DOMAIN_ID'])
     arms = run_products(1.0, domain, str(instrument_path('paper_needle_driver')),

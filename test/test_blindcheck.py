@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from grip_force_ros.diagnosis.blind import (BLIND_EFFECTS, CI_SEEDS, DEVELOPMENT_SEEDS, HELD_OUT_SEEDS,
-                                            NONE_PLANTS, BlindCase, cases, generate_log, is_right,
-                                            plant_params, run_blindcheck)
-from grip_force_ros.diagnosis.effects import EFFECT_NAMES, EFFECTS
+from grip_force_ros.lab.diagnosis.blind import (BLIND_EFFECTS, CI_SEEDS, DEVELOPMENT_SEEDS, HELD_OUT_SEEDS,
+                                                NONE_PLANTS, BlindCase, cases, generate_log, is_right,
+                                                plant_params, run_blindcheck)
+from grip_force_ros.lab.diagnosis.effects import EFFECT_NAMES, EFFECTS
 from grip_force_ros.effects import REGISTRY
 from grip_force_ros.logs import normalise_log
 from grip_force_ros.params import make_params
@@ -103,7 +103,7 @@ def test_the_plant_mismatch_reaches_the_sim():
 
 def test_the_mismatch_figures_count_the_off_plants_only():
     """`mismatch`: effect-free logs with friction or stiffness >= 10 % off; an unidentified one is a miss."""
-    from grip_force_ros.diagnosis.blind import _mismatch
+    from grip_force_ros.lab.diagnosis.blind import _mismatch
 
     def log(truth, plant, right, parameters):
         return {'truth': truth, 'plant': plant, 'right': right, 'parameters': parameters}
@@ -134,7 +134,7 @@ def test_quick_blindcheck_meets_the_goals_over_the_ci_seeds():
     on the effect-free logs whose plant has its friction or stiffness off: `none` and the off
     parameter named within 5 %. Several seeds, so a lucky one cannot pass it alone.
     """
-    from grip_force_ros.cli.blindcheck import GOALS, WORST_ACCURACY
+    from grip_force_ros.lab.cli.blindcheck import GOALS, WORST_ACCURACY
     result = run_blindcheck(quick=True, seed=CI_SEEDS[0], seeds=len(CI_SEEDS))
     assert [s['seed'] for s in result['per_seed']] == list(CI_SEEDS)
     assert result['logs'] == sum(len(cases(quick=True, seed=s)) for s in CI_SEEDS)

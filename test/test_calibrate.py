@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from grip_force_ros.cli import main as cli_main
+from grip_force_ros.lab.cli import main as cli_main
 from grip_force_ros.params.files import instrument_path
 from grip_force_ros.identify.calibration import (CalibrationError, calibrated_yaml, fit_instrument,
                                                  steady_plateaus)

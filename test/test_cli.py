@@ -9,7 +9,7 @@ import textwrap
 #: process that inherits it, and then prints its JSON answer.
 NOISY_COMMAND = textwrap.dedent('''
     import os, subprocess, sys, types
-    import grip_force_ros.cli as cli
+    import grip_force_ros.lab.cli as cli
 
     def run(args):
         os.write(1, b'\\x1b[37;1m2026-11-27 01:02:03.456 [RTPS_TRANSPORT_SHM Error] '
@@ -18,7 +18,7 @@ NOISY_COMMAND = textwrap.dedent('''
         print('{"answer": %d}' % (42 if args.json else 0))
         return 0
 
-    module = types.ModuleType('grip_force_ros.cli.noisy')
+    module = types.ModuleType('grip_force_ros.lab.cli.noisy')
     module.HELP = 'test only'
     module.add_arguments = lambda p: p.add_argument('--json', action='store_true')
     module.run = run

@@ -1,9 +1,9 @@
-"""The offline closed loop's one period (grip_force_ros/closed_loop.py)."""
+"""The offline closed loop's one period (grip_force_ros/lab/closed_loop.py)."""
 import math
 
 import pytest
 
-from grip_force_ros.closed_loop import ALL_SOURCES, NO_FORCE_SENSOR, NO_SOURCES, closed_loop_step
+from grip_force_ros.lab.closed_loop import ALL_SOURCES, NO_FORCE_SENSOR, NO_SOURCES, closed_loop_step
 from grip_force_ros.control import SOURCES, GripController
 from grip_force_ros.params import load_params_file
 from grip_force_ros.params.files import instrument_path

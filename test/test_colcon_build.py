@@ -21,8 +21,8 @@ from sensor_msgs.msg import JointState
 
 from _ros_tools import log_errors
 from grip_force_ros import topics
-from grip_force_ros.nodes.harness import RosRunner
-from grip_force_ros.nodes.processes import NodeProcess, ros_environment
+from grip_force_ros.lab.harness import RosRunner
+from grip_force_ros.lab.processes import NodeProcess, ros_environment
 
 pytestmark = pytest.mark.ros
 
@@ -60,6 +60,7 @@ def test_install_layout(install):
             / PACKAGE).is_file()
     site = list((install / PACKAGE / 'lib').glob('python3*/site-packages/grip_force_ros'))
     assert site and (site[0] / 'nodes' / 'controller.py').is_file()
+    assert (site[0] / 'lab' / 'cli' / '__init__.py').is_file()      # the laboratory is installed too
 
 
 def test_installed_executables_start_publish_and_stop(install, tmp_path):

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from grip_force_ros.cli import main as cli_main
+from grip_force_ros.lab.cli import main as cli_main
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import ParameterError, load_params_file, specs_in
 

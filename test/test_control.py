@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from grip_force_ros.closed_loop import NO_FORCE_SENSOR, closed_loop_step
+from grip_force_ros.lab.closed_loop import NO_FORCE_SENSOR, closed_loop_step
 from grip_force_ros.control import PID, ControlInputs, CurrentLimiter, ForceMap, GripController, Mode
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grip_force_ros.closed_loop import ALL_SOURCES, NO_SOURCES, closed_loop_step
+from grip_force_ros.lab.closed_loop import ALL_SOURCES, NO_SOURCES, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file

@@ -6,7 +6,7 @@ cables, a current loop, contact dynamics and sensor noise.
 import numpy as np
 import pytest
 
-from grip_force_ros.closed_loop import ALL_SOURCES, closed_loop_step
+from grip_force_ros.lab.closed_loop import ALL_SOURCES, closed_loop_step
 from grip_force_ros.control import GripController
 from grip_force_ros.params import load_params_file
 from grip_force_ros.sim.plant import InstrumentSim

@@ -14,7 +14,7 @@ def _ros_args(argv):
 
 
 def test_each_arm_runs_its_nodes_in_its_namespace_with_its_own_diagnostics():
-    from grip_force_ros.demo.run import RunSpec, _node_argv
+    from grip_force_ros.lab.demo.run import RunSpec, _node_argv
     config = instrument_path('paper_needle_driver')
     for ns in ('PSM1', 'PSM2'):
         spec = RunSpec(config=config, duration=4.0, namespace=ns)
@@ -32,7 +32,7 @@ def test_each_arm_runs_its_nodes_in_its_namespace_with_its_own_diagnostics():
 
 
 def test_run_arms_refuses_arms_without_their_own_namespace(tmp_path):
-    from grip_force_ros.demo.run import RunSpec, run_arms
+    from grip_force_ros.lab.demo.run import RunSpec, run_arms
     config = instrument_path('paper_needle_driver')
     with pytest.raises(ValueError):
         run_arms([RunSpec(config=config, namespace='PSM1'), RunSpec(config=config, namespace='PSM1')],
@@ -42,7 +42,7 @@ def test_run_arms_refuses_arms_without_their_own_namespace(tmp_path):
 
 
 def test_grasp_held_wants_an_unspoiled_run_near_its_target():
-    from grip_force_ros.demo.run import grasp_held
+    from grip_force_ros.lab.demo.run import grasp_held
     good = {'target_force': 4.0, 'hold_error_mean': 0.02, 'hold_error_rms': 0.05}
     assert grasp_held(good, [])
     assert not grasp_held(good, ['a topic went silent for 120 ms during the hold phase'])
@@ -53,7 +53,7 @@ def test_grasp_held_wants_an_unspoiled_run_near_its_target():
 
 
 def test_cli_refuses_arms_with_the_comparison_or_the_dvrk_profile(capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     assert main(['demo', '--arms', '2', '--compare-instruments']) == 2
     assert main(['demo', '--arms', '2', '--interface', 'dvrk']) == 2
     assert 'crtk' in capsys.readouterr().err
@@ -66,7 +66,7 @@ def test_two_arms_grasp_at_once_each_recorded_and_analysed(tmp_path):
     """PSM1 and PSM2 in one domain: both run, each bag holds its own topics, each is analysed."""
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     out = tmp_path / 'arms'
-    proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--arms', '2',
+    proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.lab.cli', 'demo', '--arms', '2',
                            '--duration', '3', '--json', '--quiet', '--out', str(out),
                            '--domain-id', env['ROS_DOMAIN_ID']],
                           capture_output=True, text=True, timeout=240, env=env)

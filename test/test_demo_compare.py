@@ -17,7 +17,7 @@ import math
 
 import pytest
 
-from grip_force_ros.demo.compare import ATTEMPTS, compare_instruments
+from grip_force_ros.lab.demo.compare import ATTEMPTS, compare_instruments
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

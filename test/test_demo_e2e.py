@@ -44,7 +44,7 @@ def demo_run(tmp_path_factory):
     spoiled = []
     for attempt in range(ATTEMPTS):
         out = tmp_path_factory.mktemp('demo')
-        proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
+        proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.lab.cli', 'demo', '--duration',
                                '4', '--json', '--quiet', '--out', str(out)],
                               capture_output=True, text=True, timeout=120, env=env)
         assert proc.returncode == 0, proc.stderr[-3000:]
@@ -126,7 +126,7 @@ def test_ctrl_c_stops_every_node(tmp_path):
     # A suite started as a background job (`./dev test ... &`, nohup, CI runners) inherits
     # SIGINT ignored, and Python then keeps it ignored: the demo would run its whole task
     # (exit 0 after ~30 s). The demo gets SIGINT's default, as in a terminal.
-    demo = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--duration',
+    demo = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.lab.cli', 'demo', '--duration',
                              '20', '--quiet', '--out', str(tmp_path / 'run')],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
@@ -166,7 +166,7 @@ def test_demo_through_the_dvrk_interface(tmp_path):
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     for attempt in range(ATTEMPTS):
         out = tmp_path / f'run{attempt}'
-        proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.cli', 'demo', '--interface',
+        proc = subprocess.run([sys.executable, '-m', 'grip_force_ros.lab.cli', 'demo', '--interface',
                                'dvrk', '--duration', '4', '--json', '--quiet', '--out', str(out)],
                               capture_output=True, text=True, timeout=180, env=env)
         assert proc.returncode == 0, proc.stderr[-3000:]

@@ -18,7 +18,7 @@ from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.demo.run import HOLD_MASTER, NoAnswer, ProcessError, set_parameters_confirmed
+from grip_force_ros.lab.demo.run import HOLD_MASTER, NoAnswer, ProcessError, set_parameters_confirmed
 
 TASK = {'trajectory': 'needle_grasp', 'trajectory_file': '', 'time_scale': 1.0}
 WAIT = 0.05          # s, answer wait of these tests (the product's: ANSWER_WAIT)

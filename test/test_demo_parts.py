@@ -13,14 +13,14 @@ import pytest
 
 from _interrupts import raise_as_pybind11_does
 from grip_force_ros import topics
-from grip_force_ros.demo import analysis
-from grip_force_ros.demo.compare import calibration_csv, plant_scales
-from grip_force_ros.demo.naive_node import closing_share
-from grip_force_ros.nodes.processes import (NodeProcess, ProcessGroup, can_use_realtime,
-                                            domain_in_use, pick_domain_ids, realtime_threads,
-                                            recorder_rt_priority, ros_args, ros_environment,
-                                            scheduling_of)
-from grip_force_ros.demo.run import TaskClock
+from grip_force_ros.lab.demo import analysis
+from grip_force_ros.lab.demo.compare import calibration_csv, plant_scales
+from grip_force_ros.lab.demo.naive_node import closing_share
+from grip_force_ros.lab.processes import (NodeProcess, ProcessGroup, can_use_realtime,
+                                          domain_in_use, pick_domain_ids, realtime_threads,
+                                          recorder_rt_priority, ros_args, ros_environment,
+                                          scheduling_of)
+from grip_force_ros.lab.demo.run import TaskClock
 from grip_force_ros.nodes.common import wait_until
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
@@ -191,7 +191,7 @@ def test_a_child_started_from_the_main_thread_ends_with_its_parent(tmp_path):
     """
     code = (
         'import sys, threading, time\n'
-        'from grip_force_ros.nodes.processes import NodeProcess\n'
+        'from grip_force_ros.lab.processes import NodeProcess\n'
         'sleeper = [sys.executable, "-c", "import time; time.sleep(120)"]\n'
         'main = NodeProcess("main", command=sleeper)\n'
         'other = []\n'
@@ -297,7 +297,7 @@ def test_task_clock_resyncs_on_the_closing():
 
 def test_calibration_staircase_crosses_each_force_level():
     p = make_params()
-    from grip_force_ros.demo import compare
+    from grip_force_ros.lab.demo import compare
     import tempfile
     from pathlib import Path
     path = calibration_csv(p, Path(tempfile.mkdtemp()) / 'c.csv')
@@ -359,7 +359,7 @@ def test_spread_is_max_minus_min_and_nan_when_a_run_failed():
 
 
 def test_summary_plot_is_written(tmp_path):
-    from grip_force_ros.demo.plot import summary_plot
+    from grip_force_ros.lab.demo.plot import summary_plot
     task = needle_grasp()
     data = synthetic_run(task)
     data['t'] = data['t'] - 10.0
@@ -377,8 +377,8 @@ def test_recorder_writes_an_mcap_bag_that_rosbags_reads(tmp_path):
     from sensor_msgs.msg import JointState
     from rosbags.highlevel import AnyReader
 
-    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
-    from grip_force_ros.demo.series import read_bag_series
+    from grip_force_ros.lab.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.lab.demo.series import read_bag_series
 
     ctx = Context()
     rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))
@@ -438,12 +438,12 @@ def test_recorder_works_off_a_backlog_while_the_streams_go_on(tmp_path):
     process spent per message taken (the recorder's cost: ~45 us with the EventsExecutor,
     ~130 us with rclpy's SingleThreadedExecutor, which on a quiet machine also passes here
     but in a demo, beside the two SCHED_FIFO 1 kHz nodes, stayed 0.97 s behind; see
-    :class:`~grip_force_ros.demo.recorder.SpinThread`).
+    :class:`~grip_force_ros.lab.demo.recorder.SpinThread`).
     """
     import rclpy
     from rclpy.context import Context
 
-    from grip_force_ros.demo.recorder import RecorderNode, SpinThread
+    from grip_force_ros.lab.demo.recorder import RecorderNode, SpinThread
 
     streams = [topics.INSTRUMENT_JS, topics.ACTUATOR_JS, topics.MEASURED_FORCE,
                topics.SERVO_CURRENT, topics.ESTIMATED_FORCE, topics.TARGET_FORCE]
@@ -534,8 +534,8 @@ def _report():
 
 
 def test_compare_report_table_and_plot(tmp_path):
-    from grip_force_ros.demo.compare import _json_safe, format_report
-    from grip_force_ros.demo.plot import compare_plot
+    from grip_force_ros.lab.demo.compare import _json_safe, format_report
+    from grip_force_ros.lab.demo.plot import compare_plot
     rep = _report()
     text = format_report(rep)
     assert 'spread (max - min)' in text
@@ -547,7 +547,7 @@ def test_compare_report_table_and_plot(tmp_path):
 
 
 def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
-    from grip_force_ros.cli import main as cli_main
+    from grip_force_ros.lab.cli import main as cli_main
     (tmp_path / 'old.txt').write_text('a previous run')
     for extra in ([], ['--compare-instruments']):
         assert cli_main(['demo', '--out', str(tmp_path), *extra]) == 2
@@ -557,13 +557,13 @@ def test_demo_refuses_a_non_empty_out_dir(tmp_path, capsys):
 def test_a_ctrl_c_a_c_extension_wrapped_is_still_an_interrupt(tmp_path, capsys, monkeypatch):
     """The demo, interrupted inside rclpy's deserialize_message, exits 130, not 1 with
     pybind11's TypeError (caused by the KeyboardInterrupt)."""
-    from grip_force_ros.cli import main as cli_main
-    from grip_force_ros.demo import run as demo_run
+    from grip_force_ros.lab.cli import main as cli_main
+    from grip_force_ros.lab.demo import run as demo_run
     monkeypatch.setattr(demo_run, 'run_task', raise_as_pybind11_does)
     monkeypatch.setattr(signal, 'signal', lambda *args: None)    # the demo's SIGTERM handler: not here
     assert cli_main(['demo', '--out', str(tmp_path / 'run'), '--domain-id', '7']) == 130
     assert 'interrupted' in capsys.readouterr().err
-    from grip_force_ros.demo.recorder import interrupt_behind
+    from grip_force_ros.lab.demo.recorder import interrupt_behind
     with pytest.raises(TypeError) as wrapped:
         raise_as_pybind11_does()
     assert interrupt_behind(wrapped.value)
@@ -628,9 +628,9 @@ def test_a_run_the_bag_does_not_hold_is_spoiled_not_an_error(monkeypatch, tmp_pa
     without a force sample in the steady hold window: the analysis must not raise, and the
     demo and the comparison redo the run.
     """
-    from grip_force_ros.demo import series as series_module
-    from grip_force_ros.demo.messages import FIELDS
-    from grip_force_ros.demo.run import RunResult, RunSpec, analyse_run
+    from grip_force_ros.lab.demo import series as series_module
+    from grip_force_ros.lab.demo.messages import FIELDS
+    from grip_force_ros.lab.demo.run import RunResult, RunSpec, analyse_run
     from grip_force_ros.params.files import instrument_path
 
     spec = RunSpec(config=instrument_path('paper_needle_driver'), duration=4.0)
@@ -664,7 +664,7 @@ def test_the_recording_has_caught_up_when_every_received_stream_reaches_the_time
         def latest_stamp(self, topic):
             return self.stamps[topic]
 
-    from grip_force_ros.demo.run import recording_caught_up
+    from grip_force_ros.lab.demo.run import recording_caught_up
     assert recording_caught_up(Recorder(), ['a', 'c'], 10.0)
     assert not recording_caught_up(Recorder(), ['a', 'b', 'c'], 10.0)
     assert recording_caught_up(Recorder(), ['a', 'b'], 9.5)
@@ -681,10 +681,10 @@ def test_a_comparison_run_that_cannot_be_completed_is_reported_and_the_rest_is_w
     from types import SimpleNamespace
 
     from grip_force_ros import identify, logs
-    from grip_force_ros.demo import compare
-    from grip_force_ros.demo import run as demo_run
-    from grip_force_ros.demo.run import NoAnswer
-    from grip_force_ros.nodes.processes import ProcessError
+    from grip_force_ros.lab.demo import compare
+    from grip_force_ros.lab.demo import run as demo_run
+    from grip_force_ros.lab.demo.run import NoAnswer
+    from grip_force_ros.lab.processes import ProcessError
 
     calls = []
 
@@ -719,7 +719,7 @@ def test_a_comparison_run_that_cannot_be_completed_is_reported_and_the_rest_is_w
     monkeypatch.setattr(identify, 'calibrated_yaml', lambda config, fit, bag: 'x: 1\n')
     monkeypatch.setattr(logs, 'read_log', lambda path: {})
     monkeypatch.setattr(compare, 'calibration_problems', lambda result: [])
-    from grip_force_ros.demo import comparison_configs
+    from grip_force_ros.lab.demo import comparison_configs
     from grip_force_ros.params import load_params_file
     configs = comparison_configs()
     names = [load_params_file(c).instrument_name for c in configs]

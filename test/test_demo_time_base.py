@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from grip_force_ros import topics
-from grip_force_ros.demo import analysis
-from grip_force_ros.demo.series import (CLOCK_STAMP, CLOCK_UNSTAMPED, read_bag_series,
-                                        resample, sample_clock)
+from grip_force_ros.lab.demo import analysis
+from grip_force_ros.lab.demo.series import (CLOCK_STAMP, CLOCK_UNSTAMPED, read_bag_series,
+                                            resample, sample_clock)
 
 T0 = 1_700_000_000.0        # s, the system clock at the master's start of its task
 LATENCY = 0.0005            # s, an undisturbed delivery
@@ -30,7 +30,7 @@ ERROR = 0.05                # N, load cell - target where there is a target
 
 def _spec(tmp_path=None):
     """The run the synthetic bag stands for: a sim that sends its state split (two topics)."""
-    from grip_force_ros.demo.run import RunSpec
+    from grip_force_ros.lab.demo.run import RunSpec
     from grip_force_ros.params.files import instrument_path
     config = instrument_path('paper_needle_driver')
     if tmp_path is not None:
@@ -156,8 +156,8 @@ def test_every_topic_of_a_stalled_recording_is_on_its_header_stamps(stalled_bag)
 
 
 def test_the_figure_data_and_the_figures_line_up_on_the_stamps(stalled_bag, monkeypatch, tmp_path):
-    from grip_force_ros.demo import plot as plot_module
-    from grip_force_ros.demo.run import RunResult, analyse_run
+    from grip_force_ros.lab.demo import plot as plot_module
+    from grip_force_ros.lab.demo.run import RunResult, analyse_run
 
     drawn = {}
     original = plot_module.summary_plot

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from grip_force_ros.diagnosis import (EFFECT_NAMES, DiagnosisError, build_frame, capstan_tension,
-                                      diagnose, load_decimated, run_diagnosis, write_report)
-from grip_force_ros.diagnosis.frame import decimate, hold_where_stuck, play, play_sliding
+from grip_force_ros.lab.diagnosis import (EFFECT_NAMES, DiagnosisError, build_frame, capstan_tension,
+                                          diagnose, load_decimated, run_diagnosis, write_report)
+from grip_force_ros.lab.diagnosis.frame import decimate, hold_where_stuck, play, play_sliding
 from grip_force_ros.logs import read_log, write_csv
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
@@ -274,7 +274,7 @@ def test_position_spring_is_not_named_without_a_spring():
 
 
 def test_position_spring_columns_are_legendre_over_the_training_stroke():
-    from grip_force_ros.diagnosis.effects import EFFECTS, stroke_coordinate, stroke_range
+    from grip_force_ros.lab.diagnosis.effects import EFFECTS, stroke_coordinate, stroke_range
     motor = np.linspace(0.2, 1.2, 1001)
     assert stroke_range(motor) == pytest.approx((0.205, 1.195), abs=1e-3)
     assert stroke_range(np.full(10, 0.3)) == pytest.approx((0.2995, 0.3005))     # a still angle: no 1/0
@@ -344,7 +344,7 @@ def test_report_writes_markdown_and_figures(tmp_path):
 
 
 def test_cli_diagnose_json_and_report(tmp_path, capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     from grip_force_ros.params import load_params_file
     log = _inputs(18, seconds=30.0)
     model = GripForceModel(load_params_file('config/paper_needle_driver.yaml'))

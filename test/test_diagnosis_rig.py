@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.diagnosis import run_diagnosis, write_report
+from grip_force_ros.lab.diagnosis import run_diagnosis, write_report
 from grip_force_ros.params import load_params_file
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,7 +25,7 @@ TEST = ('01', '03', '11', '13', '21', '23', '31', '33', '41', '43')
 def rig_diagnosis():
     if not DATA.is_dir():
         pytest.skip(f'rig data not found at {DATA}')
-    from grip_force_ros.rig import read_run, to_contract_log
+    from grip_force_ros.lab.rig import read_run, to_contract_log
     logs = {name: to_contract_log(read_run(DATA / f'{name}.TXT')) for name in TRAIN + TEST}
     params = load_params_file(ROOT / 'config' / 'maryland_forceps.yaml')
     return run_diagnosis([logs[n] for n in TRAIN], [logs[n] for n in TEST], params)

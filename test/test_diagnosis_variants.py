@@ -20,9 +20,9 @@ of the registry's medium ones.
 import numpy as np
 import pytest
 
-from grip_force_ros.diagnosis import build_frame, diagnose, load_decimated
-from grip_force_ros.diagnosis.blind import BlindCase, generate_log
-from grip_force_ros.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
+from grip_force_ros.lab.diagnosis import build_frame, diagnose, load_decimated
+from grip_force_ros.lab.diagnosis.blind import BlindCase, generate_log
+from grip_force_ros.lab.diagnosis.frame import hold_where_stuck, lowpass, play, play_sliding
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
 

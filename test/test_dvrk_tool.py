@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.cli import main as cli_main
+from grip_force_ros.lab.cli import main as cli_main
 from grip_force_ros.params import ParameterError, load_params_file, read_params_yaml
 from grip_force_ros.params.dvrk_tool import import_tool, read_tool_file, strip_comments, tool_facts
 

@@ -37,8 +37,8 @@ def test_schema_declares_each_simulated_effect_from_the_registry():
 
 
 def test_sim_diagnosis_and_blind_check_read_the_registry():
-    from grip_force_ros.diagnosis import effects as diagnosis_effects
-    from grip_force_ros.diagnosis.blind import BLIND_EFFECTS, STRENGTH_SPREAD, cases
+    from grip_force_ros.lab.diagnosis import effects as diagnosis_effects
+    from grip_force_ros.lab.diagnosis.blind import BLIND_EFFECTS, STRENGTH_SPREAD, cases
     from grip_force_ros.sim import EFFECT_NAMES as SIM_NAMES
     assert SIM_NAMES == effects.SIMULATED
     assert diagnosis_effects.EFFECT_NAMES == effects.DIAGNOSED

@@ -9,9 +9,9 @@ import math
 import pytest
 from hypothesis import given, strategies as st
 
-from grip_force_ros.faults.catalogue import (OUTCOMES, SOURCES, bad_params_text, burst, catalogue,
-                                             duplicate_each, frozen_stamp, rename, resize, select,
-                                             set_field, shift_stamp, silence)
+from grip_force_ros.lab.faults.catalogue import (OUTCOMES, SOURCES, bad_params_text, burst, catalogue,
+                                                 duplicate_each, frozen_stamp, rename, resize, select,
+                                                 set_field, shift_stamp, silence)
 from grip_force_ros.params import SPECS
 
 SAMPLE = {'stamp': 100.0, 'name': ['wrist_pitch', 'jaw'], 'position': [0.1, 0.2],
@@ -77,8 +77,8 @@ def test_steps_to_safe_reads_the_timeout_as_the_controller_does():
     seconds were one ulp off the controller's, and its test was last + timeout < stamp)."""
     from types import SimpleNamespace
 
-    from grip_force_ros.faults.probe import FaultProbe
-    from grip_force_ros.faults.runner import _steps_to_safe
+    from grip_force_ros.lab.faults.probe import FaultProbe
+    from grip_force_ros.lab.faults.runner import _steps_to_safe
     case = select(catalogue(), ['silence_master'])[0]
     timeout = 0.1
     last_ns = 1_795_661_078_065_190_246                  # a receive time of that CI run (ns)
@@ -99,7 +99,7 @@ def test_steps_to_safe_reads_the_timeout_as_the_controller_does():
 def test_a_spoiled_trial_is_redone_at_most_twice():
     """Two spoiled trials then a good one: the good one's detail; three spoiled: failed, with
     every cause in order (the fourth trial is never run)."""
-    from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, redo_spoiled
+    from grip_force_ros.lab.faults.catalogue import CASE_ATTEMPTS, redo_spoiled
     trials = iter([{'spoiled': 'a', 'passed': False}, {'spoiled': 'b', 'passed': False},
                    {'passed': True}])
     detail = redo_spoiled(lambda: next(trials), 'a stalled machine')
@@ -123,7 +123,7 @@ def test_a_safe_state_before_the_timeout_is_blamed_on_the_machine_only_for_a_sta
     36.2 ms > 30.0 ms (the controller was stalled)`` alone. A stall or another stale input
     spoils the trial (redone); the silenced input's own staleness, or a fault of the product,
     does not."""
-    from grip_force_ros.faults.runner import _machine_cause
+    from grip_force_ros.lab.faults.runner import _machine_cause
     stall = 'controller | safe: step interval 36.2 ms > 30.0 ms (the controller was stalled)'
     other = 'controller | safe: stale instrument input: 32.7 ms old > 30.0 ms'
     own = 'controller | safe: stale master input: 100.5 ms old > 100.0 ms'
@@ -141,7 +141,7 @@ def test_a_watchdog_trial_is_spoiled_when_a_stall_not_its_own_input_made_the_out
     actuator state. That trial measured nothing (redone); a
     missing reason with no machine cause, or a safe state before the timeout for a reason
     of the product, is the product's."""
-    from grip_force_ros.faults.runner import _watchdog_trial_spoiled
+    from grip_force_ros.lab.faults.runner import _watchdog_trial_spoiled
     stall = 'controller | safe: step interval 164.5 ms > 30.0 ms (the controller was stalled)'
     other = 'controller | safe: stale instrument input: 50.9 ms old > 30.0 ms'
     limit = 'controller | safe: rejected actuator: measured current 1.107 A beyond +-1.100'
@@ -168,7 +168,7 @@ def test_a_stall_of_the_test_process_over_a_silence_window_spoils_the_trial_not_
     whose controller still saw the actuator stale passes."""
     import time
 
-    from grip_force_ros.faults.runner import Session, run_message_case
+    from grip_force_ros.lab.faults.runner import Session, run_message_case
     from grip_force_ros.params.files import instrument_path
 
     case = next(c for c in catalogue() if c.name == 'silence_actuator')
@@ -203,7 +203,7 @@ def test_a_stall_of_the_test_process_over_a_silence_window_spoils_the_trial_not_
 
 
 def test_the_main_threads_innermost_frame_is_read_from_faulthandler_output():
-    from grip_force_ros.faults.runner import main_thread_frame
+    from grip_force_ros.lab.faults.runner import main_thread_frame
     stacks = """Thread 0x00007f1 (most recent call first):
   File "/usr/lib/python3.11/threading.py", line 324 in wait
   File "/usr/lib/python3.11/threading.py", line 1002 in _bootstrap
@@ -224,7 +224,7 @@ def test_a_bad_parameter_file_case_whose_node_is_still_running_says_where_it_was
     (here a stand-in that hangs in a function of its own)."""
     import sys
 
-    from grip_force_ros.faults import runner
+    from grip_force_ros.lab.faults import runner
     from grip_force_ros.params.files import instrument_path
 
     hangs = ('import faulthandler, signal, sys, time\n'
@@ -253,9 +253,9 @@ def test_a_restarted_sim_that_runs_but_is_never_heard_spoils_the_trial_which_is_
     does not listen. The trial is spoiled with what the runner saw (the process alive, none
     publishers known on its topics, its main thread's frame), a new process replaces it, and
     the redone trial passes. A process that dies instead is the case's own failure."""
-    from grip_force_ros.faults import runner
-    from grip_force_ros.faults.probe import relay_remaps
-    from grip_force_ros.nodes.processes import NodeProcess, node_command
+    from grip_force_ros.lab.faults import runner
+    from grip_force_ros.lab.faults.probe import relay_remaps
+    from grip_force_ros.lab.processes import NodeProcess, node_command
     from grip_force_ros.params.files import instrument_path
 
     monkeypatch.setattr(runner, 'PROCESS_READY_TIMEOUT', 8.0)
@@ -291,7 +291,7 @@ def test_the_first_safe_step_is_found_by_the_controllers_stamp_up_to_the_recover
     """A 60 ms window that holds 12 steps, all gripping as received; the safe ones reach the
     probe after the window. What counts is what the controller did, by its own
     stamp, until it gripped again; a safe step after the recovery is another event."""
-    from grip_force_ros.faults.runner import _first_safe_step
+    from grip_force_ros.lab.faults.runner import _first_safe_step
     # (probe receive time, controller stamp, command, target)
     rows = [(10.001, 10.000, 0.3, 4.0), (10.070, 10.030, 0.2, 0.0), (10.071, 10.031, 0.2, 0.0),
             (10.080, 10.079, 0.3, 4.0), (10.500, 10.499, 0.0, 0.0)]
@@ -335,8 +335,8 @@ def test_faultcheck_whole_catalogue_on_real_nodes():
     """Every case against the real controller node, the cases that involve the instrument
     against the shipped sim_instrument process too, then the negative control (~1.5-2 min;
     grip-force faultcheck)."""
-    from grip_force_ros.faults.defects import DEFECTS
-    from grip_force_ros.faults.runner import involves_instrument, run_faultcheck
+    from grip_force_ros.lab.faults.defects import DEFECTS
+    from grip_force_ros.lab.faults.runner import involves_instrument, run_faultcheck
     report = run_faultcheck()
     on_process = [c.name for c in catalogue() if involves_instrument(c)]
     _assert_report(report, len(catalogue()) + len(on_process))
@@ -375,7 +375,7 @@ def test_faultcheck_whole_catalogue_on_real_nodes():
 
 
 def test_limit_monitor_counts_every_kind_of_violation():
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1)
     for command in (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.45, 0.35):   # within both limits
         m.check(command)
@@ -395,7 +395,7 @@ def test_limit_monitor_across_a_stall_of_its_own_process():
     step over the stall (from the measured current, by design) is judged on the controller's
     own step time, longer than the watchdog there: not bounded; max_current still holds, and
     the slew bound is back at the next step."""
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
     # (controller clock at the step, command, receipt): the process stalled 35 ms after step 1
     steps = [(0.000, 0.30, 0.0002), (0.001, 0.30, 0.0350), (0.036, 0.00, 0.0351),
@@ -416,7 +416,7 @@ def test_a_jump_received_after_a_gap_is_judged_on_the_controllers_step():
     probe, stalled, receives it 40 ms after the command before. Receipt gaps cannot excuse
     it: only the controller's own step time can (else the negative control misses
     slew_limit_off)."""
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
     steps = [(0.001 * k, 0.5, 0.001 * k + 0.0002) for k in range(5)]
     steps += [(0.005, 0.0, 0.045), (0.006, 0.0, 0.0451), (0.007, 0.0, 0.0452)]
@@ -433,7 +433,7 @@ def test_a_change_across_lost_commands_is_judged_on_the_steps_they_were():
     in one 1 ms step. Each step publishes its command, then its target force: steps received
     between two commands are commands lost, and a change across n of them spans n + 1 steps.
     A jump bigger than the steps lost allow is still caught."""
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
 
     def judged(jump_to, lost_steps_received=True):
         m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
@@ -465,7 +465,7 @@ def test_a_ramp_at_the_slew_limit_passes_whatever_commands_are_lost_and_a_jump_d
     violation. The same with one step of +0.6 A at ``jump_at``: a violation, whatever else was
     lost, as long as the jump and the two steps either side of it were received (the judge
     bounds a change by the longest of the controller's steps around it)."""
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
 
     def run(jump):
         m = LimitMonitor(max_current=2.0, max_step=0.1, period=0.001, max_period=0.03)
@@ -488,7 +488,7 @@ def test_a_slew_step_is_judged_on_the_controllers_own_step_time():
     """Receipt gaps can be shorter than the controller's step (commands that waited in the
     probe's queue while a slow callback held the shared thread): a step beyond the receipt
     bound is a violation only if the controller's step that sent it was not long enough."""
-    from grip_force_ros.faults.probe import LimitMonitor
+    from grip_force_ros.lab.faults.probe import LimitMonitor
     m = LimitMonitor(max_current=0.5, max_step=0.1, period=0.001, max_period=0.03)
     # (controller clock at the step, command, its receipt): step 2 came 4 ms after step 1,
     # and step 1's command waited in the queue until just before it
@@ -504,7 +504,7 @@ def test_a_slew_step_is_judged_on_the_controllers_own_step_time():
 
 
 def test_time_message_conversion():
-    from grip_force_ros.faults.probe import to_time_msg
+    from grip_force_ros.lab.faults.probe import to_time_msg
     t = to_time_msg(12.25)
     assert (t.sec, t.nanosec) == (12, 250_000_000)
     assert to_time_msg(-5.0).sec == 0                     # clamped to the message's range
@@ -533,7 +533,7 @@ def test_probe_restamps_one_message_per_burst_and_ticks_when_its_timer_is_late()
     from rclpy.context import Context
     from sensor_msgs.msg import JointState
 
-    from grip_force_ros.faults.probe import FaultProbe, to_time_msg
+    from grip_force_ros.lab.faults.probe import FaultProbe, to_time_msg
     from grip_force_ros.params import load_params_file
     from grip_force_ros.params.files import instrument_path
 
@@ -580,7 +580,7 @@ def test_faultcheck_cli_json():
     import json
     import subprocess
     import sys
-    cmd = [sys.executable, '-m', 'grip_force_ros.cli', 'faultcheck', '--json', '--only',
+    cmd = [sys.executable, '-m', 'grip_force_ros.lab.cli', 'faultcheck', '--json', '--only',
            'silence_actuator', 'set_max_current_read_only', 'file_out_of_range']
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -594,7 +594,7 @@ def test_faultcheck_cli_json():
 
 def test_a_defect_cannot_be_injected_outside_the_negative_control():
     """The test-only switch: no broken build outside the fault check's own session."""
-    from grip_force_ros.faults.defects import DEFECTS, break_controller, negative_control_session
+    from grip_force_ros.lab.faults.defects import DEFECTS, break_controller, negative_control_session
     from grip_force_ros.nodes.controller_io import read_joints
     with pytest.raises(RuntimeError, match='negative control'):
         break_controller(object(), 'watchdog_off')

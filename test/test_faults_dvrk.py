@@ -1,4 +1,4 @@
-"""Fault cases of the dVRK interface and the drive on real node processes (faults/dvrk.py).
+"""Fault cases of the dVRK interface and the drive on real node processes (lab/faults/dvrk.py).
 
 Each case starts sim_instrument, controller and master as processes (the dvrk profile in the
 sourced ROS tools environment) and injects its fault mid-grasp; ``grip-force faultcheck`` runs
@@ -12,10 +12,10 @@ import pytest
 
 from _ros_tools import require_ros_tools
 from grip_force_ros.control.inputs import TIMEOUT_PARAMS
-from grip_force_ros.faults import dvrk
-from grip_force_ros.faults.catalogue import OUTCOMES, catalogue, dvrk_cases
-from grip_force_ros.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, _master_case, _Probe, lines_since,
-                                        run_process_cases)
+from grip_force_ros.lab.faults import dvrk
+from grip_force_ros.lab.faults.catalogue import OUTCOMES, catalogue, dvrk_cases
+from grip_force_ros.lab.faults.dvrk import (KILL_TO_ZERO, SIM_CUT, _kill_case, _master_case, _Probe,
+                                            lines_since, run_process_cases)
 from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros

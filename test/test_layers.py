@@ -4,79 +4,114 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[1] / 'grip_force_ros'
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / 'grip_force_ros'
+#: The laboratory (docs/ARCHITECTURE.md): everything under grip_force_ros/lab/.
+LAB = PACKAGE / 'lab'
 
-#: Part of the package -> the parts it may import (docs/ARCHITECTURE.md, same table).
+#: Part of the package -> the parts it may import (docs/ARCHITECTURE.md, same table). The
+#: product's parts are the top-level modules and subpackages of grip_force_ros/, the
+#: laboratory's those of grip_force_ros/lab/ ('lab.bench' for lab/bench/, 'lab.processes'
+#: for lab/processes.py).
 MAY_IMPORT = {
+    # the product: what ships in a robot
     'objects': set(),
     'effects': set(),
     'params': {'objects', 'effects'},
     'topics': set(),
-    'plotting': set(),
     'model': {'objects', 'effects', 'params'},
     'logs': {'objects', 'effects', 'topics'},
     'trajectories': {'objects', 'effects', 'params', 'topics'},
     'control': {'objects', 'effects', 'model', 'params'},
     'sim': {'objects', 'effects', 'model', 'params'},
-    'closed_loop': {'control'},
     'identify': {'objects', 'effects', 'model', 'params', 'logs'},
-    'rig': {'plotting'},
-    'diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'plotting'},
-    'reproduce': {'objects', 'effects', 'model', 'params', 'plotting'},
-    'figures': {'objects', 'effects', 'model', 'control', 'sim', 'closed_loop', 'trajectories', 'params',
-                'plotting', 'topics'},
     'nodes': {'objects', 'effects', 'control', 'identify', 'model', 'sim', 'trajectories', 'params',
               'topics'},
-    'demo': {'objects', 'effects', 'nodes', 'control', 'identify', 'model', 'logs', 'trajectories',
-             'params', 'topics', 'plotting'},
-    'faults': {'objects', 'effects', 'nodes', 'control', 'model', 'sim', 'params', 'topics'},
-    'bench': {'nodes', 'control', 'model', 'sim', 'closed_loop', 'diagnosis', 'logs', 'params', 'topics',
-              'objects', 'effects', 'demo', 'trajectories'},
-    'cli': None,                                       # the command: anything
+    # the laboratory: everything around it
+    'lab.plotting': set(),
+    'lab.closed_loop': {'control'},
+    'lab.processes': {'nodes'},
+    'lab.harness': {'nodes'},
+    'lab.rig': {'lab.plotting'},
+    'lab.diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'lab.plotting'},
+    'lab.reproduce': {'objects', 'effects', 'model', 'params', 'lab.plotting'},
+    'lab.figures': {'objects', 'effects', 'model', 'control', 'sim', 'lab.closed_loop', 'trajectories',
+                    'params', 'lab.plotting', 'topics'},
+    'lab.demo': {'objects', 'effects', 'nodes', 'lab.processes', 'lab.harness', 'control', 'identify',
+                 'model', 'logs', 'trajectories', 'params', 'topics', 'lab.plotting'},
+    'lab.faults': {'objects', 'effects', 'nodes', 'lab.processes', 'lab.harness', 'control', 'model', 'sim',
+                   'params', 'topics'},
+    'lab.bench': {'nodes', 'lab.processes', 'lab.harness', 'control', 'model', 'sim', 'lab.closed_loop',
+                  'lab.diagnosis', 'logs', 'params', 'topics', 'objects', 'effects', 'lab.demo',
+                  'trajectories'},
+    'lab.cli': None,                                   # the command: anything
 }
 #: The only parts that import rclpy or ROS message packages.
-ROS_PARTS = {'nodes', 'demo', 'faults', 'bench'}
+ROS_PARTS = {'nodes', 'lab.harness', 'lab.demo', 'lab.faults', 'lab.bench'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
                'geometry_msgs', 'diagnostic_msgs', 'crtk_msgs', 'std_srvs', 'lifecycle_msgs'}
 
 
+def part_name(dotted: str) -> str | None:
+    """'control' for grip_force_ros.control.pid, 'lab.bench' for grip_force_ros.lab.bench.loop,
+    'lab' for grip_force_ros.lab itself; None outside the package."""
+    parts = dotted.split('.')
+    if parts[0] != 'grip_force_ros' or len(parts) < 2:
+        return None
+    if parts[1] == 'lab':
+        return f'lab.{parts[2]}' if len(parts) > 2 else 'lab'
+    return parts[1]
+
+
 def part_of(path: Path) -> str:
-    """'control' for grip_force_ros/control/pid.py, 'topics' for grip_force_ros/topics.py."""
-    rel = path.relative_to(PACKAGE)
-    return rel.parts[0] if len(rel.parts) > 1 else rel.stem
+    """'control' for grip_force_ros/control/pid.py, 'topics' for grip_force_ros/topics.py,
+    'lab.bench' for grip_force_ros/lab/bench/loop.py, 'lab.plotting' for lab/plotting.py."""
+    return part_name(module_name(path))
 
 
-def imported(path: Path) -> list[tuple[int, str]]:
-    """(line, dotted name) of every absolute import in ``path``, inside functions too;
-    ``from grip_force_ros import topics`` gives 'grip_force_ros.topics'."""
+def package_files() -> list[Path]:
+    """Every module of the package but the two package docstrings (grip_force_ros/ and lab/)."""
+    return [p for p in sorted(PACKAGE.rglob('*.py'))
+            if not (p.parent in (PACKAGE, LAB) and p.stem == '__init__')]
+
+
+def imported(path: Path, tree: ast.Module | None = None) -> list[tuple[int, str]]:
+    """(line, dotted name) of every import in ``path``, inside functions too; relative
+    imports resolved; ``from grip_force_ros import topics`` gives 'grip_force_ros.topics',
+    ``from grip_force_ros.lab import plotting`` 'grip_force_ros.lab.plotting'."""
+    tree = ast.parse(path.read_text(), str(path)) if tree is None else tree
+    here = module_name(path).split('.') if path.is_relative_to(PACKAGE) else []
+    package = here if path.stem == '__init__' else here[:-1]
     out = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             out += [(node.lineno, alias.name) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            if node.module == 'grip_force_ros':
-                out += [(node.lineno, f'grip_force_ros.{alias.name}') for alias in node.names]
-            else:
-                out.append((node.lineno, node.module))
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ''
+            if node.level:
+                base = '.'.join(package[:len(package) - node.level + 1] + ([base] if base else []))
+            if base in ('grip_force_ros', 'grip_force_ros.lab') or (node.level and not node.module):
+                out += [(node.lineno, f'{base}.{alias.name}') for alias in node.names]
+            elif base:
+                out.append((node.lineno, base))
     return out
 
 
 def edges() -> list[tuple[str, str, str]]:
     """(importing part, imported part, 'file:line') for every import between parts."""
     out = []
-    for path in sorted(PACKAGE.rglob('*.py')):
-        if path.parent == PACKAGE and path.stem == '__init__':
-            continue
+    for path in package_files():
         src = part_of(path)
         for line, name in imported(path):
-            parts = name.split('.')
-            if parts[0] == 'grip_force_ros' and len(parts) > 1 and parts[1] != src:
-                out.append((src, parts[1], f'{path.relative_to(PACKAGE.parent)}:{line}'))
+            dst = part_name(name)
+            if dst is not None and dst != src:
+                out.append((src, dst, f'{path.relative_to(ROOT)}:{line}'))
     return out
 
 
 def module_name(path: Path) -> str:
-    """'grip_force_ros.faults.dvrk' for faults/dvrk.py, 'grip_force_ros.faults' for faults/__init__.py."""
+    """'grip_force_ros.lab.faults.dvrk' for lab/faults/dvrk.py, 'grip_force_ros.lab.faults' for
+    lab/faults/__init__.py."""
     parts = path.relative_to(PACKAGE.parent).with_suffix('').parts
     return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
 
@@ -84,8 +119,9 @@ def module_name(path: Path) -> str:
 def module_graph() -> dict[str, set[str]]:
     """Module of the package -> the package's modules it imports (at the top or in a function).
 
-    ``from grip_force_ros.faults import runner`` imports the module ``grip_force_ros.faults.runner``;
-    ``from grip_force_ros.faults.catalogue import FaultCase`` the module ``grip_force_ros.faults.catalogue``.
+    ``from grip_force_ros.lab.faults import runner`` imports the module
+    ``grip_force_ros.lab.faults.runner``; ``from grip_force_ros.lab.faults.catalogue import
+    FaultCase`` the module ``grip_force_ros.lab.faults.catalogue``.
     A package's ``__init__`` is a module of its own; importing a submodule runs it too, but that
     implicit step is left out (every ``__init__`` that re-exports its submodules would close a loop).
     """
@@ -136,7 +172,7 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_package_has_no_import_cycle():
     graph = module_graph()
-    assert len(graph) > 100 and 'grip_force_ros.faults.dvrk' in graph['grip_force_ros.faults.runner']
+    assert len(graph) > 100 and 'grip_force_ros.lab.faults.dvrk' in graph['grip_force_ros.lab.faults.runner']
     assert cycles(graph) == []
 
 
@@ -146,9 +182,7 @@ def test_the_cycle_check_finds_a_loop():
 
 
 def test_every_part_is_in_the_table():
-    parts = {part_of(p) for p in PACKAGE.rglob('*.py')
-             if not (p.parent == PACKAGE and p.stem in ('__init__', '__main__'))}
-    assert parts == set(MAY_IMPORT)
+    assert {part_of(p) for p in package_files()} == set(MAY_IMPORT)
 
 
 def test_parts_import_only_what_the_architecture_allows():
@@ -164,13 +198,13 @@ def test_control_imports_only_the_model_and_the_schema():
 
 def test_rclpy_and_messages_only_in_the_ros_parts():
     wrong = []
-    for path in sorted(PACKAGE.rglob('*.py')):
+    for path in package_files():
         for line, name in imported(path):
             if name.split('.')[0] in ROS_MODULES and part_of(path) not in ROS_PARTS:
-                wrong.append(f'{path.relative_to(PACKAGE.parent)}:{line}: {name}')
+                wrong.append(f'{path.relative_to(ROOT)}:{line}: {name}')
     assert wrong == []
 
 
 def test_process_launching_has_no_rclpy():
-    names = {name.split('.')[0] for _, name in imported(PACKAGE / 'nodes' / 'processes.py')}
+    names = {name.split('.')[0] for _, name in imported(LAB / 'processes.py')}
     assert not names & ROS_MODULES

@@ -22,11 +22,11 @@ from sensor_msgs.msg import JointState
 from _ros_tools import (ROOT, cli, cli_once, lifecycle_transition, log_errors, process_report,
                         require_ros_tools, retry, ros_env, run, start, stop, stop_daemon)
 from grip_force_ros import topics
-from grip_force_ros.faults.probe import LimitMonitor
+from grip_force_ros.lab.faults.probe import LimitMonitor
 from grip_force_ros.nodes.common import RECORD_QOS, stamp_seconds
 from grip_force_ros.nodes.controller import ControllerNode
-from grip_force_ros.nodes.harness import RosRunner, wait_until
-from grip_force_ros.nodes.processes import DEFAULT_RT_PRIORITY, can_use_realtime, master_rt_priority
+from grip_force_ros.lab.harness import RosRunner, wait_until
+from grip_force_ros.lab.processes import DEFAULT_RT_PRIORITY, can_use_realtime, master_rt_priority
 from grip_force_ros.params import load_params_file, read_params_yaml
 
 pytestmark = pytest.mark.ros

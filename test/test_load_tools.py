@@ -14,14 +14,14 @@ import time
 import psutil
 import pytest
 
-from grip_force_ros.bench.load import LoadError, LoadGenerator
-from grip_force_ros.bench import loadcheck
-from grip_force_ros.bench import pressure as pressure_module
-from grip_force_ros.bench.pressure import DIR_PREFIX, DiskPressure, PressureError, make_pressure
-from grip_force_ros.bench.loadcheck import (code_fingerprint, parse_junit, render_tally, source_revision,
-                                            tabulate, tally)
-from grip_force_ros.nodes.processes import (ProcessError, domain_locked, held_domains,
-                                            pick_domain_ids, reserve_domains)
+from grip_force_ros.lab.bench.load import LoadError, LoadGenerator
+from grip_force_ros.lab.bench import loadcheck
+from grip_force_ros.lab.bench import pressure as pressure_module
+from grip_force_ros.lab.bench.pressure import DIR_PREFIX, DiskPressure, PressureError, make_pressure
+from grip_force_ros.lab.bench.loadcheck import (code_fingerprint, parse_junit, render_tally, source_revision,
+                                                tabulate, tally)
+from grip_force_ros.lab.processes import (ProcessError, domain_locked, held_domains,
+                                          pick_domain_ids, reserve_domains)
 
 
 # ---------------------------------------------------------------- domains
@@ -43,7 +43,7 @@ def test_two_reservations_never_share_a_domain():
 def test_another_process_cannot_take_a_held_domain():
     with reserve_domains(1) as mine:
         code = textwrap.dedent(f"""
-            from grip_force_ros.nodes.processes import ProcessError, reserve_domains
+            from grip_force_ros.lab.processes import ProcessError, reserve_domains
             try:
                 reserve_domains(1, candidates=[{mine.domain_id}])
             except ProcessError:
@@ -82,7 +82,7 @@ def test_load_workers_never_outlive_their_parent():
     """The parent is SIGKILLed (no clean-up runs): its workers end too."""
     code = textwrap.dedent("""
         import os, sys, time
-        from grip_force_ros.bench.load import LoadGenerator
+        from grip_force_ros.lab.bench.load import LoadGenerator
         load = LoadGenerator(2, seconds=120).start()
         print(' '.join(str(p.pid) for p in load.procs), flush=True)
         time.sleep(120)
@@ -133,7 +133,7 @@ def test_a_failed_run_keeps_its_temporary_files_and_a_passed_one_does_not(tmp_pa
     """A failed loaded run's node logs are its best witness: loadcheck gives each run its own
     pytest temporary folder (``run<k>.tmp``) and removes it only when the run passed (not
     left to pytest's rotation of the user's numbered folders)."""
-    from grip_force_ros.bench.loadcheck import run_once
+    from grip_force_ros.lab.bench.loadcheck import run_once
     for name, verdict in (('test_ok.py', 'True'), ('test_bad.py', 'False')):
         (tmp_path / name).write_text(textwrap.dedent(f"""
             def test_writes_a_log(tmp_path):
@@ -241,7 +241,7 @@ def test_tally_counts_clean_runs_per_code_and_leaves_stopped_runs_out(tmp_path):
 
 
 def test_tally_command_prints_the_table_and_refuses_a_missing_folder(tmp_path, capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     write_run(tmp_path / 's', 1, record={'exit_code': 0, 'code': {'commit': 'a' * 40, 'fingerprint': 'f1'}})
     assert main(['loadcheck', '--tally', str(tmp_path / 's'), '--json']) == 0
     assert json.loads(capsys.readouterr().out)['by_code']['f1']['clean'] == 1
@@ -250,7 +250,7 @@ def test_tally_command_prints_the_table_and_refuses_a_missing_folder(tmp_path, c
 
 
 def test_load_command_refuses_values_beyond_its_bounds(capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     assert main(['load', '--seconds', '0']) == 2
     assert 'seconds' in capsys.readouterr().err
     assert main(['loadcheck', '--runs', '0']) == 2
@@ -274,7 +274,7 @@ def test_a_stopped_loadcheck_stops_its_run_and_what_the_run_started(tmp_path):
         def test_slow(child):
             time.sleep(300)
     """))
-    runner = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.cli', 'loadcheck', '--runs',
+    runner = subprocess.Popen([sys.executable, '-m', 'grip_force_ros.lab.cli', 'loadcheck', '--runs',
                                '1', '--workers', '1', '--duty', '0.2', '--select', 'not nothing',
                                '--files', str(tmp_path / 'test_slow.py'),
                                '--out', str(tmp_path / 'out')],
@@ -286,7 +286,7 @@ def test_a_stopped_loadcheck_stops_its_run_and_what_the_run_started(tmp_path):
         time.sleep(0.2)
     procs = [psutil.Process(int(p)) for p in pids_file.read_text().split()]
     workers = [p for p in psutil.Process(runner.pid).children()
-               if 'grip_force_ros.bench.load' in ' '.join(p.cmdline())]
+               if 'grip_force_ros.lab.bench.load' in ' '.join(p.cmdline())]
     assert len(workers) == 1
     runner.send_signal(signal.SIGTERM)
     runner.wait(timeout=60)
@@ -390,7 +390,7 @@ def test_disk_pressure_leaves_no_file_when_its_parent_is_killed(tmp_path):
     """The parent is SIGKILLed (no clean-up runs in it): its children remove the files."""
     code = textwrap.dedent(f"""
         import time
-        from grip_force_ros.bench.pressure import DiskPressure
+        from grip_force_ros.lab.bench.pressure import DiskPressure
         p = DiskPressure(writers=2, seconds=120, file_mb=2, rate_mb_s=2, evict_rate=50,
                          memory_mb=8, directory={str(tmp_path)!r}).start()
         print(p.directory, ' '.join(str(q.pid) for _, q in p.procs), flush=True)
@@ -456,7 +456,7 @@ def test_make_pressure_builds_each_kind():
 
 
 def test_pressure_commands_refuse_values_beyond_their_bounds(capsys):
-    from grip_force_ros.cli import main
+    from grip_force_ros.lab.cli import main
     assert main(['load', '--kind', 'disk', '--file-mb', '1e7']) == 2
     assert 'file_mb' in capsys.readouterr().err
     assert main(['bench', '--pressure', 'disk', '--disk-file-mb', '1e7', '--parts', 'model']) == 2

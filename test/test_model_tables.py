@@ -231,7 +231,7 @@ def test_scalar_solve_reaches_torques_just_below_the_peak():
 
 
 def test_table_errors_and_their_figure(tmp_path):
-    from grip_force_ros.figures.model_tables import plot_table_errors
+    from grip_force_ros.lab.figures.model_tables import plot_table_errors
     from grip_force_ros.model.tables import table_errors
     m = GripForceModel(FOUR)
     errors = table_errors(m, np.linspace(0.01, 1.0, 60))

@@ -8,7 +8,7 @@ import pytest
 
 from _interrupts import raise_as_pybind11_does
 from grip_force_ros import topics
-from grip_force_ros.demo.monitor import Snapshot, controller_mode, plain_line, render
+from grip_force_ros.lab.demo.monitor import Snapshot, controller_mode, plain_line, render
 
 pytestmark = pytest.mark.ros
 
@@ -64,7 +64,7 @@ def _publish(domain_id: int, stop: threading.Event) -> None:
 
 
 def test_monitor_shows_a_live_publisher_headless():
-    from grip_force_ros.demo.monitor import monitor
+    from grip_force_ros.lab.demo.monitor import monitor
 
     domain = int(os.environ['ROS_DOMAIN_ID'])
     stop = threading.Event()
@@ -86,7 +86,7 @@ def test_monitor_shows_a_live_publisher_headless():
 
 
 def test_monitor_redraws_in_place_on_a_tty():
-    from grip_force_ros.demo.monitor import monitor
+    from grip_force_ros.lab.demo.monitor import monitor
 
     out = io.StringIO()
     monitor(duration=0.5, period=0.1, stream=out, domain_id=int(os.environ['ROS_DOMAIN_ID']),
@@ -99,7 +99,7 @@ def test_monitor_redraws_in_place_on_a_tty():
 
 def test_a_ctrl_c_inside_a_deserialization_ends_the_monitor_as_a_ctrl_c(monkeypatch):
     """A Ctrl-C inside rclpy's deserialize_message (in the monitor's main thread) is a Ctrl-C."""
-    from grip_force_ros.demo import monitor as monitor_module
+    from grip_force_ros.lab.demo import monitor as monitor_module
 
     domain = int(os.environ['ROS_DOMAIN_ID'])
     monkeypatch.setattr(monitor_module._Collector, 'snapshot', raise_as_pybind11_does)

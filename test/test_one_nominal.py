@@ -33,10 +33,10 @@ wrist sine). The second test checks the first two; the third is the controller o
 import numpy as np
 import pytest
 
-from grip_force_ros.cli.predict import predict_log
-from grip_force_ros.closed_loop import NO_FORCE_SENSOR, closed_loop_step
+from grip_force_ros.lab.cli.predict import predict_log
+from grip_force_ros.lab.closed_loop import NO_FORCE_SENSOR, closed_loop_step
 from grip_force_ros.control import GripController
-from grip_force_ros.diagnosis import build_frame, load_decimated
+from grip_force_ros.lab.diagnosis import build_frame, load_decimated
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params.files import instrument_path
 from grip_force_ros.params import load_params_file

@@ -43,7 +43,7 @@ VOCABULARIES = {
 
 #: The one module that sets ROS_AUTOMATIC_DISCOVERY_RANGE (``ros_environment`` and
 #: ``ensure_local_discovery``); an entry that no longer sets it fails below too.
-DISCOVERY_RANGE_PLACES = {'nodes/processes.py'}
+DISCOVERY_RANGE_PLACES = {'lab/processes.py'}
 
 
 def _modules() -> dict[str, ast.Module]:

@@ -1,9 +1,9 @@
-"""The page-fault measurement of the node processes (grip_force_ros/bench/page_faults.py)."""
+"""The page-fault measurement of the node processes (grip_force_ros/lab/bench/page_faults.py)."""
 import os
 import subprocess
 import sys
 
-from grip_force_ros.bench.page_faults import proc_stat, status_mib
+from grip_force_ros.lab.bench.page_faults import proc_stat, status_mib
 
 
 def test_it_reads_faults_cpu_and_memory_of_a_process():
@@ -13,6 +13,6 @@ def test_it_reads_faults_cpu_and_memory_of_a_process():
 
 
 def test_it_runs_as_a_module():
-    run = subprocess.run([sys.executable, '-m', 'grip_force_ros.bench.page_faults', '--help'],
+    run = subprocess.run([sys.executable, '-m', 'grip_force_ros.lab.bench.page_faults', '--help'],
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 0 and '--lock' in run.stdout

@@ -6,9 +6,9 @@ nominal); `--loading-branch` gives the paper's quasi-static form. Inputs alone s
 import numpy as np
 import pytest
 
-from grip_force_ros.cli import main as cli_main
-from grip_force_ros.cli.predict import predict_log
-from grip_force_ros.diagnosis import build_frame, load_decimated
+from grip_force_ros.lab.cli import main as cli_main
+from grip_force_ros.lab.cli.predict import predict_log
+from grip_force_ros.lab.diagnosis import build_frame, load_decimated
 from grip_force_ros.logs import read_log, write_csv
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import load_params_file

@@ -219,7 +219,7 @@ def test_the_1khz_nodes_declare_the_group():
 def test_node_declares_realtime_parameters_with_descriptors():
     from rcl_interfaces.msg import ParameterType
 
-    from grip_force_ros.nodes.harness import RosRunner
+    from grip_force_ros.lab.harness import RosRunner
     from grip_force_ros.nodes.master import MasterNode
     ros = RosRunner()
     ros.start()

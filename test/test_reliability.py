@@ -2,7 +2,7 @@
 
 An in-process controller node (parameter overrides from the paper's needle driver YAML)
 and a fault probe that closes the loop with a simulated instrument over loopback DDS
-(:class:`grip_force_ros.faults.runner.Session`).
+(:class:`grip_force_ros.lab.faults.runner.Session`).
 
 Watchdog: each input in turn falls silent; the first safe output (target force 0 N, the
 current ramping to 0 A) must come within two control periods after its own timeout (30 ms
@@ -17,8 +17,8 @@ import statistics
 import pytest
 
 from grip_force_ros.control.inputs import source_timeouts
-from grip_force_ros.faults.catalogue import CASE_ATTEMPTS, FaultCase, set_field, silence
-from grip_force_ros.faults.runner import Session, run_case_redoing_spoiled, run_message_case
+from grip_force_ros.lab.faults.catalogue import CASE_ATTEMPTS, FaultCase, set_field, silence
+from grip_force_ros.lab.faults.runner import Session, run_case_redoing_spoiled, run_message_case
 from grip_force_ros.params.files import instrument_path
 
 pytestmark = pytest.mark.ros
@@ -123,9 +123,9 @@ def test_safe_output_ramps_at_the_slew_limit(session):
 
     The controller steps on the time it measured between states, which the probe sees as
     the gaps between the commands' receipts and stamps (plus one period of delivery jitter:
-    faults/probe.py); the exact per-step check is test/test_control_properties.py.
+    lab/faults/probe.py); the exact per-step check is test/test_control_properties.py.
     """
-    from grip_force_ros.faults.probe import DELIVERY_JITTER
+    from grip_force_ros.lab.faults.probe import DELIVERY_JITTER
     probe, params = session.probe, session.params
     period = 1.0 / params.expected_state_rate
     d = run_message_case(session, _silence('instrument', ticks=60))

@@ -4,7 +4,7 @@ import types
 import numpy as np
 import pytest
 
-from grip_force_ros.faults.soak import _period_stats, _Recorder
+from grip_force_ros.lab.faults.soak import _period_stats, _Recorder
 
 
 def test_period_stats_count_missed_periods():
@@ -42,7 +42,7 @@ def test_recorder_bins_minutes_and_joins_them():
     #                                                             read by on_step and on_command)
     stamps = np.arange(13_000) * 1e-3 + 1000.0       # controller step stamps, 1 ms apart
     stamps[7000:] += 0.004                           # one 5 ms gap in the second minute
-    import grip_force_ros.faults.soak as soak
+    import grip_force_ros.lab.faults.soak as soak
     real = soak.time
     # the recorder's clock only, not the time module's (other threads of the process read it)
     soak.time = types.SimpleNamespace(monotonic=lambda: next(clock))

@@ -4,10 +4,10 @@ import math
 
 import pytest
 
-from grip_force_ros.cli import main as cli_main
+from grip_force_ros.lab.cli import main as cli_main
 from grip_force_ros.model import GripForceModel
 from grip_force_ros.params import make_params
-from grip_force_ros.reproduce.rows import PAPER, STATUSES, TOLERANCE, compute_rows, status_of
+from grip_force_ros.lab.reproduce.rows import PAPER, STATUSES, TOLERANCE, compute_rows, status_of
 
 FIELDS = {'quantity', 'paper', 'model', 'rel_err', 'status', 'note'}
 REQUIRED = ['lambda_3', 'torque slope', 'torque offset', 'drum coefficient', 'wrist coefficient',

@@ -8,15 +8,15 @@ import math
 import numpy as np
 import pytest
 
-from grip_force_ros.cli import main as cli_main
+from grip_force_ros.lab.cli import main as cli_main
 from grip_force_ros.logs import read_csv
-from grip_force_ros.rig import (RigDataError, data_root, read_run, read_runs, run_files,
-                                to_contract_log)
-from grip_force_ros.rig import constants as C
-from grip_force_ros.rig.analysis import holdout_split
-from grip_force_ros.rig.estimator import (ALLOWED_INPUTS, FORBIDDEN_INPUTS, CableFrictionObserver,
-                                          EstimatorError, LinearCurrentEstimator, dahl_direction,
-                                          hold_observer, motor_side_inputs, rmse)
+from grip_force_ros.lab.rig import (RigDataError, data_root, read_run, read_runs, run_files,
+                                    to_contract_log)
+from grip_force_ros.lab.rig import constants as C
+from grip_force_ros.lab.rig.analysis import holdout_split
+from grip_force_ros.lab.rig.estimator import (ALLOWED_INPUTS, FORBIDDEN_INPUTS, CableFrictionObserver,
+                                              EstimatorError, LinearCurrentEstimator, dahl_direction,
+                                              hold_observer, motor_side_inputs, rmse)
 
 DATA = data_root() / 'Tool_4_Maryland_L_2'
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason=f'rig data not found at {DATA}')
@@ -213,7 +213,7 @@ def test_realdata_command_quick_json(runs, capsys, tmp_path):
                                           'friction_map_order': 3, 'backlash_angle': 'motor_angle'},
                                      {'hysteresis': False}])
 def test_streaming_observer_gives_the_batch_numbers(runs, changes):
-    from grip_force_ros.rig.streaming import StreamingJawTorqueObserver
+    from grip_force_ros.lab.rig.streaming import StreamingJawTorqueObserver
     train, test = holdout_split(runs)
     est = CableFrictionObserver(**changes).fit(train[::3])
     log = _slice(test[3], 6.0)

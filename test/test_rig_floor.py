@@ -4,9 +4,9 @@ Real folder ``Tool_4_Maryland_L_4`` (50 runs, loads 10-100 %); skipped when the 
 """
 import pytest
 
-from grip_force_ros.rig import data_root
-from grip_force_ros.rig.floor import analyse_floor, folds
-from grip_force_ros.rig.transfer import load_folder
+from grip_force_ros.lab.rig import data_root
+from grip_force_ros.lab.rig.floor import analyse_floor, folds
+from grip_force_ros.lab.rig.transfer import load_folder
 
 L4 = data_root() / 'Tool_4_Maryland_L_4'
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from grip_force_ros.rig.estimator import EstimatorError, LoadModel, ObserverSettings
+from grip_force_ros.lab.rig.estimator import EstimatorError, LoadModel, ObserverSettings
 
 SHAPE_CONSTANT = (0.004, -0.003, 0.001, 0.002, 0.0005)     # N*m: s, P1, P2, s*P1, 1
 SHAPE_PROPORTIONAL = (-0.05, 0.12)                          # per unit of level: s, P1

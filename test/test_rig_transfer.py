@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from grip_force_ros.cli import main as cli_main
-from grip_force_ros.rig import RigDataError, data_root, read_run, read_runs, run_files
-from grip_force_ros.rig import constants as C
-from grip_force_ros.rig.estimator import FORBIDDEN_INPUTS
-from grip_force_ros.rig.transfer import (GROUP_NAMES, GROUPS, Session, calibrate, current_tare,
-                                         default_calibration_run, load_folder, orient, score, train)
+from grip_force_ros.lab.cli import main as cli_main
+from grip_force_ros.lab.rig import RigDataError, data_root, read_run, read_runs, run_files
+from grip_force_ros.lab.rig import constants as C
+from grip_force_ros.lab.rig.estimator import FORBIDDEN_INPUTS
+from grip_force_ros.lab.rig.transfer import (GROUP_NAMES, GROUPS, Session, calibrate, current_tare,
+                                             default_calibration_run, load_folder, orient, score, train)
 
 L2 = data_root() / 'Tool_4_Maryland_L_2'
 L4 = data_root() / 'Tool_4_Maryland_L_4'
@@ -323,9 +323,9 @@ def test_transfer_cli_json_contract(tmp_path, capsys):
 @needs_data
 def test_streaming_observer_with_the_load_dependent_efficiency(folders):
     """The transfer model's quadratic branch gives the same numbers one sample at a time."""
-    from grip_force_ros.rig.streaming import StreamingJawTorqueObserver
-    from grip_force_ros.rig.transfer import TRANSFER_SETTINGS
-    from grip_force_ros.rig.estimator import CableFrictionObserver
+    from grip_force_ros.lab.rig.streaming import StreamingJawTorqueObserver
+    from grip_force_ros.lab.rig.transfer import TRANSFER_SETTINGS
+    from grip_force_ros.lab.rig.estimator import CableFrictionObserver
     f2, f4 = folders
     est = CableFrictionObserver(TRANSFER_SETTINGS).fit(f4.runs[::7])
     assert est.coefficients['alpha1_quad'] > 0                 # 0.88 A/(N*m)^2 on all of L_4
@@ -352,7 +352,7 @@ def test_the_load_model_and_the_offline_estimate(folders):
     the load model, 4.95 with it, 3.21 offline (mN*m); the margins asked, a tenth, are
     several times the 0.2-0.5 mN*m the per-run biases move a 20-run figure."""
     from dataclasses import replace
-    from grip_force_ros.rig.transfer import TRANSFER_SETTINGS, score, train
+    from grip_force_ros.lab.rig.transfer import TRANSFER_SETTINGS, score, train
     f2, f4 = folders
     model = train([f4])
     plain = train([f4], replace(TRANSFER_SETTINGS, load_model=False))

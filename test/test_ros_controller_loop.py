@@ -19,7 +19,7 @@ from grip_force_ros.nodes import controller as controller_module
 from grip_force_ros.nodes.common import joint_state
 from grip_force_ros.nodes.controller import (FALLBACK_AFTER_PERIODS, MIN_STEP_SPACING_PERIODS,
                                              ControllerNode)
-from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.lab.harness import RosRunner
 from grip_force_ros.nodes.wire import JointStateData
 from rclpy.serialization import serialize_message
 

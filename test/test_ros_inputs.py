@@ -15,7 +15,7 @@ from sensor_msgs.msg import JointState
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import STATE_PUB_QOS, InputRejected, joint_state, read_joints
 from grip_force_ros.nodes.controller import ControllerNode
-from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.lab.harness import RosRunner
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 
 pytestmark = pytest.mark.ros

@@ -10,7 +10,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.lab.harness import RosRunner
 from grip_force_ros.nodes.master import EXIT_GRACE, MasterNode
 
 pytestmark = pytest.mark.ros

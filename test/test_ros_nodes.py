@@ -21,8 +21,8 @@ from geometry_msgs.msg import WrenchStamped
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import STATE_SUB_QOS
 from grip_force_ros.nodes.controller import ControllerNode
-from grip_force_ros.nodes.harness import RosRunner
-from grip_force_ros.nodes.processes import NodeProcess
+from grip_force_ros.lab.harness import RosRunner
+from grip_force_ros.lab.processes import NodeProcess
 from grip_force_ros.params import load_params_file
 
 pytestmark = pytest.mark.ros

@@ -16,8 +16,8 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
 from grip_force_ros.nodes.controller import ControllerNode
-from grip_force_ros.nodes.harness import RosRunner
-from grip_force_ros.nodes.processes import node_command
+from grip_force_ros.lab.harness import RosRunner
+from grip_force_ros.lab.processes import node_command
 from grip_force_ros.nodes.master import MasterNode
 from grip_force_ros.nodes.ros_params import NodeParameters, descriptor_for
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode

@@ -396,7 +396,7 @@ def test_shutdown_once_shuts_a_given_context_down_once():
 def test_a_runner_keeps_the_test_process_heap_out_of_full_collections():
     """A full collection of a large test process stalled in-process nodes (~250 ms each for
     ~450 000 objects, measured): the harness freezes the heap it starts with, and gives it back."""
-    from grip_force_ros.nodes.harness import RosRunner
+    from grip_force_ros.lab.harness import RosRunner
     ballast = [[i] for i in range(200_000)]      # long-lived containers of a large process
     with RosRunner():
         assert gc.get_freeze_count() >= len(ballast)

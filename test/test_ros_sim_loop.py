@@ -12,7 +12,7 @@ from rclpy.serialization import serialize_message
 
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import joint_state
-from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.lab.harness import RosRunner
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 from grip_force_ros.nodes.wire import JointStateData, read_wrench
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from _ros_tools import (FASTDDS_LOG_LINE, ROOT, VENV, known_deadlock, log_errors, process_report,
                         require_ros_tools, retry, ros_env, run, start, stop, stop_daemon, vendor_dir)
-from grip_force_ros.nodes.processes import wait_until
+from grip_force_ros.lab.processes import wait_until
 
 EXECUTABLES = ('controller', 'master', 'sim_instrument')
 

@@ -13,9 +13,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.demo.analysis import SIM_STATUS, drive_cuts_under_current
+from grip_force_ros.lab.demo.analysis import SIM_STATUS, drive_cuts_under_current
 from grip_force_ros.nodes.common import STATE_PUB_QOS, joint_state
-from grip_force_ros.nodes.harness import RosRunner
+from grip_force_ros.lab.harness import RosRunner
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 
 

@@ -1,7 +1,7 @@
 """Rate independence: the controller steps on the measured time between states.
 
 ROS-free: the real GripController on the simulated instrument with states at 100 .. 1500 Hz
-(bench/state_rate.py, seeded sensor noise and +-10 % state-time jitter); the node refuses to
+(lab/bench/state_rate.py, seeded sensor noise and +-10 % state-time jitter); the node refuses to
 start outside the range the gains are shown stable for. The measured table: docs/control.md.
 """
 import subprocess
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from grip_force_ros.bench.state_rate import offline_grasp
+from grip_force_ros.lab.bench.state_rate import offline_grasp
 from grip_force_ros.control import GripController
 from grip_force_ros.params import ParameterError, load_params_file, make_params
 from grip_force_ros.params.controller import STATE_RATE_MAX, STATE_RATE_MIN

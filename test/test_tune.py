@@ -120,7 +120,7 @@ def test_design_meets_margins_on_the_paper_instrument():
 
 
 def test_cli_prints_json_and_writes_the_step_plot(tmp_path, capsys):
-    from grip_force_ros.cli import tune as cli
+    from grip_force_ros.lab.cli import tune as cli
     parser = argparse.ArgumentParser()
     cli.add_arguments(parser)
     args = parser.parse_args(['--config', str(ROOT / 'config' / 'paper_needle_driver.yaml'),

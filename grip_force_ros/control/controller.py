@@ -16,7 +16,7 @@ from grip_force_ros.model.dvrk_jaw import command_current_limit
 PULL_OUT_PER_MU = math.sqrt(2.0) + 1.0
 
 #: The words that end a safe-state reason when the controller's own step interval exceeded
-#: the watchdog (its process was stalled, not an input lost); faults/runner.py reads them.
+#: the watchdog (its process was stalled, not an input lost); lab/faults/runner.py reads them.
 CONTROLLER_STALLED = 'the controller was stalled'
 
 #: Default time (s) in which the force target climbs from the estimate to the force map's

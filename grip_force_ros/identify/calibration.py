@@ -13,7 +13,7 @@ series, which are not independent). Two users:
   errors from the covariance. :func:`calibrated_yaml` writes the calibrated instrument
   YAML with a header that says where the numbers come from.
 - the sim-to-real diagnosis re-identifies the instrument's own parameters on whole logs
-  before it looks for an unmodelled effect (``diagnosis/engine.py``).
+  before it looks for an unmodelled effect (``lab/diagnosis/engine.py``).
 """
 from __future__ import annotations
 

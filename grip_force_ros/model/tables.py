@@ -212,7 +212,7 @@ def table_errors(model, currents: np.ndarray) -> dict:
     """Relative errors (-) of a model's vectorised fast path at ``currents`` (A), zero wrist.
 
     The accuracy check behind docs/model.md (speed) and its figure
-    (``python -m grip_force_ros.figures.model_tables``).
+    (``python -m grip_force_ros.lab.figures.model_tables``).
 
     Parameters
     ----------

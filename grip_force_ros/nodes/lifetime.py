@@ -12,7 +12,7 @@ The one owner of
   controller's calibration fit).
 
 Used by :func:`grip_force_ros.nodes.common.run_node`, the launch files and the
-laboratory's process harness (:mod:`grip_force_ros.nodes.processes`), which starts nodes
+laboratory's process harness (:mod:`grip_force_ros.lab.processes`), which starts nodes
 as child processes.
 """
 from __future__ import annotations

@@ -1,5 +1,0 @@
-import sys
-
-from grip_force_ros.cli import main
-
-sys.exit(main())
