@@ -46,6 +46,7 @@ MAY_IMPORT = {
                   'trajectories'},
     'lab.cli': None,                                   # the command: anything
 }
+PRODUCT = {part for part in MAY_IMPORT if not part.startswith('lab.')}
 #: The only parts that import rclpy or ROS message packages.
 ROS_PARTS = {'nodes', 'lab.harness', 'lab.demo', 'lab.faults', 'lab.bench'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
@@ -107,6 +108,35 @@ def edges() -> list[tuple[str, str, str]]:
             if dst is not None and dst != src:
                 out.append((src, dst, f'{path.relative_to(ROOT)}:{line}'))
     return out
+
+
+def _docstrings(tree: ast.Module) -> set[int]:
+    """ids of the Constant nodes that are docstrings (module, class, function)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                out.add(id(body[0].value))
+    return out
+
+
+def uses_of_the_lab(path: Path, source: str | None = None) -> list[str]:
+    """'file:line: name' of every use of the laboratory in ``path``: an import of
+    grip_force_ros.lab (at the top or in a function, absolute or relative), or a string that
+    names one of its modules (``python -m grip_force_ros.lab.cli``, ``import_module``).
+    Docstrings and comments are prose, not uses."""
+    source = path.read_text() if source is None else source
+    tree = ast.parse(source, str(path))
+    where = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+    found = [(line, name) for line, name in imported(path, tree)
+             if name == 'grip_force_ros.lab' or name.startswith('grip_force_ros.lab.')]
+    skip = _docstrings(tree)
+    found += [(node.lineno, node.value) for node in ast.walk(tree)
+              if isinstance(node, ast.Constant) and isinstance(node.value, str)
+              and id(node) not in skip and 'grip_force_ros.lab' in node.value]
+    return [f'{where}:{line}: {name}' for line, name in sorted(found)]
 
 
 def module_name(path: Path) -> str:
@@ -181,8 +211,48 @@ def test_the_cycle_check_finds_a_loop():
     assert cycles(graph) == [['a', 'b', 'c']]
 
 
+def product_files() -> list[Path]:
+    """The product's modules (grip_force_ros/ outside lab/) and its launch files."""
+    return [p for p in sorted(PACKAGE.rglob('*.py')) if not p.is_relative_to(LAB)] + \
+        sorted((ROOT / 'launch').glob('*.launch.py'))
+
+
+def test_the_product_never_imports_the_laboratory():
+    files = product_files()
+    assert PACKAGE / 'nodes' / 'controller.py' in files and ROOT / 'launch' / 'grasp.launch.py' in files
+    assert not any(p.is_relative_to(LAB) for p in files)
+    wrong = [use for path in files for use in uses_of_the_lab(path)]
+    assert wrong == [], 'the product uses the laboratory (move what it needs to the product)'
+
+
+def test_the_laboratory_check_finds_every_kind_of_use():
+    source = """\"\"\"Prose may name grip_force_ros.lab.cli.\"\"\"
+import grip_force_ros.lab.bench.run
+from grip_force_ros import lab, topics
+from grip_force_ros.lab import plotting
+from ..lab.processes import NodeProcess
+from . import common
+
+
+def fit():
+    from grip_force_ros.lab.cli import main
+    return ['python', '-m', 'grip_force_ros.lab.cli', 'calibrate']
+"""
+    where = PACKAGE / 'nodes' / 'example.py'
+    uses = [use.split(': ', 1)[1] for use in uses_of_the_lab(where, source)]
+    assert uses == ['grip_force_ros.lab.bench.run', 'grip_force_ros.lab', 'grip_force_ros.lab.plotting',
+                    'grip_force_ros.lab.processes', 'grip_force_ros.lab.cli', 'grip_force_ros.lab.cli']
+
+
 def test_every_part_is_in_the_table():
     assert {part_of(p) for p in package_files()} == set(MAY_IMPORT)
+    assert LAB.is_dir() and {'nodes', 'control', 'model', 'params', 'identify'} <= PRODUCT
+    assert not (PRODUCT & {'plotting', 'closed_loop', 'demo', 'faults', 'bench', 'cli'})
+
+
+def test_the_table_lets_the_product_import_only_the_product():
+    wrong = {part: MAY_IMPORT[part] - PRODUCT for part in PRODUCT if MAY_IMPORT[part] - PRODUCT}
+    assert wrong == {}
 
 
 def test_parts_import_only_what_the_architecture_allows():
@@ -206,5 +276,6 @@ def test_rclpy_and_messages_only_in_the_ros_parts():
 
 
 def test_process_launching_has_no_rclpy():
-    names = {name.split('.')[0] for _, name in imported(LAB / 'processes.py')}
-    assert not names & ROS_MODULES
+    for path in (LAB / 'processes.py', PACKAGE / 'nodes' / 'lifetime.py'):
+        names = {name.split('.')[0] for _, name in imported(path)}
+        assert not names & ROS_MODULES, path
