@@ -91,6 +91,28 @@ def dvrk_topic(device: str, name: str) -> str:
     return f'{device}/{name}'
 
 
+#: Prefix of every /diagnostics status name of this package's nodes.
+DIAGNOSTIC_PREFIX = 'grip_force_ros: '
+
+
+def diagnostic_name(namespace: str, node: str) -> str:
+    """Return the /diagnostics status name of ``node`` in ``namespace``.
+
+    ``'grip_force_ros: controller'`` in the root namespace (``'/'`` or ``''``),
+    ``'grip_force_ros: /PSM1/controller'`` in ``/PSM1``: /diagnostics is one topic for
+    every node, so the arms of one console tell their statuses apart by name, as an
+    aggregator groups them.
+    """
+    ns = namespace.rstrip('/')
+    return f'{DIAGNOSTIC_PREFIX}{ns}/{node}' if ns else f'{DIAGNOSTIC_PREFIX}{node}'
+
+
+def is_status_of(name: str, node: str) -> bool:
+    """Tell whether a /diagnostics status ``name`` is one of ``node`` (any namespace)."""
+    return name == DIAGNOSTIC_PREFIX + node or (name.startswith(DIAGNOSTIC_PREFIX)
+                                                and name.endswith('/' + node))
+
+
 def topic_set(interface: str = 'crtk', arm: str = 'PSM1', master: str = 'MTML') -> TopicSet:
     """Return the topics of ``interface`` ('crtk' or 'dvrk', with the dVRK arm and master names).
 

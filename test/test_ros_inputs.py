@@ -134,3 +134,31 @@ def test_sim_holds_its_last_good_command(loop):
             assert sim.current_command == pytest.approx(0.05)
     finally:
         ctl._timer.reset()
+
+
+def test_diagnostic_names_carry_the_namespace():
+    """At the root 'grip_force_ros: controller'; in /PSM1 'grip_force_ros: /PSM1/controller'."""
+    assert topics.diagnostic_name('/', 'controller') == 'grip_force_ros: controller'
+    assert topics.diagnostic_name('', 'sim_instrument') == 'grip_force_ros: sim_instrument'
+    assert topics.diagnostic_name('/PSM1', 'controller') == 'grip_force_ros: /PSM1/controller'
+    assert topics.is_status_of('grip_force_ros: /PSM2/sim_instrument', 'sim_instrument')
+    assert topics.is_status_of('grip_force_ros: sim_instrument', 'sim_instrument')
+    assert not topics.is_status_of('grip_force_ros: /PSM2/controller', 'sim_instrument')
+    assert not topics.is_status_of('other: /x/sim_instrument', 'sim_instrument')
+
+
+def test_two_arms_statuses_on_one_diagnostics_topic_are_told_apart():
+    """Controllers and sims of /PSM1 and /PSM2 publish on the one /diagnostics under their own names."""
+    import functools
+    with RosRunner() as ros:
+        for arm in ('PSM1', 'PSM2'):
+            ros.add(functools.partial(ControllerNode, namespace=arm))
+            ros.add(functools.partial(SimInstrumentNode, namespace=arm))
+        probe = ros.plain_node('diagnostics_reader')
+        names: set[str] = set()
+        probe.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
+                                  lambda m: names.update(s.name for s in m.status), 50)
+        ros.start()
+        want = {f'grip_force_ros: /{arm}/{node}' for arm in ('PSM1', 'PSM2')
+                for node in ('controller', 'sim_instrument')}
+        assert ros.wait_for(lambda: want <= names, 30.0), sorted(names)

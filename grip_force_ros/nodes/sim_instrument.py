@@ -216,7 +216,7 @@ class SimInstrumentNode(Node):
         loop = self.loop.summary()
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
-            name='grip_force_ros: sim_instrument',
+            name=topics.diagnostic_name(self.get_namespace(), 'sim_instrument'),
             message=f'simulating {self.sim.obj}' + (f'; rejected {self.rejected} commands'
                                                     if self.rejected else ''),
             hardware_id=params.instrument_name,

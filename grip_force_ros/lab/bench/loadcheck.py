@@ -70,8 +70,8 @@ def _git(path: Path, *args) -> subprocess.CompletedProcess | None:
 
 
 def is_documentation(path: str) -> bool:
-    """Tell whether a file is one that no test runs: under ``docs/``, or Markdown (README, notes)."""
-    return path.startswith('docs/') or path.endswith('.md')
+    """Tell whether no test runs a file: under ``docs/``, Markdown or reST (CHANGELOG.rst)."""
+    return path.startswith('docs/') or path.endswith(('.md', '.rst'))
 
 
 def code_fingerprint(repo: Path, commit: str) -> str | None:

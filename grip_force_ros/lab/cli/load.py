@@ -15,8 +15,9 @@ def add_pressure_arguments(parser, prefix: str = '') -> None:
                         help='disk pressure: fsync writer processes (default 2; 0 = none)')
     parser.add_argument(f'--{prefix}file-mb', dest='disk_file_mb', type=float, default=256.0,
                         help="disk pressure: each writer's file, rewritten in a loop (MB, default 256)")
-    parser.add_argument(f'--{prefix}rate-mb-s', dest='disk_rate_mb_s', type=float, default=None,
-                        help='disk pressure: most MB/s each writer writes (default: as fast as the disk)')
+    parser.add_argument(f'--{prefix}rate-mb-s', dest='disk_rate_mb_s', type=float, default=64.0,
+                        help='disk pressure: most MB/s each writer writes (default 64; 0: as fast '
+                             'as the disk takes them, on a VM with a cached virtual disk a CPU load)')
     parser.add_argument(f'--{prefix}evict-rate', dest='disk_evict_rate', type=float, default=500.0,
                         help="disk pressure: the package's files dropped from the page cache a "
                              'second (1/s, default 500; 0 = none)')
@@ -33,7 +34,7 @@ def add_pressure_arguments(parser, prefix: str = '') -> None:
 def pressure_options(args) -> dict:
     """Return the keywords of :class:`~grip_force_ros.lab.bench.pressure.DiskPressure` in ``args``."""
     return {'writers': args.disk_writers, 'file_mb': args.disk_file_mb,
-            'rate_mb_s': args.disk_rate_mb_s, 'evict_rate': args.disk_evict_rate,
+            'rate_mb_s': args.disk_rate_mb_s or None, 'evict_rate': args.disk_evict_rate,
             'memory_mb': args.disk_memory_mb, 'drop_caches': args.disk_drop_caches,
             'directory': args.disk_dir}
 

@@ -9,6 +9,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from grip_force_ros import topics
 from grip_force_ros.control import Mode
 from grip_force_ros.control.inputs import SOURCES
 from grip_force_ros.trajectories import Trajectory
@@ -288,7 +289,7 @@ def run_problems(metrics: dict, windows: dict, max_gap: float = 0.1) -> list[str
 
 
 #: Name of the simulated instrument's /diagnostics status.
-SIM_STATUS = 'grip_force_ros: sim_instrument'
+SIM_STATUS = topics.diagnostic_name('/', 'sim_instrument')
 
 
 def drive_cuts_under_current(diagnostics, until: float) -> int:
@@ -313,6 +314,6 @@ def drive_cuts_under_current(diagnostics, until: float) -> int:
         if t > until:
             continue
         for status in statuses:
-            if status['name'] == SIM_STATUS:
+            if topics.is_status_of(status['name'], 'sim_instrument'):
                 count = max(count, int(status['values'].get('drive_cuts_under_current', 0)))
     return count
