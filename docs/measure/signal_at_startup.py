@@ -1,4 +1,4 @@
-"""How often a signal sent while a Python process starts is lost (docs/reliability.md, round 24).
+"""How often a signal sent while a Python process starts is lost (docs/reliability.md).
 
 Starts ``python -c "import time; time.sleep(120)"`` (this interpreter, so this venv's ``.pth``
 files run at start-up), sends it one signal at a random time in its first ``--window`` ms,

@@ -102,7 +102,7 @@ def lock_memory() -> str | None:
 
     Buys: no major page fault on the loop's path; a page of the interpreter, of the
     middleware's libraries or of the heap is never evicted and read back from disk while
-    the loop waits for it (a busy disk made that tens of ms, issue 46). The process's
+    the loop waits for it (on a busy disk, tens of ms). The process's
     resident memory grows to what it maps (thread stacks included).
 
     Not attempted where RLIMIT_MEMLOCK is finite and below :data:`LOCK_HEADROOM` times what

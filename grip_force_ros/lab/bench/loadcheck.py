@@ -17,7 +17,7 @@ does not start a new count) and ``dirty`` when the tracked files differed from i
 series is counted per code:
 ``grip-force loadcheck --tally FOLDER...`` reads the run files of any number of series
 and says, per commit, how many loaded runs were clean (:func:`tally`); a run stopped
-midway is incomplete, neither clean nor failed. Issue 13's bar is 20 clean runs of one code.
+midway is incomplete, neither clean nor failed. The bar for a code is 20 clean runs.
 
 No rclpy here: the tests run in child processes.
 """

@@ -1,6 +1,6 @@
 """A bounded disk-and-memory pressure: fsync writers, a page-cache evictor, a memory hog.
 
-What a freshly started machine does to the loop (issue 46): its disk is busy (``top``
+What a freshly started machine does to the loop: its disk is busy (``top``
 shows 100 % I/O wait) and a node that waits for a page of its own code or of a shared
 library to come back from disk stalls, real-time priority or not. This generator makes
 that happen on purpose, beside the CPU load of :mod:`.load`:

@@ -8,7 +8,7 @@ Every sample is placed at its header stamp: the one clock of the samples (the no
 stamp with the system clock when they sample or compute). The time a message reached
 the recorder is not a sample time: a stalled process, or a recorder that fell behind,
 delivers late, and a trace placed at its receive times is shifted against the others
-(a run of issue 46: the master's trace 2.5 s off the jaw and force traces). On the
+(the master's trace seconds off the jaw and force traces). On the
 stamps, a stall shows as what it was: a gap in the stalled process's samples.
 """
 from __future__ import annotations
