@@ -31,7 +31,8 @@ CONTROLLER = [
        'instrument states, on the measured time between them (expected_state_rate).',
        min=100.0, max=10000.0, read_only=True, group=_G),
     _P('expected_state_rate', 'double', 1000.0, 'Hz',
-       'Rate of the instrument state the controller steps on (instrument/actuator/measured_js; '
+       'Rate of the instrument state the controller steps on (the combined '
+       'instrument/measured_js, or instrument/actuator/measured_js of a split driver; '
        'dvrk: <arm>/jaw/measured_js, 100 Hz by default). The PID, filters and slew limit step '
        'on the measured time between states; the gains are scheduled on this rate '
        '(gain_design_rate) and shown stable from '
@@ -49,8 +50,9 @@ CONTROLLER = [
        "dVRK's watchdog on its drive link. Must cover two state periods (expected_state_rate).",
        min=0.002, max=1.0, group=_G),
     _P('actuator_watchdog_timeout', 'double', 0.03, 's',
-       'Watchdog of the actuator state (instrument/actuator/measured_js: measured current, drum '
-       "angle), the loop's feedback on the drive link. 30 ms, as the dVRK's drive link.",
+       'Watchdog of the actuator state (measured current, drum angle: the jaw_drum of the '
+       'combined instrument/measured_js, or instrument/actuator/measured_js of a split '
+       "driver), the loop's feedback on the drive link. 30 ms, as the dVRK's drive link.",
        min=0.002, max=1.0, group=_G),
     _P('force_watchdog_timeout', 'double', 0.03, 's',
        'Watchdog of the load cell (grip/measured_force) when force_sensor_enabled: the force '
