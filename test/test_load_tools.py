@@ -468,7 +468,7 @@ def test_pressure_commands_refuse_values_beyond_their_bounds(capsys):
 def test_changelog_and_markdown_are_documentation_for_the_tally():
     """A commit that changes only README, CHANGELOG.rst or docs/ keeps the code's fingerprint."""
     from grip_force_ros.lab.bench.loadcheck import is_documentation
-    assert all(is_documentation(p) for p in ('README.md', 'CHANGELOG.rst', 'docs/dvrk.md',
-                                              'docs/figures/demo_compare.png'))
+    docs = ('README.md', 'CHANGELOG.rst', 'docs/dvrk.md', 'docs/figures/demo_compare.png')
+    assert all(is_documentation(p) for p in docs)
     assert not any(is_documentation(p) for p in ('grip_force_ros/nodes/controller.py',
                                                  'config/paper_needle_driver.yaml', 'setup.cfg'))

@@ -563,7 +563,8 @@ class ControllerNode(LifecycleNode):
             values['target_force_N'] = f'{out.target_force:.3f}'
             values['pull_out_force_N'] = f'{out.pull_out_force:.3f}'
         return DiagnosticStatus(
-            level=level, name=topics.diagnostic_name(self.get_namespace(), 'controller'), message=f'{mode}: {reasons}',
+            level=level, name=topics.diagnostic_name(self.get_namespace(), 'controller'),
+            message=f'{mode}: {reasons}',
             hardware_id=params.instrument_name,
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 

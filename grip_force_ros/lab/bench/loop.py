@@ -348,9 +348,10 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
     """Measure the sim -> controller -> sim round trip and the full path at 1 kHz, the shipped nodes.
 
     Starts the shipped controller node as :mod:`.product_controller` (it notes the input
-    stamps of each step), sensorless or with the load cell in the loop, a ``master`` repeating the needle grasp (the shipped
-    executable), all with ``--params-file config``, and the shipped sim node as
-    :mod:`.product_sim`, which keeps its loop's round trips for the window.
+    stamps of each step), sensorless or with the load cell in the loop, a ``master``
+    repeating the needle grasp (the shipped executable), all with ``--params-file config``,
+    and the shipped sim node as :mod:`.product_sim`, which keeps its loop's round trips for
+    the window.
 
     Parameters
     ----------

@@ -87,7 +87,8 @@ def _render_product(lines: list[str], loop: dict, pad: str) -> None:
                      f"{_f(age['p99_ms'])} ms; same sample as the state "
                      f"{_f(f['same_sample_fraction'] * 100)} %")
     ref = 'contract floor' if loop.get('load_cell') else 'floor'
-    lines.append(f"{pad}goals (against the {ref}): p99 ratio {_f(loop['p99_ratio'])} <= {goals['p99_ratio']:g}: "
+    lines.append(f"{pad}goals (against the {ref}): p99 ratio {_f(loop['p99_ratio'])} <= "
+                 f"{goals['p99_ratio']:g}: "
                  f"{_met(met['p99_ratio'])}; full-path p99 ratio {_f(loop['full_path_p99_ratio'])} <= "
                  f"{goals['full_path_p99_ratio']:g}: {_met(met['full_path_p99_ratio'])}; missed "
                  f"{_f(loop['missed_fraction'] * 100)} % <= {ref}'s + 0.05 % = "
