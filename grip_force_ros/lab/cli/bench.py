@@ -46,13 +46,8 @@ def add_arguments(parser) -> None:
                              'cell + combined state); default: sensorless as shipped, against the floor')
     parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
                         help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
-    parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
-                        help='run the loop part (floor and product alike) under a bounded load: '
-                             'cpu (one busy process per core), disk (fsync writers, page-cache '
-                             "eviction of the package's files; the --disk-* options), both "
-                             '(default none)')
-    from grip_force_ros.lab.cli.load import add_pressure_arguments
-    add_pressure_arguments(parser, prefix='disk-')
+    from grip_force_ros.lab.cli.load import add_pressure_option
+    add_pressure_option(parser, 'the loop part (floor and product alike)')
 
 
 def _f(value, fmt='.3g') -> str:

@@ -63,13 +63,8 @@ def add_arguments(parser) -> None:
                              '(default 50 where the machine permits it, as ros2_control runs its '
                              'loop; else normal scheduling, said in the JSON "scheduling"; '
                              '0 = normal scheduling)')
-    parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
-                        help='run the demo under a bounded load, stopped when it ends: cpu (one '
-                             'busy process per core), disk (fsync writers, page-cache eviction of '
-                             "the package's files; the --disk-* options), both (default none); "
-                             'its summary is "pressure" in the JSON')
-    from grip_force_ros.lab.cli.load import add_pressure_arguments
-    add_pressure_arguments(parser, prefix='disk-')
+    from grip_force_ros.lab.cli.load import add_pressure_option
+    add_pressure_option(parser, 'the demo (its summary: "pressure" in the JSON)')
 
 
 def _write_report(report: dict, out: Path, args, load, show) -> None:

@@ -5,6 +5,18 @@ HELP = ('a bounded load for T seconds: busy processes (cpu), fsync writers, page
         'eviction and memory (disk), or both (Ctrl-C stops them at once)')
 
 
+def add_pressure_option(parser, what: str) -> None:
+    """Add ``--pressure none|cpu|disk|both`` and the disk pressure's ``--disk-*`` options.
+
+    ``what`` says what runs under the load (``'the demo'``, ``'the loop part'``).
+    """
+    parser.add_argument('--pressure', choices=('none', 'cpu', 'disk', 'both'), default='none',
+                        help=f'run {what} under a bounded load, stopped when it ends: cpu (one '
+                             'busy process per core), disk (fsync writers, page-cache eviction of '
+                             "the package's files; the --disk-* options), both (default none)")
+    add_pressure_arguments(parser, prefix='disk-')
+
+
 def add_pressure_arguments(parser, prefix: str = '') -> None:
     """Add the options of the disk pressure (:class:`~grip_force_ros.lab.bench.pressure.DiskPressure`).
 
