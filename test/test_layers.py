@@ -4,6 +4,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from _ast_tools import docstring_ids
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / 'grip_force_ros'
 #: The laboratory (docs/ARCHITECTURE.md): everything under grip_force_ros/lab/.
@@ -110,18 +112,6 @@ def edges() -> list[tuple[str, str, str]]:
     return out
 
 
-def _docstrings(tree: ast.Module) -> set[int]:
-    """ids of the Constant nodes that are docstrings (module, class, function)."""
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                out.add(id(body[0].value))
-    return out
-
-
 def uses_of_the_lab(path: Path, source: str | None = None) -> list[str]:
     """'file:line: name' of every use of the laboratory in ``path``: an import of
     grip_force_ros.lab (at the top or in a function, absolute or relative), or a string that
@@ -132,7 +122,7 @@ def uses_of_the_lab(path: Path, source: str | None = None) -> list[str]:
     where = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
     found = [(line, name) for line, name in imported(path, tree)
              if name == 'grip_force_ros.lab' or name.startswith('grip_force_ros.lab.')]
-    skip = _docstrings(tree)
+    skip = docstring_ids(tree)
     found += [(node.lineno, node.value) for node in ast.walk(tree)
               if isinstance(node, ast.Constant) and isinstance(node.value, str)
               and id(node) not in skip and 'grip_force_ros.lab' in node.value]

@@ -24,6 +24,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from _ast_tools import docstring_ids
 
 from grip_force_ros.control.inputs import SOURCES
 from grip_force_ros.effects import EFFECT_NAMES
@@ -55,21 +56,9 @@ def _modules() -> dict[str, ast.Module]:
 MODULES = _modules()
 
 
-def _docstrings(tree: ast.Module) -> set[int]:
-    """ids of the Constant nodes that are docstrings (module, class, function)."""
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                out.add(id(body[0].value))
-    return out
-
-
 def _strings(tree: ast.Module):
     """(line, text) of every string constant that is not a docstring."""
-    skip = _docstrings(tree)
+    skip = docstring_ids(tree)
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
             yield node.lineno, node.value
