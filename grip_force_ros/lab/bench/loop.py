@@ -128,20 +128,8 @@ VARIANTS = (
 
 
 def _window(measurer: Child, others: list[Child], seconds: float) -> dict:
-    """Wait for START, meter CPU over the window, return the measurer's JSON."""
-    line = measurer.wait_line(lambda line: line == 'START' or line.startswith('{'), START_TIMEOUT)
-    if line != 'START':
-        raise BenchError(f'{measurer.name}: {json.loads(line).get("error", line)}')
-    for c in [measurer] + others:
-        c.cpu_start()
-    line = measurer.wait_line(lambda line: line.startswith('{'), seconds + 30.0)
-    for c in [measurer] + others:
-        c.cpu_stop()
-    result = json.loads(line)
-    if 'error' in result:
-        raise BenchError(f'{measurer.name}: {result["error"]}')
-    result['cpu_percent'] = {c.name: c.cpu_percent for c in [measurer] + others}
-    return result
+    """Wait for START, meter CPU over the window, return the measurer's JSON (:func:`_windows`, one arm)."""
+    return _windows({'': (measurer, others)}, seconds)['']
 
 
 def run_floor(seconds: float, domain_id: int, variant: Variant = BEST, warmup: float = 1.0,
