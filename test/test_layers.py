@@ -32,6 +32,7 @@ MAY_IMPORT = {
     # the laboratory: everything around it
     'lab.plotting': set(),
     'lab.closed_loop': {'control'},
+    'lab.tune': {'objects', 'effects', 'control', 'model', 'params'},
     'lab.processes': {'nodes'},
     'lab.harness': {'nodes'},
     'lab.rig': {'lab.plotting'},

@@ -1,4 +1,4 @@
-"""Loop design (control/tune.py, python-control) and `grip-force tune`.
+"""Loop design (lab/tune.py, python-control) and `grip-force tune`.
 
 The margins claimed in docs/control.md and in each YAML are checked on the gains the YAML
 carries, for every plant variant (nominal, cable stiffness and pulley friction +-20%), with
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grip_force_ros.control import tune
+from grip_force_ros.lab import tune
 from grip_force_ros.params import load_params_file, make_params
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -54,7 +54,7 @@ and flagged; beyond ``master_angle_tolerance`` they are invalid.
 Pieces (small classes, each usable alone): :class:`ForceMap` (master angle -> free jaw target
 or grip force target), :class:`PID` (back-calculation anti-windup, filtered derivative on the
 measurement, bumpless preset), :class:`CurrentLimiter` (current and slew limits, reports
-which hit). Loop design with python-control: :mod:`grip_force_ros.control.tune`.
+which hit). The gains are designed offline by `grip-force tune` (the laboratory).
 """
 from grip_force_ros.control.controller import ControlOutput, GripController, Mode
 from grip_force_ros.control.force_map import ForceMap

@@ -28,13 +28,13 @@ def figure_rates(params) -> tuple[float, ...]:
 
 
 def plot_steps(params, path, title: str = '', model=None) -> dict:
-    """Write the step-response figure (PNG) of :func:`grip_force_ros.control.tune.step_responses`.
+    """Write the step-response figure (PNG) of :func:`grip_force_ros.lab.tune.step_responses`.
 
     One curve per loop at each rate of :func:`figure_rates` (solid: the first, dashed: the
     next), each with the gains the controller runs there (the schedule). Returns the 5%
     settling times (s): rate (Hz) -> curve name -> s.
     """
-    from grip_force_ros.control.tune import settling_time, step_responses
+    from grip_force_ros.lab.tune import settling_time, step_responses
     from grip_force_ros.lab.plotting import pyplot
     plt = pyplot()
     fig, (ax_f, ax_j) = plt.subplots(2, 1, figsize=(8, 8), sharex=True)
@@ -81,7 +81,7 @@ def _rate_lines(result) -> list[str]:
 
 
 def run(args) -> int:
-    from grip_force_ros.control import tune
+    from grip_force_ros.lab import tune
     from grip_force_ros.params import ParameterError, load_params_file
     try:
         params = load_params_file(args.config)
