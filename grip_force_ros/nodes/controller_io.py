@@ -235,7 +235,7 @@ class CrtkControllerIO(ControllerIO):
         """Store the actuator state (the step runs on it).
 
         Returns its header stamp (int ns) when it was accepted as a new, stamped sample, else
-        None (:data:`NO_STEP`).
+        None (the step carries the controller's clock).
         """
         try:
             msg = JointStateData(data)
