@@ -224,7 +224,7 @@ def _synthetic_product(p99, full_p99, missed, controller_cpu, skew=0.0):
             'timer_periods': {'missed_fraction': 0.0},
             'full_path': {'full_path': lat(full_p99), 'matched_fraction': 1.0, 'inputs': inputs},
             'cpu_percent': {'sim': 30.0, 'controller': controller_cpu, 'master': 8.0},
-            'other_commands': 3, 'window_skew_s': skew, 'executor': 'node default'}
+            'other_commands': 3, 'window_skew_s': skew}
 
 
 def test_compare_arms_judges_each_arm_against_the_one_floor():

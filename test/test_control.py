@@ -127,34 +127,35 @@ def test_limiter_reports_which_limit():
 # --------------------------------------------------------------------------- inputs
 def test_inputs_reject_bad_samples_and_keep_last_good(params):
     inp = ControlInputs.from_params(params)
-    assert inp.set_instrument(0.0, 0.1, 0.3) is None
+    assert inp.set_instrument(0.0, 0.1, 0.3) == (True, None)
     for bad in [(math.nan, 0.3), (0.1, math.inf), (3.0, 0.3), (0.1, 2.0), (0.1, -0.5)]:
-        reason = inp.set_instrument(0.001, *bad)
-        assert reason and reason.startswith('instrument:')
+        fresh, reason = inp.set_instrument(0.001, *bad)
+        assert not fresh and reason and reason.startswith('instrument:')
         assert inp.instrument_fault == reason
         assert (inp.wrist_angle, inp.jaw_angle) == (0.1, 0.3)    # last good kept
-    assert inp.set_instrument(0.002, 0.1, 0.31) is None
+    assert inp.set_instrument(0.002, 0.1, 0.31) == (True, None)
     assert inp.instrument_fault is None
-    assert inp.set_actuator(0.0, 'garbage').startswith('actuator: a value is not a number')
+    assert inp.set_actuator(0.0, 'garbage')[1].startswith('actuator: a value is not a number')
     assert sum(inp.rejected.values()) == 6
 
 
 def test_inputs_stamps_backwards_future_and_duplicates(params):
     inp = ControlInputs.from_params(params)
-    assert inp.set_master(1.0, 0.5, stamp=0.999) is None
-    assert inp.set_master(1.001, 0.6, stamp=0.999) is None      # duplicate: ignored
+    assert inp.set_master(1.0, 0.5, stamp=0.999) == (True, None)
+    assert inp.set_master(1.001, 0.6, stamp=0.999) == (False, None)   # duplicate: ignored
     assert inp.master_angle == 0.5 and inp.master_time == 1.0  # no watchdog refresh
-    assert 'backwards' in inp.set_master(1.002, 0.6, stamp=0.5)
-    assert inp.set_master(1.003, 0.6, stamp=0.51) is None       # stream continues from the jump
-    assert 'ahead' in inp.set_master(1.004, 0.6, stamp=5.0)
+    assert 'backwards' in inp.set_master(1.002, 0.6, stamp=0.5)[1]
+    assert inp.set_master(1.003, 0.6, stamp=0.51) == (True, None)   # stream continues from the jump
+    assert 'ahead' in inp.set_master(1.004, 0.6, stamp=5.0)[1]
 
 
 def test_master_clamped_or_rejected(params):
     inp = ControlInputs.from_params(params)                     # range [0, 1.2], tolerance 0.5
-    assert inp.set_master(0.0, -0.2) is None and inp.master_clamped and inp.master_angle == 0.0
-    assert inp.set_master(0.0, 1.3) is None and inp.master_clamped and inp.master_angle == 1.2
-    assert inp.set_master(0.0, 0.4) is None and not inp.master_clamped
-    assert 'outside' in inp.set_master(0.0, 5.0)
+    assert inp.set_master(0.0, -0.2) == (True, None) and inp.master_clamped and inp.master_angle == 0.0
+    assert inp.set_master(0.0, 1.3) == (True, None) and inp.master_clamped and inp.master_angle == 1.2
+    assert inp.set_master(0.0, 0.4) == (True, None) and not inp.master_clamped
+    assert inp.set_master(0.0, 5.0)[0] is False
+    assert 'outside' in inp.set_master(0.0, 5.0)[1]
 
 
 # --------------------------------------------------------------------------- controller
@@ -385,7 +386,7 @@ def test_controller_cross_parameter_checks():
 def test_unset_zero_stamps_are_not_duplicates(params):
     inp = ControlInputs.from_params(params)
     for k in range(3):
-        assert inp.set_master(0.001 * k, 0.5, stamp=0.0) is None
+        assert inp.set_master(0.001 * k, 0.5, stamp=0.0) == (True, None)
         assert inp.master_time == 0.001 * k                    # every sample refreshes
 
 

@@ -44,13 +44,13 @@ def node(monkeypatch):
     ros = RosRunner()
     ctl = ros.add(ControllerNode)
     step_times: list[float] = []
-    control = ctl._control
+    update = ctl._update
 
-    def recorded_control(answered_stamp=None):
+    def recorded_update(now_ns, answered_ns, started):
         step_times.append(clock.now)
-        control(answered_stamp)
+        update(now_ns, answered_ns, started)
 
-    ctl._control = recorded_control
+    ctl._update = recorded_update
     try:
         yield ctl, clock, step_times
     finally:
@@ -60,7 +60,7 @@ def node(monkeypatch):
 def _state(ctl) -> None:
     """One actuator state (drum current, position, velocity) delivered to the node."""
     stamp = ctl.get_clock().now().to_msg()
-    ctl.io._on_actuator(serialize_message(
+    ctl._on_state(ctl.io.read_actuator, serialize_message(
         joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05])))
 
 
@@ -143,9 +143,9 @@ def test_a_stall_of_this_process_is_not_taken_for_a_lost_input(node):
     assert steps[-1] == later + period
 
 
-def test_a_cancelled_timer_stops_the_loop(node):
+def test_a_stopped_loop_does_not_step(node):
     ctl, clock, steps = node
-    ctl._timer.cancel()
+    ctl._running = False
     _state(ctl)
     assert steps == [] and ctl.last_output is None
     assert ctl.inputs.measured_current == pytest.approx(0.05), 'the state is still read'
@@ -201,7 +201,7 @@ class _Recorder:
 
 
 def _record_outputs(ctl, log) -> None:
-    ctl.io._servo_pub, ctl.io._estimate_pub, ctl.io._target_pub = (
+    ctl._command_pub, ctl._estimate_pub, ctl._target_pub = (
         _Recorder('command', log), _Recorder('estimate', log), _Recorder('target', log))
 
 
@@ -213,13 +213,13 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
     _record_outputs(ctl, [])
 
     def command_stamp():
-        sent = JointStateData(ctl.io._servo_pub.last)
+        sent = JointStateData(ctl._command_pub.last)
         return sent.sec, sent.nanosec
 
     def deliver(stamp):
-        ctl.io._on_actuator(serialize_message(
+        ctl._on_state(ctl.io.read_actuator, serialize_message(
             joint_state(stamp, [topics.DRUM_JOINT], [0.1], [0.0], [0.05])))
-        return command_stamp(), ctl.io._estimate_msg.header.stamp
+        return command_stamp(), ctl.io.estimate_msg.header.stamp
 
     stamp = ctl.get_clock().now().to_msg()
     stamp.nanosec = (stamp.nanosec // 1000) * 1000 + 123          # recognisable
@@ -256,6 +256,27 @@ def test_command_every_step_forces_at_their_own_rate(node):
     _state(ctl)
     assert log[7:] == ['command', 'estimate', 'target']
     # the one sent is the step's own output, stamped with the controller's clock at it
-    est = ctl.io._estimate_pub.last
+    est = ctl._estimate_pub.last
     assert est.wrench.force.z == ctl.last_output.estimated_force
     assert est.header.stamp.sec > 0
+
+
+def test_a_state_reaches_the_publisher_within_four_frames(node):
+    """One read-compute-write path: subscription callback -> _update -> Publisher.publish."""
+    import sys
+    ctl, clock, steps = node
+    depths = []
+
+    class _Counting:
+        def publish(self, msg):
+            frame, names = sys._getframe(), []
+            while frame is not None and frame.f_code.co_name != '_on_state':
+                names.append(frame.f_code.co_name)
+                frame = frame.f_back
+            depths.append(names + ['_on_state'])
+
+    ctl._update = type(ctl)._update.__get__(ctl)          # the shipped step, not the recorder
+    ctl._command_pub = _Counting()
+    _state(ctl)
+    # _on_state, _update, publish: the stand-in publisher's own frame is Publisher.publish's
+    assert depths == [['publish', '_update', '_on_state']]

@@ -136,9 +136,9 @@ def test_valid_runtime_set_reaches_the_controller_core(ros, controller, client):
 def test_force_sensor_switch_subscribes_at_runtime(ros, controller, client):
     (res,) = remote_set(client, ros, force_sensor_enabled=True)
     assert res.successful
-    assert controller.io._force_sub is not None and controller.controller.use_sensor
+    assert controller._force_sub is not None and controller.controller.use_sensor
     (res,) = remote_set(client, ros, force_sensor_enabled=False)
-    assert res.successful and controller.io._force_sub is None
+    assert res.successful and controller._force_sub is None
 
 
 def test_double_array_elements_are_checked_at_runtime(ros):

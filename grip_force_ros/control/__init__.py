@@ -7,8 +7,9 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
     ctrl = GripController(params)            # params: ParamSet (instrument + limits + controller)
     inputs = ctrl.new_inputs()               # ControlInputs, validated in one place
     # in the subscription callbacks (receive_time = node clock now [s], stamp = header stamp [s],
-    # same clock; stamp=nan skips the stamp checks). Each returns None, or the reason (str) the
-    # sample was rejected (publish it on /diagnostics):
+    # same clock; stamp=nan skips the stamp checks). Each returns (fresh, reason): fresh is
+    # True when the sample was accepted as a new one (False: a duplicate or rejected), reason
+    # None or why the sample was rejected (str; publish it on /diagnostics):
     inputs.set_master(receive_time, master_angle)                      # [rad]
     inputs.set_instrument(receive_time, wrist_angle, jaw_angle, jaw_velocity=0.0, stamp=nan)
     inputs.set_actuator(receive_time, measured_current, motor_angle=0.0, motor_velocity=0.0,

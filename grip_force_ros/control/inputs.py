@@ -35,6 +35,10 @@ INTERVAL_CLIP = 4.0
 
 _NAN = math.nan
 _isfinite = math.isfinite
+#: What a ``set_*`` returns: (fresh, rejection reason); constant tuples, no allocation.
+_FRESH = (True, None)
+_DUPLICATE = (False, None)
+_REJECTED = False
 
 
 def source_timeouts(params) -> dict:
@@ -80,11 +84,12 @@ class ControlInputs:
 
     Notes
     -----
-    Each ``set_*`` method returns None when the sample is accepted, or the reason (str) it
-    was rejected. A rejected sample is not stored; the source is marked faulted (its
-    ``*_fault`` attribute holds the reason) until the next accepted sample. A sample whose
-    stamp equals the previous stamp is a duplicate: ignored (returns None) without
-    refreshing the receive time. A stamp of NaN or 0.0 (an unset ROS header) skips the
+    Each ``set_*`` method returns ``(fresh, reason)``: ``fresh`` (bool) is True when the
+    sample was accepted as a new one (stored, its receive time refreshed), ``reason`` is None
+    or why the sample was rejected (str). A rejected sample (``(False, reason)``) is not
+    stored; the source is marked faulted (its ``*_fault`` attribute holds the reason) until
+    the next accepted sample. A sample whose stamp equals the previous stamp is a duplicate:
+    ignored without refreshing the receive time (``(False, None)``). A stamp of NaN or 0.0 (an unset ROS header) skips the
     stamp checks.
     """
 
@@ -183,24 +188,24 @@ class ControlInputs:
 
     # ------------------------------------------------------------------ setters
     def set_master(self, receive_time: float, master_angle: float, stamp: float = _NAN):
-        """Master gripper opening angle (rad). Returns None or the rejection reason."""
+        """Master gripper opening angle (rad). Returns ``(fresh, reason)`` (class notes)."""
         try:
             receive_time, master_angle, stamp = float(receive_time), float(master_angle), float(stamp)
         except (TypeError, ValueError):
-            return self.reject('master', receive_time, 'a value is not a number')
+            return _REJECTED, self.reject('master', receive_time, 'a value is not a number')
         why = self._check_times('master', receive_time, stamp, self.master_stamp)
         if why is not None:
             if why == 'duplicate':
-                return None
+                return _DUPLICATE
             if stamp == stamp and _isfinite(stamp):
                 self.master_stamp = stamp     # a jump back is rejected once, not forever
-            return self.reject('master', receive_time, why)
+            return _REJECTED, self.reject('master', receive_time, why)
         angle = master_angle
         if not _isfinite(angle):
-            return self.reject('master', receive_time, f'gripper angle {angle!r} not finite')
+            return _REJECTED, self.reject('master', receive_time, f'gripper angle {angle!r} not finite')
         lo, hi, tol = self.master_angle_min, self.master_angle_max, self.master_angle_tolerance
         if angle < lo - tol or angle > hi + tol:
-            return self.reject('master', receive_time,
+            return _REJECTED, self.reject('master', receive_time,
                                f'gripper angle {angle:.3f} rad outside [{lo - tol:.3f}, {hi + tol:.3f}]')
         clamped = False
         if angle < lo:
@@ -213,7 +218,7 @@ class ControlInputs:
         self.master_time = receive_time
         self.master_stamp = stamp
         self.master_fault = None
-        return None
+        return _FRESH
 
     def set_instrument(self, receive_time: float, wrist_angle: float, jaw_angle: float,
                        jaw_velocity: float = 0.0, stamp: float = _NAN):
@@ -222,23 +227,23 @@ class ControlInputs:
             receive_time, stamp = float(receive_time), float(stamp)
             wrist_angle, jaw_angle, jaw_velocity = float(wrist_angle), float(jaw_angle), float(jaw_velocity)
         except (TypeError, ValueError):
-            return self.reject('instrument', receive_time, 'a value is not a number')
+            return _REJECTED, self.reject('instrument', receive_time, 'a value is not a number')
         why = self._check_times('instrument', receive_time, stamp, self.instrument_stamp)
         if why is not None:
             if why == 'duplicate':
-                return None
+                return _DUPLICATE
             if stamp == stamp and _isfinite(stamp):
                 self.instrument_stamp = stamp
-            return self.reject('instrument', receive_time, why)
+            return _REJECTED, self.reject('instrument', receive_time, why)
         if not (_isfinite(wrist_angle) and _isfinite(jaw_angle) and _isfinite(jaw_velocity)):
-            return self.reject('instrument', receive_time,
+            return _REJECTED, self.reject('instrument', receive_time,
                                f'non-finite value (wrist {wrist_angle!r}, jaw {jaw_angle!r}, '
                                f'jaw velocity {jaw_velocity!r})')
         if abs(wrist_angle) > self.wrist_angle_limit:
-            return self.reject('instrument', receive_time,
+            return _REJECTED, self.reject('instrument', receive_time,
                                f'wrist angle {wrist_angle:.3f} rad beyond +-{self.wrist_angle_limit:.3f}')
         if jaw_angle < self.jaw_angle_min or jaw_angle > self.jaw_angle_max:
-            return self.reject('instrument', receive_time,
+            return _REJECTED, self.reject('instrument', receive_time,
                                f'jaw angle {jaw_angle:.3f} rad outside '
                                f'[{self.jaw_angle_min:.3f}, {self.jaw_angle_max:.3f}]')
         self.wrist_angle = wrist_angle
@@ -249,7 +254,7 @@ class ControlInputs:
         self.instrument_time = receive_time
         self.instrument_stamp = stamp
         self.instrument_fault = None
-        return None
+        return _FRESH
 
     def set_actuator(self, receive_time: float, measured_current: float, motor_angle: float = 0.0,
                      motor_velocity: float = 0.0, stamp: float = _NAN):
@@ -259,20 +264,20 @@ class ControlInputs:
             measured_current = float(measured_current)
             motor_angle, motor_velocity = float(motor_angle), float(motor_velocity)
         except (TypeError, ValueError):
-            return self.reject('actuator', receive_time, 'a value is not a number')
+            return _REJECTED, self.reject('actuator', receive_time, 'a value is not a number')
         why = self._check_times('actuator', receive_time, stamp, self.actuator_stamp)
         if why is not None:
             if why == 'duplicate':
-                return None
+                return _DUPLICATE
             if stamp == stamp and _isfinite(stamp):
                 self.actuator_stamp = stamp
-            return self.reject('actuator', receive_time, why)
+            return _REJECTED, self.reject('actuator', receive_time, why)
         if not (_isfinite(measured_current) and _isfinite(motor_angle) and _isfinite(motor_velocity)):
-            return self.reject('actuator', receive_time,
+            return _REJECTED, self.reject('actuator', receive_time,
                                f'non-finite value (current {measured_current!r}, motor angle '
                                f'{motor_angle!r}, motor velocity {motor_velocity!r})')
         if abs(measured_current) > self.current_limit:
-            return self.reject('actuator', receive_time,
+            return _REJECTED, self.reject('actuator', receive_time,
                                f'measured current {measured_current:.3f} A beyond +-{self.current_limit:.3f}')
         self.measured_current = measured_current
         self.motor_angle = motor_angle
@@ -281,29 +286,29 @@ class ControlInputs:
         self.actuator_time = receive_time
         self.actuator_stamp = stamp
         self.actuator_fault = None
-        return None
+        return _FRESH
 
     def set_force(self, receive_time: float, grip_force: float, stamp: float = _NAN):
         """Measured grip force of a force sensor (N)."""
         try:
             receive_time, grip_force, stamp = float(receive_time), float(grip_force), float(stamp)
         except (TypeError, ValueError):
-            return self.reject('force', receive_time, 'a value is not a number')
+            return _REJECTED, self.reject('force', receive_time, 'a value is not a number')
         why = self._check_times('force', receive_time, stamp, self.force_stamp)
         if why is not None:
             if why == 'duplicate':
-                return None
+                return _DUPLICATE
             if stamp == stamp and _isfinite(stamp):
                 self.force_stamp = stamp
-            return self.reject('force', receive_time, why)
+            return _REJECTED, self.reject('force', receive_time, why)
         if not _isfinite(grip_force):
-            return self.reject('force', receive_time, f'grip force {grip_force!r} not finite')
+            return _REJECTED, self.reject('force', receive_time, f'grip force {grip_force!r} not finite')
         if abs(grip_force) > self.force_limit:
-            return self.reject('force', receive_time,
+            return _REJECTED, self.reject('force', receive_time,
                                f'grip force {grip_force:.3f} N beyond +-{self.force_limit:.1f}')
         self.measured_force = grip_force
         self.force_interval = next_interval(self.force_interval, receive_time - self.force_time)
         self.force_time = receive_time
         self.force_stamp = stamp
         self.force_fault = None
-        return None
+        return _FRESH

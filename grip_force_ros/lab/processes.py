@@ -102,7 +102,7 @@ def ros_environment(domain_id: int | None = None, extra: Mapping[str, str] | Non
         ``ROS_DOMAIN_ID`` of the child; None keeps the one of ``base`` (e.g. a
         test's own domain, set by its conftest).
     extra : mapping, optional
-        Further variables, set last (e.g. ``GRIP_FORCE_EXECUTOR``, ``PYTHONPATH``).
+        Further variables, set last (e.g. ``PYTHONPATH``).
     base : mapping, optional
         Environment to start from (default ``os.environ``; not modified).
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import faulthandler
 import gc
 import math
-import os
 import signal
 import sys
 import time
@@ -75,10 +74,6 @@ def matching_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
 
 
 _RCLError = _rclpy_impl.RCLError
-
-#: Environment variable choosing the executor of ``main``: 'events' or 'single'.
-EXECUTOR_ENV = 'GRIP_FORCE_EXECUTOR'
-
 
 class InputRejected(ValueError):
     """A received message is malformed; ``str()`` is the reason for /diagnostics."""
@@ -163,12 +158,12 @@ def stamp_nanoseconds(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def make_executor(context=None, kind: str | None = None):
+def make_executor(context=None, kind: str = 'events'):
     """Make an executor: 'events' (rclpy.experimental.EventsExecutor) or 'single'.
 
-    ``kind`` defaults to the GRIP_FORCE_EXECUTOR environment variable, else 'events'.
+    The nodes' own processes (:func:`run_node`) spin the EventsExecutor; 'single' is for a
+    caller that spins nodes of its own in a thread (the laboratory's harness).
     """
-    kind = kind or os.environ.get(EXECUTOR_ENV, 'events')
     if kind == 'single':
         return SingleThreadedExecutor(context=context)
     try:

@@ -32,8 +32,9 @@ came for :data:`FALLBACK_AFTER_PERIODS` state periods (a watch timer looks every
 :data:`WATCH_PERIOD`, so the first fallback step comes at most that much later) and then
 steps every half state period at most (the safe state still comes within a timer period or
 two of ``watchdog_timeout``), never within :data:`MIN_STEP_SPACING_PERIODS` of the previous
-step; the next state puts it to sleep again. Cancelling the watch timer (``_timer``) stops the
-loop altogether (no step on states either).
+step; the next state puts it to sleep again. The loop runs while the node is active
+(``_running``): activation sets it, the start of a deactivation clears it (no step on states
+or on the timer then).
 
 Stamps: the current command of a step on a fresh actuator state (accepted,
 with a non-zero stamp) carries that state's header stamp, a reply stamp in the
@@ -56,9 +57,9 @@ Lifecycle (``rclpy.lifecycle``; ``ros2 lifecycle get|set /controller``):
     construction, exit 2, as a plain node). Nothing is published: the drive gets no
     command (the sim, like a drive with a command timeout, holds 0 A).
 ``configure`` -> ``inactive``
-    The controller core built from the parameters, the profile's topics created
-    (:mod:`~grip_force_ros.nodes.controller_io`: subscriptions fill the inputs, so they
-    are fresh at activation); no step runs, nothing is published (zero current). A
+    The controller core built from the parameters, the profile's topics created (the
+    conversions are :mod:`~grip_force_ros.nodes.controller_io`'s; subscriptions fill the
+    inputs, so they are fresh at activation); no step runs, nothing is published (zero current). A
     failure (e.g. the dvrk profile without crtk_msgs) leaves the node unconfigured and logs
     why.
 ``activate`` -> ``active``
@@ -87,15 +88,17 @@ import time
 import traceback
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.task import Future
 from rclpy.time import Time
+from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
-from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, InputRejected, run_node
-from grip_force_ros.nodes.controller_io import controller_io
+from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS, run_node
+from grip_force_ros.nodes.controller_io import NO_STEP, controller_io
 from grip_force_ros.nodes.controller_services import ControllerServices
 from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
@@ -158,7 +161,13 @@ class _ZeroRamp:
 
 
 class ControllerNode(LifecycleNode):
-    """Runs :class:`GripController` once per actuator state, the timer as watchdog fallback."""
+    """Runs :class:`GripController` once per actuator state, the timer as watchdog fallback.
+
+    The loop is one read-compute-write update per instrument state: the state topic's
+    subscription callback (:meth:`_on_state`) converts the message into the inputs (the
+    profile's ``read_*``, :mod:`~grip_force_ros.nodes.controller_io`), and :meth:`_update`
+    steps the controller, converts its output (the profile's ``command``) and publishes it.
+    """
 
     def __init__(self, **kwargs):
         super().__init__('controller', **kwargs)
@@ -169,7 +178,13 @@ class ControllerNode(LifecycleNode):
         self.add_on_set_parameters_callback(self._refuse_unsafe_set)
         self.controller: GripController | None = None
         self.inputs: ControlInputs | None = None
-        self.io = None
+        self.io = None                 # the profile's conversions (controller_io)
+        self._loop_entities: list = []  # the loop's subscriptions and publishers (configure)
+        self._force_sub = None         # the load cell's subscription, while listened to
+        self._force_wanted = False     # a service needs the load cell (start_procedure)
+        self._command_pub = self._estimate_pub = self._target_pub = None
+        self._next_forces_ns = 0       # controller clock (ns) at which the forces are due
+        self._running = False          # the loop steps (active, not stopping)
         self.procedure = None          # a service's procedure or the deactivation ramp, or None
         self.last_output = None
         self._timer = None             # the watch timer: exists while configured, runs while active
@@ -203,7 +218,7 @@ class ControllerNode(LifecycleNode):
     @property
     def active(self) -> bool:
         """Whether the loop runs (the lifecycle state is active, the timer not cancelled)."""
-        return self._timer is not None and not self._timer.is_canceled()
+        return self._running
 
     # ------------------------------------------------------------------ lifecycle
     @_transition
@@ -219,7 +234,8 @@ class ControllerNode(LifecycleNode):
             self._timer = self.create_timer(WATCH_PERIOD, self._watch, autostart=False)
             self._fallback = self.create_timer(1.0 / params.control_rate, self._tick,
                                                autostart=False)
-            self.io = controller_io(self, params)     # the profile's topics (dvrk: crtk_msgs)
+            self.io = controller_io(params)     # the profile's conversions (dvrk: crtk_msgs)
+            self._create_loop_entities()
         except ValueError as exc:
             self._release()
             self._configure_error = str(exc)
@@ -245,6 +261,7 @@ class ControllerNode(LifecycleNode):
             self.controller = GripController(self.params)
         self._reset_loop_state()
         self._timer.reset()
+        self._running = True
         self.get_logger().info('active: closing the loop')
         return _SUCCESS
 
@@ -328,6 +345,7 @@ class ControllerNode(LifecycleNode):
         if not self.active:
             return
         self.user_services.stop(f'the controller is {reason}')
+        self._running = False
         self._timer.cancel()
         self._fallback.cancel()
         self._fallback_idle = True
@@ -335,20 +353,73 @@ class ControllerNode(LifecycleNode):
         longest = 2.0 * self.controller.current_limit / self.params.max_current_slew + 1.0  # s
         give_up = time.monotonic() + longest
         while True:
-            self._control()
+            self._update(self._now_ns().nanoseconds, None, None)
             if self.last_output.current_command == 0.0 or time.monotonic() > give_up:
                 break
             time.sleep(self._period)
         self.procedure = None
         stamp = self._now_ns()
-        self.io.publish_forces(self.last_output, stamp.nanoseconds)   # the last ramp step's
+        now_ns = stamp.nanoseconds
+        self._next_forces_ns = now_ns + self.io.forces_period_ns
+        self.io.fill_forces(self.last_output, now_ns)    # the last ramp step's
+        self._estimate_pub.publish(self.io.estimate_msg)
+        self._target_pub.publish(self.io.target_msg)
         self._publish_diagnostics(stamp.to_msg(), self.last_output)
+
+    def _create_loop_entities(self) -> None:
+        """Create the profile's loop topics: the callbacks are this node's, the conversions the IO's."""
+        io, names, raw = self.io, self.io.names, self.io.raw_states
+        subscribe, entities = self.create_subscription, self._loop_entities
+        on_state = self._on_state
+        entities.append(subscribe(JointState, names.master_js,
+                                  functools.partial(on_state, io.read_master), STATE_SUB_QOS,
+                                  raw=True))
+        entities.append(subscribe(JointState, names.instrument_js,
+                                  functools.partial(on_state, io.read_instrument), STATE_SUB_QOS,
+                                  raw=raw))
+        entities.append(subscribe(JointState, names.actuator_js,
+                                  functools.partial(on_state, io.read_actuator), STATE_SUB_QOS,
+                                  raw=raw))
+        self._command_pub = self.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self._estimate_pub = self.create_publisher(WrenchStamped, names.estimated_force,
+                                                   STATE_PUB_QOS)
+        self._target_pub = self.create_publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
+        entities += (self._command_pub, self._estimate_pub, self._target_pub)
+        self._next_forces_ns = 0
+        self._follow_force()
+        io.attach(self)
+
+    def _follow_force(self) -> None:
+        """Subscribe to the load cell while force_sensor_enabled or a service needs it."""
+        listen = self.params.force_sensor_enabled or self._force_wanted
+        if listen and self._force_sub is None:
+            self._force_sub = self.create_subscription(
+                WrenchStamped, self.io.names.measured_force,
+                functools.partial(self._on_state, self.io.read_force), STATE_SUB_QOS, raw=True)
+        elif not listen and self._force_sub is not None:
+            self.destroy_subscription(self._force_sub)
+            self._force_sub = None
+
+    def load_cell_publishers(self) -> int:
+        """Return how many publishers the load-cell topic has (0: no load cell)."""
+        return self.count_publishers(self.resolve_topic_name(self.io.names.measured_force))
 
     def _release(self) -> None:
         """Destroy what configure created (safe on a half-made configuration)."""
-        if self.io is not None:
-            self.io.destroy()
-            self.io = None
+        io, self.io = self.io, None    # first: a callback queued before this drops its event
+        self._running = False
+        if io is not None:
+            io.detach(self)
+        if self._force_sub is not None:
+            self.destroy_subscription(self._force_sub)
+            self._force_sub = None
+        for entity in reversed(self._loop_entities):
+            if type(entity).__name__ == 'Subscription':
+                self.destroy_subscription(entity)
+            else:
+                self.destroy_publisher(entity)
+        self._loop_entities = []
+        self._command_pub = self._estimate_pub = self._target_pub = None
         for timer in (self._timer, self._fallback):
             if timer is not None:
                 self.destroy_timer(timer)
@@ -365,7 +436,8 @@ class ControllerNode(LifecycleNode):
         """Let ``procedure`` step instead of the controller (and listen to the load cell)."""
         self.procedure = procedure
         if needs_load_cell:
-            self.io.want_force(True)
+            self._force_wanted = True
+            self._follow_force()
 
     def end_procedure(self, procedure) -> None:
         """Hand the loop back to the controller, which continues from the current last sent."""
@@ -374,45 +446,51 @@ class ControllerNode(LifecycleNode):
         self.procedure = None
         if procedure.drives_current:     # stopped mid-staircase: the ramp continues from there
             self.controller.command = procedure.command
-        self.io.want_force(False)
+        self._force_wanted = False
+        self._follow_force()
 
     # ------------------------------------------------------------------ time
     def now(self) -> float:
         """Return the controller clock (s), the clock of receive times and of the watchdog."""
         return self._now_ns().nanoseconds * 1e-9
 
-    # ------------------------------------------------------------------ inputs (the profile's)
-    def reject(self, source: str, now: float, exc: InputRejected) -> None:
-        """Count a malformed message of ``source``: the input is faulted until a good one."""
-        reason = self.inputs.reject(source, now, f'malformed message: {exc}')
-        self._note_rejection(reason)
-        loop_log(self).put('warning', f'rejected {reason}', throttle=1.0)
+    # ------------------------------------------------------------------ inputs
+    def _on_state(self, read, data) -> None:
+        """Take one message of a loop topic; on an instrument state, run the control step.
+
+        The subscription callback of every loop topic (bound to the profile's converter
+        ``read`` with :func:`functools.partial`): one clock read gives the receive time and
+        the step's time; ``read`` fills the inputs and returns :data:`NO_STEP`, or the
+        state's stamp that the command answers (int ns, or None: the controller's clock).
+        """
+        io = self.io
+        if io is None:                     # released: an event queued before is dropped
+            return
+        now_ns = self._now_ns().nanoseconds
+        answered = read(data, now_ns * 1e-9, self.inputs)
+        if io.rejections:
+            self._take_rejections(io.rejections)
+        if answered is NO_STEP or not self._running:   # not running: inactive or stopping
+            return
+        self.steps['on_state'] += 1
+        started = time.perf_counter()
+        self._last_state_step = started
+        self._update(now_ns, answered, started)
+        if not self._fallback_idle:        # the states came back: the fallback sleeps
+            self._fallback.cancel()
+            self._fallback_idle = True
+
+    def _take_rejections(self, rejections: list) -> None:
+        """Keep the rejection reasons ``rejections`` for /diagnostics, warn, and empty the list."""
+        for reason in rejections:
+            self._note_rejection(reason)
+            loop_log(self).put('warning', f'rejected {reason}', throttle=1.0)
+        rejections.clear()
 
     def _note_rejection(self, reason: str) -> None:
         """Keep a rejection for the next /diagnostics, even if it is over by then."""
         if reason not in self._new_rejections and len(self._new_rejections) < 5:
             self._new_rejections.append(reason)
-
-    def report(self, reason) -> None:
-        """Note the result of a ``set_*`` of the inputs (None, or why the sample was rejected)."""
-        if reason is not None:
-            self._note_rejection(reason)
-            loop_log(self).put('warning', f'rejected {reason}', throttle=1.0)
-
-    def on_state(self, answered_stamp=None) -> None:
-        """Run a control step on an instrument state (event-driven loop).
-
-        ``answered_stamp``: the state's header stamp (int ns) when it was accepted fresh (the
-        command carries it), else None.
-        """
-        if not self._timer.is_canceled():  # cancelled: the loop is stopped (inactive)
-            self.steps['on_state'] += 1
-            started = time.perf_counter()
-            self._last_state_step = started
-            self._step(started, answered_stamp)
-            if not self._fallback_idle:    # the states came back: the fallback sleeps
-                self._fallback.cancel()
-                self._fallback_idle = True
 
     # ------------------------------------------------------------------ parameters
     def _refuse_unsafe_set(self, parameters) -> SetParametersResult:
@@ -430,6 +508,7 @@ class ControllerNode(LifecycleNode):
         for name in _INPUT_RANGES:
             setattr(self.inputs, name, getattr(fresh, name))
         self.io.update_params(params)
+        self._follow_force()
         if 'request_enable' in changed and params.request_enable and hasattr(self.io,
                                                                              'request_enable'):
             self.io.request_enable()
@@ -459,7 +538,7 @@ class ControllerNode(LifecycleNode):
         states that came in meanwhile run first, so a stall of this process is not taken for a
         lost input (the next tick steps if none came).
         """
-        if self.controller is None or self._timer.is_canceled():   # a queued event after a stop
+        if not self._running:              # a queued event after a stop
             return
         started = time.perf_counter()
         previous, self._last_timer = self._last_timer, started
@@ -471,16 +550,50 @@ class ControllerNode(LifecycleNode):
         if (started - self._last_state_step >= self._fallback_after
                 and started - self._last_step >= self._min_spacing):
             self.steps['on_timer'] += 1
-            self._step(started)
+            self._update(self._now_ns().nanoseconds, None, started)
 
-    def _step(self, started: float, answered_stamp=None) -> None:
-        """One control step, timed (``started``: perf_counter s, now).
+    def _update(self, now_ns: int, answered_ns, started) -> None:
+        """One read-compute-write step: step the controller, convert its output, publish.
 
-        ``answered_stamp``: header stamp (int ns) of the fresh actuator state the step answers
-        (the current command carries it), or None (the controller's clock).
+        Parameters
+        ----------
+        now_ns : int
+            The controller's clock at the step (ns): the receive time of the state it answers.
+        answered_ns : int or None
+            Header stamp (ns) of the fresh instrument state the step answers (the current
+            command carries it), or None (the command carries ``now_ns``).
+        started : float or None
+            perf_counter (s) at the step's start, for the loop timing; None: not timed (the
+            ramp to 0 A of a deactivation).
         """
-        self._last_step = started
-        self._control(answered_stamp)
+        if started is not None:
+            self._last_step = started
+        now = now_ns * 1e-9
+        io, inputs, procedure = self.io, self.inputs, self.procedure
+        if procedure is None:
+            out = self.controller.step(now, inputs, io.interlock())
+        else:                               # a service's procedure, or the ramp to 0 A
+            out = procedure.step(now, inputs, io.interlock())
+        self.last_output = out
+        command = io.command(out, now_ns if answered_ns is None else answered_ns)
+        if command is not None:
+            self._command_pub.publish(command)
+        if now_ns >= self._next_forces_ns:
+            self._next_forces_ns = now_ns + io.forces_period_ns
+            io.fill_forces(out, now_ns)
+            self._estimate_pub.publish(io.estimate_msg)
+            self._target_pub.publish(io.target_msg)
+
+        if out.limits_hit:
+            self._limits_seen.update(out.limits_hit)
+        key = (out.mode, out.limits_hit, out.reasons, len(inputs.rejected))
+        since = now - self._diag_time
+        if since >= 1.0 / DIAGNOSTICS_RATE or ((key != self._diag_key or self._new_rejections)
+                                               and since >= DIAGNOSTICS_MIN_INTERVAL):
+            self._publish_diagnostics(Time(nanoseconds=now_ns).to_msg(), out)
+            self._diag_key, self._diag_time = key, now
+        if started is None:
+            return
         timing = self.timing
         busy = time.perf_counter() - started
         timing['busy_sum'] += busy
@@ -495,26 +608,6 @@ class ControllerNode(LifecycleNode):
             if period > 1.5 * self._period:
                 timing['late'] += 1
         self._last_tick = started
-
-    def _control(self, answered_stamp=None) -> None:
-        now_ns = self._now_ns().nanoseconds
-        now = now_ns * 1e-9
-        procedure = self.procedure
-        if procedure is None:
-            out = self.controller.step(now, self.inputs, self.io.interlock())
-        else:                               # a service's procedure, or the ramp to 0 A
-            out = procedure.step(now, self.inputs, self.io.interlock())
-        self.last_output = out
-        self.io.publish(out, now_ns, answered_stamp)
-
-        if out.limits_hit:
-            self._limits_seen.update(out.limits_hit)
-        key = (out.mode, out.limits_hit, out.reasons, len(self.inputs.rejected))
-        since = now - self._diag_time
-        if since >= 1.0 / DIAGNOSTICS_RATE or ((key != self._diag_key or self._new_rejections)
-                                               and since >= DIAGNOSTICS_MIN_INTERVAL):
-            self._publish_diagnostics(Time(nanoseconds=now_ns).to_msg(), out)
-            self._diag_key, self._diag_time = key, now
 
     def diagnostic_status(self, out) -> DiagnosticStatus:
         """Build the controller's DiagnosticStatus for the last output ``out``."""

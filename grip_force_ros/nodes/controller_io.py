@@ -1,14 +1,18 @@
-"""The controller's I/O wiring of one interface profile: topics, messages, units.
+"""The controller's conversions of one interface profile: messages <-> values, units.
 
-:class:`ControllerNode` (nodes/controller.py) keeps the loop, the timing and
-/diagnostics; the profile object made by :func:`controller_io` subscribes to the inputs,
-fills the controller's :class:`~grip_force_ros.control.ControlInputs`, asks the node to step
-when a fresh instrument state arrives, and publishes the command and the force outputs:
+:class:`ControllerNode` (nodes/controller.py) owns the loop's subscriptions and publishers,
+the loop, the timing and /diagnostics; the profile object made by :func:`controller_io`
+says which topics and converts: a ``read_*`` method turns one message into the controller's
+:class:`~grip_force_ros.control.ControlInputs` (given as an argument) and tells whether the
+node steps on it; :meth:`ControllerIO.command` turns a step's output into the command
+message; :meth:`ControllerIO.fill_forces` fills the force messages. The profile objects
+never call the node. Topics:
 
 ``crtk`` (:class:`CrtkControllerIO`; topics.py, docs/ros_interface.md)
-    ``master/gripper/measured_js``, ``instrument/measured_js`` (wrist_pitch, jaw),
-    ``instrument/actuator/measured_js`` (jaw_drum, effort = current, A): the step runs on it;
-    command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A).
+    ``master/gripper/measured_js``, ``instrument/measured_js`` (wrist_pitch, jaw; combined:
+    and jaw_drum, the step runs on it), ``instrument/actuator/measured_js`` (jaw_drum,
+    effort = current, A): the step runs on it; command ``instrument/actuator/servo_jf``
+    (jaw_drum, effort = current, A).
 ``dvrk`` (:class:`DvrkControllerIO`; docs/dvrk.md)
     ``<master>/gripper/measured_js`` (gripper), ``<arm>/measured_js`` (the wrist picked by
     name among the arm's joints), ``<arm>/jaw/measured_js`` (jaw: position, velocity, effort
@@ -16,13 +20,13 @@ when a fresh instrument state arrives, and publishes the command and the force o
     :mod:`grip_force_ros.model.dvrk_jaw`): the step runs on it; command ``<arm>/jaw/servo_jf``
     (jaw effort, N*m), sent only while ``<arm>/operating_state`` is ENABLED and homed (the
     step is safe otherwise, with the reason); ``<arm>/state_command`` when asked to enable
-    and home (``request_enable``); the grip force topics under ``<arm>/grip/``.
+    and home (``request_enable``); the grip force topics under ``<arm>/grip/``. The arm's
+    operating-state channel (that subscription, its service client, a poll timer and the
+    state_command publisher) is the profile's own: :meth:`DvrkControllerIO.attach` creates it
+    on the node, its callbacks change only the profile's arm state.
 
-The node calls :meth:`ControllerIO.publish` after each step with the step's output. Both
-profiles subtract the tare's offsets (``current_sensor_offset``, ``load_cell_offset``) from
-the measured current and the load cell before the controller sees them. The node creates
-the I/O object when it is configured and calls :meth:`ControllerIO.destroy` when it is
-cleaned up (lifecycle, nodes/controller.py).
+Both profiles subtract the tare's offsets (``current_sensor_offset``, ``load_cell_offset``)
+from the measured current and the load cell before the controller sees them.
 """
 from __future__ import annotations
 
@@ -34,8 +38,7 @@ from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.model.dvrk_jaw import JawEffortConversion
-from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
-    stamp_seconds
+from grip_force_ros.nodes.common import STATE_PUB_QOS, InputRejected, read_joints, stamp_seconds
 from grip_force_ros.nodes.dvrk_msgs import arm_interlock, crtk_msgs
 from grip_force_ros.nodes.wire import JointStateData, JointStateWriter, read_wrench
 
@@ -56,165 +59,129 @@ ARM_POLL_PERIOD = 0.5
 STATE_REPLY_WAIT = 2.0
 
 
+class _NoStep:
+    """The type of :data:`NO_STEP`."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return 'NO_STEP'
+
+
+#: What a ``read_*`` returns for a message the node does not step on (a master sample, the
+#: load cell, the joints of a split state). Otherwise it returns the header stamp (int ns) of
+#: a fresh, stamped instrument state, which the command answering it carries, or None (a
+#: state the node steps on with the controller's clock: rejected, duplicated or unstamped).
+NO_STEP = _NoStep()
+
 class ControllerIO:
     """What both profiles share: the master, the load cell, the force outputs.
 
     Parameters
     ----------
-    node : ControllerNode
-        Provides ``inputs`` (ControlInputs), ``now()`` (s), ``report(reason)``,
-        ``reject(source, now, exc)``, ``on_state(stamp)`` (run a control step on a fresh
-        state; ``stamp``: the state's header stamp, or None) and ``get_logger()``.
     params : ParamSet
         The node's parameters.
     names : TopicSet
         The profile's topics (:func:`grip_force_ros.topics.topic_set`).
+
+    Attributes
+    ----------
+    names : TopicSet
+        The profile's topics.
+    raw_states : bool
+        The instrument's state topics are taken as serialized bytes
+        (:mod:`~grip_force_ros.nodes.wire`; the master and the load cell always are).
+    rejections : list of str
+        Why the samples read since the node last emptied it were rejected (the node reports
+        and clears them).
+    forces_period_ns : int
+        Least time between two publications of the force outputs (ns).
+    estimate_msg, target_msg : WrenchStamped
+        The force outputs, filled by :meth:`fill_forces` (reused every time).
     """
 
     interface = ''
+    raw_states = True
 
-    def __init__(self, node, params, names: topics.TopicSet):
-        self.node = node
+    def __init__(self, params, names: topics.TopicSet):
         self.names = names
-        self._entities: list = []      # what this object created on the node (destroy())
-        self.alive = True              # False once destroy() ran: callbacks drop their event
-        self.subscribe(JointState, names.master_js, self._on_master, STATE_SUB_QOS, raw=True)
-        self._force_sub = None
-        self._force_wanted = False     # a service needs the load cell (want_force)
+        self.rejections: list[str] = []
         self.update_params(params)
-        self._estimate_pub = self.publisher(WrenchStamped, names.estimated_force, STATE_PUB_QOS)
-        self._target_pub = self.publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
         # Messages reused every step: fill, do not rebuild.
-        self._estimate_msg = WrenchStamped()
-        self._estimate_msg.header.frame_id = topics.JAW_FRAME
-        self._target_msg = WrenchStamped()
-        self._target_msg.header.frame_id = topics.JAW_FRAME
-        self._next_forces_ns = 0       # controller clock (ns) at which the forces are due
+        self.estimate_msg = WrenchStamped()
+        self.estimate_msg.header.frame_id = topics.JAW_FRAME
+        self.target_msg = WrenchStamped()
+        self.target_msg.header.frame_id = topics.JAW_FRAME
 
-    # ------------------------------------------------------------------ entities
-    def subscribe(self, msg_type, topic: str, callback, qos, raw: bool = False):
-        """Create a subscription on the node, for :meth:`destroy`; see :meth:`_live`.
-
-        ``raw``: the callback takes the serialized bytes (:mod:`~grip_force_ros.nodes.wire`).
-        """
-        sub = self.node.create_subscription(msg_type, topic, self._live(callback), qos, raw=raw)
-        self._entities.append(sub)
-        return sub
-
-    def _live(self, callback):
-        """Wrap ``callback`` to drop what comes after :meth:`destroy`.
-
-        The EventsExecutor may still run an event it queued before the entity was destroyed
-        (seen: a joint state after ``shutdown`` released the inputs).
-        """
-        def live(*args):
-            if self.alive:
-                callback(*args)
-        return live
-
-    def publisher(self, *args):
-        """Create a publisher on the node (``create_publisher`` arguments), for :meth:`destroy`."""
-        pub = self.node.create_publisher(*args)
-        self._entities.append(pub)
-        return pub
-
-    def destroy(self) -> None:
-        """Destroy every subscription, publisher, client and timer this object created."""
-        node = self.node
-        self.alive = False
-        if self._force_sub is not None:
-            node.destroy_subscription(self._force_sub)
-            self._force_sub = None
-        for entity in reversed(self._entities):
-            kind = type(entity).__name__.lower()     # subscription, publisher, client, timer
-            getattr(node, f'destroy_{kind}')(entity)
-        self._entities = []
+    def update_params(self, params) -> None:
+        """Apply accepted parameters (offsets, the wrist's freshness bound, the force rate)."""
+        self.force_offset = params.load_cell_offset          # N
+        self.current_offset = params.current_sensor_offset   # A
+        self.wrist_timeout = params.watchdog_timeout         # s, the controller's watchdog
+        # due again one output period after, less half a state period (so that at equal
+        # rates the forces go out every step, whatever the states' jitter)
+        self.forces_period_ns = max(0, int(1e9 / params.force_output_rate
+                                           - 0.5e9 / params.expected_state_rate))
 
     # ------------------------------------------------------------------ inputs
-    def _on_master(self, data: bytes) -> None:
-        node = self.node
-        now = node.now()
+    def _reject(self, inputs, source: str, now: float, exc: InputRejected) -> None:
+        """Record a malformed message of ``source`` received at ``now`` (s)."""
+        self.rejections.append(inputs.reject(source, now, f'malformed message: {exc}'))
+
+    def read_master(self, data: bytes, now: float, inputs):
+        """Store a master gripper state received at ``now`` (s); returns :data:`NO_STEP`."""
         try:
             msg = JointStateData(data)
             (angle,), = read_joints(msg, _MASTER_JOINTS, ('position',)).values()
         except InputRejected as exc:
-            return node.reject('master', now, exc)
-        node.report(node.inputs.set_master(now, angle, msg.stamp))
+            self._reject(inputs, 'master', now, exc)
+            return NO_STEP
+        why = inputs.set_master(now, angle, msg.stamp)[1]
+        if why is not None:
+            self.rejections.append(why)
+        return NO_STEP
 
-    def _on_force(self, data: bytes) -> None:
-        node = self.node
-        now = node.now()
+    def read_force(self, data: bytes, now: float, inputs):
+        """Store a load-cell sample (N, less the tare) received at ``now`` (s); :data:`NO_STEP`."""
         try:
             stamp, _, _, force = read_wrench(data)
         except InputRejected as exc:
-            return node.reject('force', now, exc)
-        node.report(node.inputs.set_force(now, force - self.force_offset, stamp))
-
-    def update_params(self, params) -> None:
-        """Apply accepted parameters (the load-cell subscription follows force_sensor_enabled)."""
-        self._force_enabled = params.force_sensor_enabled
-        self.force_offset = params.load_cell_offset          # N
-        self.current_offset = params.current_sensor_offset   # A
-        # due again one output period after, less half a state period (so that at equal
-        # rates the forces go out every step, whatever the states' jitter)
-        self._forces_period_ns = max(0, int(1e9 / params.force_output_rate
-                                            - 0.5e9 / params.expected_state_rate))
-        self._follow_force()
-
-    def want_force(self, wanted: bool) -> None:
-        """Subscribe to the load cell while a service needs it, whatever force_sensor_enabled says."""
-        self._force_wanted = wanted
-        self._follow_force()
-
-    def load_cell_publishers(self) -> int:
-        """Return how many publishers the load-cell topic has (0: no load cell)."""
-        node = self.node
-        return node.count_publishers(node.resolve_topic_name(self.names.measured_force))
-
-    def _follow_force(self) -> None:
-        listen = self._force_enabled or self._force_wanted
-        if listen and self._force_sub is None:
-            self._force_sub = self.node.create_subscription(
-                WrenchStamped, self.names.measured_force, self._live(self._on_force), STATE_SUB_QOS,
-                raw=True)
-        elif not listen and self._force_sub is not None:
-            self.node.destroy_subscription(self._force_sub)
-            self._force_sub = None
+            self._reject(inputs, 'force', now, exc)
+            return NO_STEP
+        why = inputs.set_force(now, force - self.force_offset, stamp)[1]
+        if why is not None:
+            self.rejections.append(why)
+        return NO_STEP
 
     # ------------------------------------------------------------------ outputs
-    def publish(self, out, now_ns: int, answered_ns: int | None = None) -> None:
-        """Publish the command of one step, then its forces when due (``force_output_rate``).
-
-        ``now_ns``: the controller's clock at the step (ns); ``answered_ns``: the header stamp
-        (ns) of the fresh state the step answers, which the command carries, or None (the
-        command carries ``now_ns``).
-        """
-        self.publish_command(out, answered_ns if answered_ns is not None else now_ns)
-        if now_ns >= self._next_forces_ns:
-            self.publish_forces(out, now_ns)
-
-    def publish_forces(self, out, now_ns: int) -> None:
-        """Publish the estimated and target force of ``out``, stamped ``now_ns`` (ns)."""
-        self._next_forces_ns = now_ns + self._forces_period_ns
+    def fill_forces(self, out, now_ns: int) -> None:
+        """Fill :attr:`estimate_msg` and :attr:`target_msg` with ``out``, stamped ``now_ns`` (ns)."""
         sec, nanosec = divmod(now_ns, 1_000_000_000)
-        est = self._estimate_msg
+        est = self.estimate_msg
         est.header.stamp.sec, est.header.stamp.nanosec = sec, nanosec
         est.wrench.force.z = out.estimated_force
         est.wrench.force.x = out.pull_out_force
-        target = self._target_msg
+        target = self.target_msg
         target.header.stamp.sec, target.header.stamp.nanosec = sec, nanosec
         target.wrench.force.z = out.target_force
-        self._estimate_pub.publish(est)
-        self._target_pub.publish(target)
 
-    def publish_command(self, out, stamp_ns: int) -> None:
-        """Send the step's command (the profile's topic and unit), stamped ``stamp_ns`` (ns)."""
+    def command(self, out, stamp_ns: int):
+        """Return the step's command message (the profile's unit), stamped ``stamp_ns`` (ns).
+
+        None: no command goes out (the instrument may not be driven).
+        """
         raise NotImplementedError
 
     # ------------------------------------------------------------------ state
     def interlock(self) -> str | None:
         """Return why the instrument may not be driven now (None: it may)."""
         return None
+
+    def attach(self, node) -> None:
+        """Create the profile's own entities on ``node`` (beside the loop's; none here)."""
+
+    def detach(self, node) -> None:
+        """Destroy what :meth:`attach` created on ``node``."""
 
     def status(self) -> dict[str, str]:
         """Key/value strings of the profile for /diagnostics."""
@@ -226,18 +193,15 @@ class CrtkControllerIO(ControllerIO):
 
     interface = 'crtk'
 
-    def __init__(self, node, params, names: topics.TopicSet):
-        super().__init__(node, params, names)
-        self.subscribe(JointState, names.instrument_js, self._on_instrument, STATE_SUB_QOS,
-                       raw=True)
-        self.subscribe(JointState, names.actuator_js, self._on_actuator, STATE_SUB_QOS, raw=True)
-        self._servo_pub = self.publisher(JointState, names.command, STATE_PUB_QOS)
+    def __init__(self, params, names: topics.TopicSet):
+        super().__init__(params, names)
         self._servo = JointStateWriter([topics.DRUM_JOINT], ('effort',))
 
-    def _on_instrument(self, data: bytes) -> None:
-        """Joint state: wrist and jaw; with the drum too (combined), the step runs on it."""
-        node = self.node
-        now = node.now()
+    def read_instrument(self, data: bytes, now: float, inputs):
+        """Store wrist and jaw; with the drum too (combined), the step runs on it.
+
+        Returns :data:`NO_STEP` for the joints alone, else as :meth:`read_actuator`.
+        """
         combined = False
         try:
             msg = JointStateData(data)
@@ -247,51 +211,50 @@ class CrtkControllerIO(ControllerIO):
             if combined:
                 current = _drum_effort(msg)
         except InputRejected as exc:
-            node.reject('instrument', now, exc)
+            self._reject(inputs, 'instrument', now, exc)
             if combined:
-                node.reject('actuator', now, exc)
-                node.on_state(None)
-            return
+                self._reject(inputs, 'actuator', now, exc)
+                return None
+            return NO_STEP
         wrist, jaw = joints[topics.WRIST_JOINT], joints[topics.JAW_JOINT]
-        jaw_velocity = jaw[1] if len(jaw) > 1 else 0.0
         stamp = msg.stamp
-        inputs = node.inputs
-        node.report(inputs.set_instrument(now, wrist[0], jaw[0], jaw_velocity, stamp))
+        why = inputs.set_instrument(now, wrist[0], jaw[0], jaw[1] if len(jaw) > 1 else 0.0,
+                                    stamp)[1]
+        if why is not None:
+            self.rejections.append(why)
         if not combined:
-            return
+            return NO_STEP
         drum = joints[topics.DRUM_JOINT]
-        node.report(inputs.set_actuator(now, current - self.current_offset, drum[0],
-                                        drum[1] if len(drum) > 1 else 0.0, stamp))
-        fresh = inputs.actuator_time == now and stamp != 0.0
-        node.on_state(msg.sec * 1_000_000_000 + msg.nanosec if fresh else None)
+        fresh, why = inputs.set_actuator(now, current - self.current_offset, drum[0],
+                                         drum[1] if len(drum) > 1 else 0.0, stamp)
+        if why is not None:
+            self.rejections.append(why)
+        return msg.sec * 1_000_000_000 + msg.nanosec if fresh and stamp != 0.0 else None
 
-    def _on_actuator(self, data: bytes) -> None:
-        """Actuator state: store it and run the control step on it (event-driven loop)."""
-        self.node.on_state(self._read_actuator(data))
+    def read_actuator(self, data: bytes, now: float, inputs):
+        """Store the actuator state (the step runs on it).
 
-    def _read_actuator(self, data: bytes) -> int | None:
-        """Store the actuator state; its stamp (ns) if it was accepted as a new, stamped sample."""
-        node = self.node
-        now = node.now()
+        Returns its header stamp (int ns) when it was accepted as a new, stamped sample, else
+        None (the step carries the controller's clock).
+        """
         try:
             msg = JointStateData(data)
             fields = _DRUM_FIELDS if len(msg.velocity) else _DRUM_FIELDS[:2]
             (drum,) = read_joints(msg, _ACTUATOR_JOINTS, fields).values()
         except InputRejected as exc:
-            node.reject('actuator', now, exc)
+            self._reject(inputs, 'actuator', now, exc)
             return None
-        velocity = drum[2] if len(drum) > 2 else 0.0
         stamp = msg.stamp
-        inputs = node.inputs
-        node.report(inputs.set_actuator(now, drum[0] - self.current_offset, drum[1], velocity, stamp))
-        # accepted now (a duplicate or rejected sample leaves actuator_time as it was)
-        fresh = inputs.actuator_time == now and stamp != 0.0
-        return msg.sec * 1_000_000_000 + msg.nanosec if fresh else None
+        fresh, why = inputs.set_actuator(now, drum[0] - self.current_offset, drum[1],
+                                         drum[2] if len(drum) > 2 else 0.0, stamp)
+        if why is not None:
+            self.rejections.append(why)
+        return msg.sec * 1_000_000_000 + msg.nanosec if fresh and stamp != 0.0 else None
 
-    def publish_command(self, out, stamp_ns: int) -> None:
-        """Send the current command (A) on ``instrument/actuator/servo_jf``."""
+    def command(self, out, stamp_ns: int) -> bytes:
+        """Return the current command (A) for ``instrument/actuator/servo_jf``, as CDR bytes."""
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        self._servo_pub.publish(self._servo.write(sec, nanosec, (out.current_command,)))
+        return self._servo.write(sec, nanosec, (out.current_command,))
 
 
 class DvrkControllerIO(ControllerIO):
@@ -304,11 +267,12 @@ class DvrkControllerIO(ControllerIO):
     """
 
     interface = 'dvrk'
+    raw_states = False
 
-    def __init__(self, node, params, names: topics.TopicSet):
+    def __init__(self, params, names: topics.TopicSet):
         self.msgs = crtk_msgs()          # first: without crtk_msgs nothing is created
         self.arm = params.arm
-        super().__init__(node, params, names)
+        super().__init__(params, names)
         self.conversion = JawEffortConversion.from_params(params)
         self.effort_limit = params.dvrk_jaw_effort_max      # N*m
         self.wrist = math.nan            # rad, last wrist pitch of <arm>/measured_js
@@ -320,69 +284,101 @@ class DvrkControllerIO(ControllerIO):
         self.state_stamp = -math.inf     # s, header stamp of the operating state held
         self.withheld = 0                # steps whose command was not sent (arm not ready)
         self.requested = False           # an enable/home request is pending (request_enable)
+        self._request_at_start = params.request_enable
         self._last_request = -math.inf   # perf_counter s of the last state_command sent
         self._state_future = None
         self._state_asked = -math.inf    # perf_counter s of the last operating_state request
-        self.subscribe(JointState, names.instrument_js, self._on_arm, STATE_SUB_QOS)
-        self.subscribe(JointState, names.actuator_js, self._on_jaw, STATE_SUB_QOS)
-        self.subscribe(self.msgs.OperatingState, names.operating_state, self._on_operating_state,
-                       STATE_PUB_QOS)
-        self._state_client = node.create_client(self.msgs.TriggerOperatingState,
-                                                names.operating_state)
-        self._entities.append(self._state_client)
-        self._command_pub = self.publisher(self.msgs.StringStamped, names.state_command,
-                                           STATE_PUB_QOS)
-        self._servo_pub = self.publisher(JointState, names.command, STATE_PUB_QOS)
         self._servo_msg = JointState(name=[topics.JAW_JOINT], effort=[0.0])
-        self._poll_timer = node.create_timer(ARM_POLL_PERIOD, self._live(self._poll))
-        self._entities.append(self._poll_timer)
-        if params.request_enable:
+        self._entities: list = []        # the arm channel (attach)
+        self.alive = False               # the arm channel exists: its callbacks take events
+        self._log = self._clock = self._state_client = self._command_pub = None
+
+    # ------------------------------------------------------------------ the arm channel
+    def attach(self, node) -> None:
+        """Create the arm's operating-state channel on ``node``; ask to enable if configured."""
+        self._log, self._clock = node.get_logger(), node.get_clock()
+        self.alive = True
+        self._entities = [
+            node.create_subscription(self.msgs.OperatingState, self.names.operating_state,
+                                     self._live(self._on_operating_state), STATE_PUB_QOS),
+            node.create_client(self.msgs.TriggerOperatingState, self.names.operating_state),
+            node.create_publisher(self.msgs.StringStamped, self.names.state_command,
+                                  STATE_PUB_QOS),
+            node.create_timer(ARM_POLL_PERIOD, self._live(self._poll))]
+        self._state_client, self._command_pub = self._entities[1], self._entities[2]
+        if self._request_at_start:
             self.request_enable()
 
+    def detach(self, node) -> None:
+        """Destroy the arm's channel; what it had queued is dropped."""
+        self.alive = False
+        for entity in reversed(self._entities):
+            kind = type(entity).__name__.lower()     # subscription, publisher, client, timer
+            getattr(node, f'destroy_{kind}')(entity)
+        self._entities = []
+
+    def _live(self, callback):
+        """Wrap ``callback`` to drop what comes after :meth:`detach`.
+
+        The EventsExecutor may still run an event it queued before the entity was destroyed.
+        """
+        def live(*args):
+            if self.alive:
+                callback(*args)
+        return live
+
     # ------------------------------------------------------------------ inputs
-    def _on_arm(self, msg: JointState) -> None:
-        """Keep the wrist pitch of the arm's joints (other joints are normal, not a fault)."""
-        node = self.node
-        now = node.now()
+    def read_instrument(self, msg: JointState, now: float, inputs):
+        """Keep the wrist pitch of the arm's joints (other joints are normal, not a fault).
+
+        Returns :data:`NO_STEP`.
+        """
         names = list(msg.name)
         joint = next((j for j in topics.DVRK_WRIST_JOINTS if j in names), None)
         if joint is None:
-            return node.reject('instrument', now, InputRejected(
+            self._reject(inputs, 'instrument', now, InputRejected(
                 f'no wrist pitch joint ({" or ".join(topics.DVRK_WRIST_JOINTS)}) in '
                 f'{self.names.instrument_js}: {names}'))
+            return NO_STEP
         try:
             (wrist,), = read_joints(msg, (joint,), ('position',), others=True).values()
         except InputRejected as exc:
-            return node.reject('instrument', now, exc)
+            self._reject(inputs, 'instrument', now, exc)
+            return NO_STEP
         self.wrist, self.wrist_time, self.wrist_joint = wrist, now, joint
+        return NO_STEP
 
-    def _on_jaw(self, msg: JointState) -> None:
-        """Feed the jaw to the instrument (with the wrist) and actuator (current) inputs; step."""
-        node = self.node
-        now = node.now()
+    def read_actuator(self, msg: JointState, now: float, inputs):
+        """Feed the jaw to the instrument (with the wrist) and actuator (current) inputs.
+
+        The step runs on it: returns its header stamp (int ns) when the actuator sample was
+        accepted as a new, stamped one, else None.
+        """
         fields = ('position', 'effort', 'velocity') if len(msg.velocity) else ('position', 'effort')
         try:
             (jaw,) = read_joints(msg, _JAW_JOINTS, fields).values()
         except InputRejected as exc:
-            node.reject('actuator', now, exc)
-            node.reject('instrument', now, exc)
-            node.on_state(None)
-            return
-        stamp = stamp_seconds(msg.header.stamp)
-        inputs = node.inputs
-        jaw_velocity = jaw[2] if len(jaw) > 2 else 0.0
+            self._reject(inputs, 'actuator', now, exc)
+            self._reject(inputs, 'instrument', now, exc)
+            return None
+        header = msg.header.stamp
+        stamp = stamp_seconds(header)
         age = now - self.wrist_time
-        if age <= inputs_timeout(node):
-            node.report(inputs.set_instrument(now, self.wrist, jaw[0], jaw_velocity, stamp))
+        if age <= self.wrist_timeout:
+            why = inputs.set_instrument(now, self.wrist, jaw[0], jaw[2] if len(jaw) > 2 else 0.0,
+                                        stamp)[1]
+            if why is not None:
+                self.rejections.append(why)
         else:
             why = ('no wrist yet' if age != age else f'stale wrist: {age * 1e3:.1f} ms old')
-            node.reject('instrument', now, InputRejected(f'{why} ({self.names.instrument_js})'))
+            self._reject(inputs, 'instrument', now,
+                         InputRejected(f'{why} ({self.names.instrument_js})'))
         # the dVRK's effort is computed from the measured motor currents: invert its conversion
-        node.report(inputs.set_actuator(now, self.conversion.current(jaw[1]) - self.current_offset,
-                                        stamp=stamp))
-        fresh = inputs.actuator_time == now and stamp != 0.0
-        node.on_state(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-                      if fresh else None)
+        fresh, why = inputs.set_actuator(now, self.conversion.current(jaw[1]) - self.current_offset,
+                                         stamp=stamp)
+        if why is not None:
+            self.rejections.append(why)
+        return header.sec * 1_000_000_000 + header.nanosec if fresh and stamp != 0.0 else None
 
     def _on_operating_state(self, msg) -> None:
         stamp = stamp_seconds(msg.header.stamp)
@@ -392,19 +388,20 @@ class DvrkControllerIO(ControllerIO):
         self.state, self.is_homed, self.is_busy = msg.state, bool(msg.is_homed), bool(msg.is_busy)
         self.state_stamp = stamp if stamp else self.state_stamp
         if (self.state, self.is_homed, self.is_busy) != previous:
-            self.node.get_logger().info(
+            self._log.info(
                 f'arm {self.arm}: {self.state}, {"homed" if self.is_homed else "not homed"}'
                 f'{", busy" if self.is_busy else ""}')
         if self.requested and self.interlock() is None:
             self.requested = False
-            self.node.get_logger().info(f'arm {self.arm} is enabled and homed')
+            self._log.info(f'arm {self.arm} is enabled and homed')
 
     # ------------------------------------------------------------------ the arm
     def request_enable(self) -> None:
         """Ask the arm to enable and home (sent when the arm's state_command is subscribed)."""
         self.requested = True
         self._last_request = -math.inf
-        self._poll()
+        if self.alive:
+            self._poll()
 
     def _poll(self) -> None:
         """Ask for the operating state while none is known; send a pending enable/home."""
@@ -428,36 +425,38 @@ class DvrkControllerIO(ControllerIO):
             self._send('home')
 
     def _on_state_reply(self, future) -> None:
+        if not self.alive:
+            return
         try:
             self._on_operating_state(future.result().operating_state)
         except Exception as exc:  # noqa: BLE001 - a failed call: poll again later
-            self.node.get_logger().warning(f'operating_state service of {self.arm} failed: {exc}',
-                                           throttle_duration_sec=5.0)
+            self._log.warning(f'operating_state service of {self.arm} failed: {exc}',
+                              throttle_duration_sec=5.0)
 
     def _send(self, command: str) -> None:
         msg = self.msgs.StringStamped()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = self._clock.now().to_msg()
         msg.string = command
         self._command_pub.publish(msg)
         self._last_request = time.perf_counter()
-        self.node.get_logger().info(f'asked arm {self.arm} to {command} ({self.names.state_command})')
+        self._log.info(f'asked arm {self.arm} to {command} ({self.names.state_command})')
 
     def interlock(self) -> str | None:
         """Return why the arm may not be driven: not ENABLED, not homed, busy, or unknown."""
         return arm_interlock(self.arm, self.state, self.is_homed, self.is_busy)
 
     # ------------------------------------------------------------------ outputs
-    def publish_command(self, out, stamp_ns: int) -> None:
-        """Send the jaw effort (N*m) on ``<arm>/jaw/servo_jf`` while the arm is ready."""
+    def command(self, out, stamp_ns: int):
+        """Return the jaw effort (N*m) for ``<arm>/jaw/servo_jf``; None while the arm is not ready."""
         if self.interlock() is not None:
             self.withheld += 1          # a disabled arm gets nothing (servo_jf takes over the jaw)
-            return
+            return None
         effort = self.conversion.effort(out.current_command)
         limit = self.effort_limit       # the current limit already keeps it inside; rounding
         servo = self._servo_msg
         servo.header.stamp.sec, servo.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
         servo.effort[0] = limit if effort > limit else (-limit if effort < -limit else effort)
-        self._servo_pub.publish(servo)
+        return servo
 
     def status(self) -> dict[str, str]:
         """Key/value strings of the dvrk profile for /diagnostics."""
@@ -485,14 +484,9 @@ def _drum_effort(msg) -> float:
     return current
 
 
-def inputs_timeout(node) -> float:
-    """Return the node controller's watchdog timeout (s): the wrist's freshness bound too."""
-    return node.controller.watchdog_timeout
-
-
-def controller_io(node, params) -> ControllerIO:
-    """Make the I/O object of the node's ``interface`` profile."""
+def controller_io(params) -> ControllerIO:
+    """Make the converters of the ``interface`` profile of ``params``."""
     names = topics.topic_set(params.interface, params.arm, params.master)
     if params.interface == 'dvrk':
-        return DvrkControllerIO(node, params, names)
-    return CrtkControllerIO(node, params, names)
+        return DvrkControllerIO(params, names)
+    return CrtkControllerIO(params, names)

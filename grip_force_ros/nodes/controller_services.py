@@ -492,7 +492,7 @@ class ControllerServices:
         if why is not None:
             response.success, response.message = False, why
             return response
-        load_cell = node.io.load_cell_publishers() > 0
+        load_cell = node.load_cell_publishers() > 0
         node.start_procedure(Tare(node, self.tare, node.now(), load_cell), load_cell)
         return None
 
@@ -504,7 +504,7 @@ class ControllerServices:
             if why is None and node.params.object_kind == 'free':
                 why = ("object_kind is 'free': set it to what the jaws close on (the load cell "
                        "as a needle: ~/set_object needle)")
-            if why is None and node.io.load_cell_publishers() == 0:
+            if why is None and node.load_cell_publishers() == 0:
                 why = (f'no load cell: nobody publishes {node.io.names.measured_force}; the fit '
                        'needs the measured grip force')
             why = why and f'calibration refused: {why}'

@@ -45,12 +45,13 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.task import Future
+from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, run_node
+from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_SUB_QOS, run_node
 from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
-from grip_force_ros.nodes.sim_io import sim_io
+from grip_force_ros.nodes.sim_io import CommandRefused, sim_io
 from grip_force_ros.sim import InstrumentSim
 from grip_force_ros.sim.drive import CommandTimeout
 from grip_force_ros.sim.loop_latency import LoopLatency
@@ -91,11 +92,14 @@ class SimInstrumentNode(Node):
         self.loop = LoopLatency(capacity=int(2 * params.publish_rate * DIAGNOSTICS_PERIOD) + 16)
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS,
                                                DIAGNOSTICS_QOS)
-        try:                               # the profile's topics (dvrk: needs crtk_msgs)
-            self.io = sim_io(self, params)
+        try:                               # the profile's conversions (dvrk: needs crtk_msgs)
+            self.io = sim_io(params)
         except ValueError:
             self.destroy_node()            # refuse to start: leave nothing in the ROS graph
             raise
+        self.create_subscription(JointState, self.io.names.command, self._on_command,
+                                 STATE_SUB_QOS, raw=self.io.raw_command)
+        self.io.attach(self)               # the sensor publishers (dvrk: the arm's channel)
         self._last = time.monotonic()
         self._started = self._last
         self._max_step = max(MAX_STEP, MAX_STEP_PERIODS / params.publish_rate)
@@ -115,7 +119,16 @@ class SimInstrumentNode(Node):
         """Return the node's monotonic clock (s), the clock of the drive and the arm."""
         return time.monotonic()
 
-    # ------------------------------------------------------------------ input (the profile's)
+    # ------------------------------------------------------------------ input
+    def _on_command(self, data) -> None:
+        """Take a command message (the profile converts it): hold its current, or refuse it."""
+        try:
+            current, stamp_ns = self.io.read_command(data)
+        except CommandRefused as exc:
+            self.refuse(str(exc), exc.stamp_ns)
+            return
+        self.accept(current, stamp_ns)
+
     def accept(self, current: float, stamp_ns: int) -> None:
         """Hold ``current`` (A), a command accepted by the profile; re-arm the drive timeout."""
         self.loop.command_received(stamp_ns, self.get_clock().now().nanoseconds)

@@ -1,8 +1,11 @@
 """The simulated instrument's I/O wiring of one interface profile: topics, messages, units.
 
 :class:`SimInstrumentNode` (nodes/sim_instrument.py) steps the plant, holds the current
-command and its drive-side timeout, and publishes /diagnostics; the profile object made by
-:func:`sim_io` takes the commands in and publishes the sensors:
+command and its drive-side timeout, takes the command topic and publishes /diagnostics; the
+profile object made by :func:`sim_io` converts the command message into a current
+(:meth:`SimIO.read_command`, which never calls the node), and, once attached to the node
+(:meth:`SimIO.attach`: the sensor publishers, the dvrk arm's operating-state channel),
+publishes the sensors:
 
 ``crtk`` (:class:`CrtkSimIO`)
     command ``instrument/actuator/servo_jf`` (jaw_drum, effort = current, A); sensors
@@ -27,6 +30,8 @@ command and its drive-side timeout, and publishes /diagnostics; the profile obje
 """
 from __future__ import annotations
 
+import time
+
 from geometry_msgs.msg import WrenchStamped
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
@@ -46,28 +51,63 @@ _NAN = float('nan')
 _JAW_JOINTS = (topics.JAW_JOINT,)
 
 
+class CommandRefused(ValueError):
+    """A command the drive does not take; ``str()`` is the reason.
+
+    Parameters
+    ----------
+    reason : str
+        Why it was refused.
+    stamp_ns : int
+        The command's header stamp (ns; 0 when it could not be read).
+    """
+
+    def __init__(self, reason: str, stamp_ns: int):
+        super().__init__(reason)
+        self.stamp_ns = stamp_ns
+
+
 class SimIO:
     """What both profiles share: the load cell.
 
     Parameters
     ----------
-    node : SimInstrumentNode
-        Provides ``accept(current, stamp_ns)`` (a command to hold, A), ``refuse(reason)``,
-        ``now()`` (s) and ``get_logger()``.
     params : ParamSet
         The node's parameters.
     names : TopicSet
         The profile's topics (:func:`grip_force_ros.topics.topic_set`).
+
+    Attributes
+    ----------
+    raw_command : bool
+        The command topic is taken as serialized bytes (:mod:`~grip_force_ros.nodes.wire`).
     """
 
     interface = ''
+    raw_command = True
 
-    def __init__(self, node, params, names: topics.TopicSet):
-        self.node = node
+    def __init__(self, params, names: topics.TopicSet):
         self.names = names
-        self._force_pub = node.create_publisher(WrenchStamped, names.measured_force, STATE_PUB_QOS)
+        self._force_pub = None
         self._force_msg = WrenchStamped()
         self._force_msg.header.frame_id = topics.JAW_FRAME
+        self._log = None
+
+    def attach(self, node) -> None:
+        """Create the sensor publishers (and the profile's own entities) on ``node``."""
+        self._log = node.get_logger()
+        self._force_pub = node.create_publisher(WrenchStamped, self.names.measured_force,
+                                                STATE_PUB_QOS)
+
+    def read_command(self, data):
+        """Return ``(current, stamp_ns)`` of a command message: the current to hold (A).
+
+        Raises
+        ------
+        CommandRefused
+            The message is malformed, or the drive does not take it now.
+        """
+        raise NotImplementedError
 
     def powered(self) -> bool:
         """Tell whether the drive may carry a current (the dVRK arm: ENABLED)."""
@@ -90,33 +130,44 @@ class CrtkSimIO(SimIO):
 
     interface = 'crtk'
 
-    def __init__(self, node, params, names: topics.TopicSet):
-        super().__init__(node, params, names)
-        node.create_subscription(JointState, names.command, self._on_command, STATE_SUB_QOS,
-                                 raw=True)
+    def __init__(self, params, names: topics.TopicSet):
+        super().__init__(params, names)
         self.combined = params.state_message == 'combined'
-        self._joint_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
+        self._joint_pub = self._actuator_pub = None
         self._force = WrenchWriter(topics.JAW_FRAME)
         if self.combined:
             self._state = JointStateWriter(_STATE_JOINTS, ('position', 'velocity', 'effort'))
             return
-        self._actuator_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
         self._joints = JointStateWriter(_STATE_JOINTS[:2], ('position', 'velocity'))
         self._actuator = JointStateWriter(_STATE_JOINTS[2:], ('position', 'velocity', 'effort'))
 
-    def _on_command(self, data: bytes) -> None:
+    def attach(self, node) -> None:
+        """Create the sensor publishers on ``node``: the state (split: and the actuator's)."""
+        super().attach(node)
+        self._joint_pub = node.create_publisher(JointState, self.names.instrument_js,
+                                                STATE_PUB_QOS)
+        if not self.combined:
+            self._actuator_pub = node.create_publisher(JointState, self.names.actuator_js,
+                                                       STATE_PUB_QOS)
+
+    def read_command(self, data: bytes):
+        """Return ``(current, stamp_ns)`` of a ``servo_jf`` (jaw_drum effort = current, A).
+
+        Raises
+        ------
+        CommandRefused
+            The bytes are not a JointState, or not one current for the drum.
+        """
         try:
             msg = JointStateData(data)
         except InputRejected as exc:
-            self.node.refuse(f'rejected current command: {exc}', 0)
-            return
+            raise CommandRefused(f'rejected current command: {exc}', 0) from None
         stamp = msg.sec * 1_000_000_000 + msg.nanosec
         try:
             (current,), = read_joints(msg, _COMMAND_JOINTS, ('effort',)).values()
         except InputRejected as exc:
-            self.node.refuse(f'rejected current command: {exc}', stamp)
-            return
-        self.node.accept(current, stamp)
+            raise CommandRefused(f'rejected current command: {exc}', stamp) from None
+        return current, stamp
 
     def publish_state(self, m, stamp_ns: int) -> None:
         """Publish a step's sensors, stamped ``stamp_ns`` (ns): the load cell, then the state.
@@ -148,10 +199,11 @@ class DvrkSimIO(SimIO):
     """
 
     interface = 'dvrk'
+    raw_command = False
 
-    def __init__(self, node, params, names: topics.TopicSet):
+    def __init__(self, params, names: topics.TopicSet):
         self.msgs = crtk_msgs()          # first: without crtk_msgs nothing is created
-        super().__init__(node, params, names)
+        super().__init__(params, names)
         self.arm_name = params.arm
         self.arm = ArmState(params.homing_time)
         self.conversion = JawEffortConversion.from_params(params)
@@ -159,7 +211,19 @@ class DvrkSimIO(SimIO):
         self.refused_not_ready = 0       # servo_jf while not ENABLED and homed
         self.refused_effort = 0          # servo_jf beyond the effort limit
         self.state_commands = 0
-        node.create_subscription(JointState, names.command, self._on_servo_jf, STATE_SUB_QOS)
+        self._clock = self._state_pub = self._arm_pub = self._jaw_pub = None
+        self._arm_msg = JointState(name=list(topics.DVRK_PSM_JOINTS),
+                                   position=[0.0] * len(topics.DVRK_PSM_JOINTS))
+        self._wrist_index = topics.DVRK_PSM_JOINTS.index(topics.WRIST_JOINT)
+        self._jaw_msg = JointState(name=[topics.JAW_JOINT], position=[0.0], velocity=[0.0],
+                                   effort=[0.0])
+        self._published_state = None
+
+    def attach(self, node) -> None:
+        """Create on ``node`` the sensor publishers and the arm's operating-state channel."""
+        super().attach(node)
+        names = self.names
+        self._clock = node.get_clock()
         node.create_subscription(self.msgs.StringStamped, names.state_command,
                                  self._on_state_command, STATE_SUB_QOS)
         self._state_pub = node.create_publisher(self.msgs.OperatingState, names.operating_state,
@@ -168,18 +232,12 @@ class DvrkSimIO(SimIO):
                             self._on_state_request)
         self._arm_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
         self._jaw_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
-        self._arm_msg = JointState(name=list(topics.DVRK_PSM_JOINTS),
-                                   position=[0.0] * len(topics.DVRK_PSM_JOINTS))
-        self._wrist_index = topics.DVRK_PSM_JOINTS.index(topics.WRIST_JOINT)
-        self._jaw_msg = JointState(name=[topics.JAW_JOINT], position=[0.0], velocity=[0.0],
-                                   effort=[0.0])
-        self._published_state = None
         self.publish_operating_state()
 
     # ------------------------------------------------------------------ the arm
     def _operating_state_msg(self):
         msg = self.msgs.OperatingState()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = self._clock.now().to_msg()
         msg.header.frame_id = self.arm_name
         msg.state, msg.is_homed, msg.is_busy = self.arm.key()
         return msg
@@ -197,8 +255,8 @@ class DvrkSimIO(SimIO):
         command = str(msg.string)
         self.state_commands += 1
         before = self.arm.key()
-        why = self.arm.command(command, self.node.now())
-        log = self.node.get_logger()
+        why = self.arm.command(command, time.monotonic())   # the drive's clock
+        log = self._log
         if why is not None:
             log.warning(f'{self.arm_name}: {why}')
         elif self.arm.key() != before:
@@ -214,33 +272,37 @@ class DvrkSimIO(SimIO):
         """Complete a homing in progress; publish the operating state when it changed."""
         self.arm.update(now)
         if self.arm.key() != self._published_state:
-            self.node.get_logger().info(f'{self.arm_name}: {self.arm.state}, '
+            self._log.info(f'{self.arm_name}: {self.arm.state}, '
                                         f'{"homed" if self.arm.is_homed else "not homed"}')
             self.publish_operating_state()
 
     # ------------------------------------------------------------------ commands
-    def _on_servo_jf(self, msg: JointState) -> None:
+    def read_command(self, msg: JointState):
+        """Return ``(current, stamp_ns)`` of a ``<arm>/jaw/servo_jf``: the jaw effort as current (A).
+
+        Raises
+        ------
+        CommandRefused
+            Malformed, the arm not ENABLED and homed, or beyond the tool's effort limit.
+        """
         stamp = stamp_nanoseconds(msg.header.stamp)
-        node = self.node
         if not msg.name and len(msg.effort) == 1:    # the dVRK's own client names no joint
             msg = JointState(header=msg.header, name=[topics.JAW_JOINT], effort=list(msg.effort))
         try:
             (effort,), = read_joints(msg, _JAW_JOINTS, ('effort',)).values()
         except InputRejected as exc:
-            node.refuse(f'rejected jaw effort: {exc}', stamp)
-            return
+            raise CommandRefused(f'rejected jaw effort: {exc}', stamp) from None
         if not self.arm.ready:
             self.refused_not_ready += 1
-            node.refuse(f'servo_jf refused: arm {self.arm_name} is {self.arm.state}'
-                        f'{"" if self.arm.is_homed else ", not homed"}'
-                        f'{", busy homing" if self.arm.is_busy else ""}', stamp)
-            return
+            raise CommandRefused(f'servo_jf refused: arm {self.arm_name} is {self.arm.state}'
+                                 f'{"" if self.arm.is_homed else ", not homed"}'
+                                 f'{", busy homing" if self.arm.is_busy else ""}', stamp)
         if abs(effort) > self.effort_limit:
             self.refused_effort += 1
-            node.refuse(f'servo_jf refused: jaw effort {effort:.4f} N*m beyond the tool limit '
-                        f'+-{self.effort_limit:g} N*m (a current in A on the effort topic?)', stamp)
-            return
-        node.accept(self.conversion.current(effort), stamp)
+            raise CommandRefused(f'servo_jf refused: jaw effort {effort:.4f} N*m beyond the tool '
+                                 f'limit +-{self.effort_limit:g} N*m (a current in A on the '
+                                 'effort topic?)', stamp)
+        return self.conversion.current(effort), stamp
 
     # ------------------------------------------------------------------ sensors
     def publish_state(self, m, stamp_ns: int) -> None:
@@ -270,9 +332,9 @@ class DvrkSimIO(SimIO):
                 'state_commands': str(self.state_commands)}
 
 
-def sim_io(node, params) -> SimIO:
-    """Make the I/O object of the node's ``interface`` profile."""
+def sim_io(params) -> SimIO:
+    """Make the converters of the ``interface`` profile of ``params`` (then :meth:`SimIO.attach`)."""
     names = topics.topic_set(params.interface, params.arm, params.master)
     if params.interface == 'dvrk':
-        return DvrkSimIO(node, params, names)
-    return CrtkSimIO(node, params, names)
+        return DvrkSimIO(params, names)
+    return CrtkSimIO(params, names)

@@ -15,6 +15,6 @@ the machines are shared and noisy; :func:`.run.run_bench` returns its JSON):
 Printed by ``python -m grip_force_ros.lab.bench.<module>`` (figures of the docs):
 :mod:`.model_speed` (the scalar fast paths), :mod:`.control_step` (step and
 node period, grip and free), :mod:`.sim_step` (the simulated instrument's step),
-:mod:`.node_timing` (the controller node's own period and tick per executor),
+:mod:`.node_timing` (the controller node's own period and tick),
 :mod:`.diagnosis_speed` (the long-log report).
 """

@@ -256,8 +256,7 @@ def _windows(arms: dict[str, tuple[Child, list[Child]]], seconds: float) -> dict
 
 
 def run_products(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
-                 executor: str | None = None, rt_priority: int = 0,
-                 controller_params: dict | None = None,
+                 rt_priority: int = 0, controller_params: dict | None = None,
                  namespaces: tuple[str, ...] = ('',),
                  window_delay: float = ARMS_WINDOW_DELAY, load_cell: bool = False) -> dict[str, dict]:
     """Measure one product per arm, all at once in one ROS domain, each in its own namespace.
@@ -269,7 +268,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
 
     Parameters
     ----------
-    seconds, domain_id, config, warmup, executor, rt_priority, controller_params, load_cell
+    seconds, domain_id, config, warmup, rt_priority, controller_params, load_cell
         As :func:`run_product`.
     namespaces : tuple of str
         ROS namespaces of the arms ('' : the root namespace, one arm).
@@ -281,8 +280,7 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
     dict
         Arm namespace -> the :func:`run_product` result of that arm.
     """
-    extra = {'GRIP_FORCE_EXECUTOR': executor} if executor else {}
-    env = ros_environment(domain_id, extra)
+    env = ros_environment(domain_id)
     config = str(instrument_path(config).resolve())
     open_at_ns = time.time_ns() + int(window_delay * 1e9) if len(namespaces) > 1 else 0
     children: list[Child] = []
@@ -321,7 +319,6 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
     opened = [r.get('opened_ns', 0) for r in results.values()]
     for arm, result in results.items():
         result['config'] = config
-        result['executor'] = executor or 'node default'
         result['rt_priority'] = rt_priority
         result['load_cell'] = load_cell
         if len(namespaces) > 1:
@@ -331,8 +328,8 @@ def run_products(seconds: float, domain_id: int, config: str | None = None, warm
 
 
 def run_product(seconds: float, domain_id: int, config: str | None = None, warmup: float = 2.0,
-                executor: str | None = None, rt_priority: int = 0,
-                controller_params: dict | None = None, load_cell: bool = False) -> dict:
+                rt_priority: int = 0, controller_params: dict | None = None,
+                load_cell: bool = False) -> dict:
     """Measure the sim -> controller -> sim round trip and the full path at 1 kHz, the shipped nodes.
 
     Starts the shipped controller node as :mod:`.product_controller` (it notes the input
@@ -350,8 +347,6 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
     config : str, optional
         Instrument YAML (path or shipped name) for the sim, the controller and the
         master; default :data:`~grip_force_ros.params.files.DEFAULT_INSTRUMENT`.
-    executor : str, optional
-        'events' or 'single': the nodes' executor (``GRIP_FORCE_EXECUTOR``); default theirs.
     warmup : float
         Time after discovery before the window opens (s).
     rt_priority : int
@@ -373,8 +368,7 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
         ``other_commands`` (commands that answer no fresh state: the controller's timer
         fallback), ``worst``.
     """
-    return run_products(seconds, domain_id, config, warmup, executor, rt_priority,
-                        controller_params, namespaces=('',), load_cell=load_cell)['']
+    return run_products(seconds, domain_id, config, warmup, rt_priority, controller_params, namespaces=('',), load_cell=load_cell)['']
 
 
 #: The loop's goals: product p99 and full-path p99 at most this many times the reference

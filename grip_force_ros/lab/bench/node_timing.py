@@ -1,12 +1,11 @@
-"""The controller node's own loop timing, per executor (rclpy; prints figures, asserts nothing).
+"""The controller node's own loop timing (rclpy; prints figures, asserts nothing).
 
 Starts sim_instrument, controller and a repeating master as separate processes
 (as the demo does), lets the loop run, then reads the controller's own timing
 from its /diagnostics: mean and max period, periods longer than 1.5x nominal,
-and the time spent in one tick. Run once per executor to compare::
+and the time spent in one tick::
 
-    .venv/bin/python -m grip_force_ros.lab.bench.node_timing --seconds 20 --executor events
-    .venv/bin/python -m grip_force_ros.lab.bench.node_timing --seconds 20 --executor single
+    .venv/bin/python -m grip_force_ros.lab.bench.node_timing --seconds 20
 
 Set ROS_DOMAIN_ID first (DDS stays on loopback unless you chose a range). The
 round trip against the middleware floor is :mod:`.loop` (``grip-force bench``).
@@ -30,9 +29,9 @@ from grip_force_ros.params import instrument_path
 CONFIG = instrument_path()
 
 
-def run(seconds: float, executor: str, config: Path = CONFIG) -> dict:
+def run(seconds: float, config: Path = CONFIG) -> dict:
     """Run the loop for ``seconds`` and return the controller's timing figures."""
-    env = ros_environment(extra={'GRIP_FORCE_EXECUTOR': executor})
+    env = ros_environment()
     latest: dict[str, str] = {}
 
     def on_diag(msg: DiagnosticArray) -> None:
@@ -58,7 +57,6 @@ def run(seconds: float, executor: str, config: Path = CONFIG) -> dict:
             for proc in procs:
                 proc.stop()
     return {
-        'executor': executor,
         'seconds': seconds,
         'periods': int(latest.get('periods', 0)),
         'period_mean_ms': float(latest.get('period_mean_ms', 'nan')),
@@ -74,10 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run :func:`run` with the command-line options and print its figures as JSON."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--seconds', type=float, default=20.0)
-    parser.add_argument('--executor', choices=('events', 'single'), default='events')
     args = parser.parse_args(argv)
     ensure_local_discovery()
-    print(json.dumps(run(args.seconds, args.executor)))
+    print(json.dumps(run(args.seconds)))
     return 0
 
 

@@ -4,7 +4,7 @@ r"""The product's controller for the full-path figures: the shipped node, noting
 command arrival, :mod:`.product_sim`); the full path needs, per command, the sample
 stamps of *every* input the step used. This module runs the shipped
 :class:`~grip_force_ros.nodes.controller.ControllerNode` (the same loop, topics and
-timing) and only wraps its I/O's ``publish`` to note, for each command that answers an
+timing) and only extends its ``_update`` (one control step) to note, for each command that answers an
 actuator state, the stamps of the actuator state, the jaw angle (``instrument/measured_js``)
 and the load cell (``grip/measured_force``) in its ``ControlInputs`` and the controller's
 clock at the step; a ring of the newest ``--capacity`` steps is written as ``.npz`` to
@@ -45,18 +45,16 @@ class BenchController(ControllerNode):
         self._record_path = opts.record
         self._rows = np.zeros((opts.capacity, len(COLUMNS)), np.int64)
         self._n = 0
-        publish = self.io.publish
 
-        def noting_publish(out, now_ns, answered_ns=None):
-            publish(out, now_ns, answered_ns)
-            if answered_ns is not None:
-                inputs = self.inputs
-                self._rows[self._n % len(self._rows)] = (
-                    answered_ns, now_ns,
-                    _ns(inputs.actuator_stamp), _ns(inputs.instrument_stamp), _ns(inputs.force_stamp))
-                self._n += 1
-
-        self.io.publish = noting_publish
+    def _update(self, now_ns, answered_ns, started):
+        """Run the shipped step, then note the input stamps of a step that answers a state."""
+        super()._update(now_ns, answered_ns, started)
+        if answered_ns is not None:
+            inputs = self.inputs
+            self._rows[self._n % len(self._rows)] = (
+                answered_ns, now_ns,
+                _ns(inputs.actuator_stamp), _ns(inputs.instrument_stamp), _ns(inputs.force_stamp))
+            self._n += 1
 
     def records(self) -> dict[str, np.ndarray]:
         """Return the noted steps, oldest first: one int64 array (ns) per column of :data:`COLUMNS`."""

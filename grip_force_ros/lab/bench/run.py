@@ -59,7 +59,7 @@ LOOP_OVERHEAD = 300.0
 
 
 def run_loop(seconds: float, domains=None, config: str | None = None, variant: Variant = BEST,
-             product_executor: str | None = None, rt_priority: int = 0, say=None,
+             rt_priority: int = 0, say=None,
              pressure: str = 'none', pressure_options: dict | None = None, arms: int = 1,
              load_cell: bool = False) -> dict:
     """Measure the ``loop`` section in one free domain: floor, contract floor, product, their ratios.
@@ -68,7 +68,7 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
     ----------
     seconds : float
         Measurement window of each of the three runs (s).
-    domains, config, variant, product_executor, rt_priority, say
+    domains, config, variant, rt_priority, say
         As :func:`run_bench`.
     pressure : str
         Load during the three runs, the same for floor and product:
@@ -109,24 +109,23 @@ def run_loop(seconds: float, domains=None, config: str | None = None, variant: V
             if arms == 1:
                 say(f'loop: product sim -> controller -> sim, {seconds:g} s, {config}, '
                     f"{'load cell' if load_cell else 'sensorless'}")
-                product = run_product(seconds, domain, config, executor=product_executor,
-                                      rt_priority=rt_priority, load_cell=load_cell)
+                product = run_product(seconds, domain, config, rt_priority=rt_priority,
+                                      load_cell=load_cell)
             else:
                 names = ARM_NAMESPACES[:arms]
                 say(f'loop: {arms} products at once ({", ".join("/" + n for n in names)}), '
                     f'sim -> controller -> sim each, {seconds:g} s, {config}')
-                products = run_products(seconds, domain, config, executor=product_executor,
-                                        rt_priority=rt_priority, namespaces=names,
+                products = run_products(seconds, domain, config, rt_priority=rt_priority,
+                                        namespaces=names,
                                         load_cell=load_cell)
     if arms == 1:
         out = compare(floor, product, contract_floor)
         out['product_fallback_commands'] = product['other_commands']
     else:
         out = compare_arms(floor, products, contract_floor)
-        product = next(iter(products.values()))
     out.update({'seconds': seconds, 'domain_id': domain, 'floor_variant': floor['variant'],
                 'floor_lost_fraction': floor['lost_fraction'],
-                'product_executor': product['executor'], 'rt_priority': rt_priority,
+                'rt_priority': rt_priority,
                 'pressure': load.last_summary})
     return out
 
@@ -149,7 +148,7 @@ def run_variants(seconds: float, domains=None, variants=VARIANTS, say=None) -> l
 
 def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str | None = None,
               log_minutes: float = 60.0, model_size: int = 100_000, variants: bool = False,
-              variant_seconds: float | None = None, product_executor: str | None = None,
+              variant_seconds: float | None = None,
               rt_priority: int = 0, pressure: str = 'none', pressure_options: dict | None = None,
               arms: int = 1, load_cell: bool = False, say=None) -> dict:
     """Everything ``grip-force bench`` measures, as the nested JSON dict.
@@ -173,8 +172,6 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
         Also measure the floor with every variant of :data:`VARIANTS`.
     variant_seconds : float, optional
         Window of each variant run (s); default ``seconds``.
-    product_executor : str, optional
-        Executor of the product's nodes ('events' or 'single'); default theirs.
     rt_priority : int
         0, or SCHED_FIFO priority of the 1 kHz processes of the floor and the product alike.
     pressure : str
@@ -209,8 +206,7 @@ def run_bench(seconds: float = 20.0, parts=PARTS, *, domains=None, config: str |
         out['model'] = run_model(config, size=model_size,
                                  other_configs=(str(nonlinear),) if nonlinear.is_file() else ())
     if 'loop' in parts:
-        out['loop'] = run_loop(seconds, domains, config, product_executor=product_executor,
-                               rt_priority=rt_priority, say=say, pressure=pressure,
+        out['loop'] = run_loop(seconds, domains, config, rt_priority=rt_priority, say=say, pressure=pressure,
                                pressure_options=pressure_options, arms=arms,
                                load_cell=load_cell)
     if variants:

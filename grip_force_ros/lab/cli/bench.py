@@ -44,8 +44,6 @@ def add_arguments(parser) -> None:
                         help="close the product controller's force loop on the load cell "
                              '(force_sensor_enabled) and judge it against the contract floor (load '
                              'cell + combined state); default: sensorless as shipped, against the floor')
-    parser.add_argument('--product-executor', choices=('events', 'single'), default=None,
-                        help="executor of the product's nodes (GRIP_FORCE_EXECUTOR; default theirs)")
     from grip_force_ros.lab.cli.load import add_pressure_option
     add_pressure_option(parser, 'the loop part (floor and product alike)')
 
@@ -227,7 +225,7 @@ def run(args) -> int:
         result = run_bench(args.seconds, parts, domains=parse_domains(args.domain_ids), config=config,
                            log_minutes=args.log_minutes, model_size=args.model_size,
                            variants=args.variants, variant_seconds=args.variant_seconds,
-                           product_executor=args.product_executor, rt_priority=args.rt_priority,
+                           rt_priority=args.rt_priority,
                            pressure=args.pressure, pressure_options=pressure_options,
                            arms=args.arms, load_cell=args.load_cell, say=say)
     except BenchError as exc:
