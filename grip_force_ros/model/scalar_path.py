@@ -188,6 +188,46 @@ class ScalarPath:
         return self.current_for_chain_torque_scalar(
             friction.chain_torque(torque, jaw_angle, direction, jaw_velocity), wrist_angle)
 
+    def force_through_jaw_friction_scalar(self, chain_force: float, jaw_angle: float, obj: str,
+                                          direction: float, jaw_velocity: float = 0.0,
+                                          current: float = 0.0, wrist_angle: float = 0.0) -> float:
+        """Grip force (N) the jaw holds when the chain alone would give ``chain_force`` (N).
+
+        For an estimate that already follows the chain's stick band
+        (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`): its force, as a
+        chain torque through the contact gain, through the jaw friction in state
+        ``direction`` (jaw angle in rad, jaw opening rate in rad/s), and back. 0 with no
+        contact. A chain force of 0 (the chain cannot squeeze) is the loading-edge chain
+        torque of ``current`` (A) at ``wrist_angle`` (rad) where that is negative, else 0:
+        a current opening the jaw takes from what the friction holds.
+        """
+        gain = _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+        if gain <= 0.0:
+            return 0.0
+        if chain_force > 0.0:
+            chain = chain_force / gain
+        else:
+            chain = self._torque_scalar(current, wrist_angle)
+            if chain > 0.0:
+                chain = 0.0
+        torque = self.jaw_friction.jaw_torque(chain, jaw_angle, direction, jaw_velocity)
+        return torque * gain if torque > 0.0 else 0.0
+
+    def chain_force_for_jaw_friction_scalar(self, grip_force: float, jaw_angle: float, obj: str,
+                                            direction: float, jaw_velocity: float = 0.0) -> float:
+        """Return the chain's grip force (N) that holds ``grip_force`` (N) against the jaw friction.
+
+        The inverse of :meth:`force_through_jaw_friction_scalar`, for a chain inverse that
+        takes a force (the stick band's ``current_for_force``); 0 where the jaw friction
+        or spring alone holds the force. ``grip_force`` as given with no contact (the
+        chain inverse refuses it).
+        """
+        gain = _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+        if gain <= 0.0:
+            return grip_force
+        torque = self.jaw_friction.chain_torque(grip_force / gain, jaw_angle, direction, jaw_velocity)
+        return torque * gain if torque > 0.0 else 0.0
+
     def current_for_chain_torque_scalar(self, torque: float, wrist_angle: float) -> float:
         """Return the loading-edge current (A) with chain torque M(I) = ``torque`` (N*m), at rest.
 
