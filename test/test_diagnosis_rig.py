@@ -3,7 +3,10 @@
 The rig's physics (docs/real_data.md): Coulomb friction of ~75 mN*m at the jaw, larger than
 any load, with stick through reversals; the jaw torque sensor zero checks to 0.1 mN*m. So the
 generic engine must name a friction effect whose direction follows the drive motion, not a
-sensor offset, and shrink the held-out gap well below the nominal model's.
+sensor offset, and shrink the held-out gap well below the nominal model's. That is asked of
+the instrument file with its jaw friction terms at 0 (the paper's physics only); with the
+terms that ``grip-force realdata`` fitted (config/maryland_forceps.yaml) the nominal itself
+starts and ends nearer the rig.
 """
 from pathlib import Path
 
@@ -21,14 +24,34 @@ TRAIN = ('00', '02', '10', '12', '20', '22', '30', '32', '40', '42')
 TEST = ('01', '03', '11', '13', '21', '23', '31', '33', '41', '43')
 
 
+#: The jaw friction terms of the schema (model/jaw_friction.py).
+JAW_TERMS = ('jaw_coulomb_friction', 'jaw_coulomb_friction_slope', 'jaw_spring_torque',
+             'jaw_spring_slope', 'jaw_spring_curvature', 'jaw_viscous_friction',
+             'jaw_efficiency_load_gain')
+
+
 @pytest.fixture(scope='module')
-def rig_diagnosis():
+def rig_logs():
     if not DATA.is_dir():
         pytest.skip(f'rig data not found at {DATA}')
     from grip_force_ros.lab.rig import read_run, to_contract_log
-    logs = {name: to_contract_log(read_run(DATA / f'{name}.TXT')) for name in TRAIN + TEST}
+    return {name: to_contract_log(read_run(DATA / f'{name}.TXT')) for name in TRAIN + TEST}
+
+
+@pytest.fixture(scope='module')
+def rig_diagnosis(rig_logs):
     params = load_params_file(ROOT / 'config' / 'maryland_forceps.yaml')
-    return run_diagnosis([logs[n] for n in TRAIN], [logs[n] for n in TEST], params)
+    params = params.replace(**{k: 0.0 for k in JAW_TERMS})       # the paper's physics only
+    return run_diagnosis([rig_logs[n] for n in TRAIN], [rig_logs[n] for n in TEST], params)
+
+
+def test_the_fitted_jaw_terms_bring_the_nominal_nearer_the_rig(rig_logs, rig_result):
+    """Measured: 33.7 -> 23.4 mN*m before any effect, 9.5 -> 7.5 after two."""
+    params = load_params_file(ROOT / 'config' / 'maryland_forceps.yaml')
+    verdict = run_diagnosis([rig_logs[n] for n in TRAIN], [rig_logs[n] for n in TEST],
+                            params).result['verdict']
+    assert verdict['gap_before'] < 0.8 * rig_result['verdict']['gap_before']
+    assert verdict['gap_after'] < rig_result['verdict']['gap_after']
 
 
 @pytest.fixture(scope='module')

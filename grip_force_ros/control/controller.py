@@ -117,6 +117,13 @@ class GripController:
             from grip_force_ros.model.hysteresis import HystereticGripForce
             self.stick_band = HystereticGripForce(model)
         self.hysteresis = None          # the stick band when sensorless (set by _configure)
+        #: the jaw friction's direction state, stepped with the drum angle; None when the
+        #: instrument has no jaw friction terms (the loop is then the chain's alone)
+        self.friction_state = None
+        friction = getattr(model, 'jaw_friction', None)
+        if friction is not None and friction.active:
+            from grip_force_ros.model.jaw_friction import FrictionState
+            self.friction_state = FrictionState(friction.width)
         self._configure(params)
         self.command = 0.0              # A, last output
         self.mode = _SAFE               # starts safe until every input has arrived
@@ -356,6 +363,16 @@ class GripController:
                     estimate = self.model.grip_force_scalar(measured, wrist, jaw, obj)
             elif not self.use_sensor:
                 estimate = self.model.grip_force_scalar(inputs.measured_current, wrist, jaw, obj)
+            friction = self.friction_state
+            if friction is not None:          # the jaw friction: its state follows the drum
+                direction = friction.step(inputs.motor_angle)
+                if not self.use_sensor:
+                    if friction.sliding or not friction.slid:
+                        estimate = self.model.force_through_jaw_friction_scalar(
+                            estimate, jaw, obj, direction, inputs.jaw_velocity,
+                            inputs.measured_current, wrist)
+                    else:                     # reversing: the jaw sticks, the current does not
+                        estimate = self.estimated_force   # show the load; hold the estimate
         except (ValueError, ArithmeticError) as exc:
             return self._safe((f'force estimate failed: {exc}',), inputs)
         self.last_wrist = wrist
@@ -402,11 +419,20 @@ class GripController:
                 self.branch = branch
             if self.use_feedforward and target_force > 0.0:
                 try:
+                    chain_force = target_force
+                    if self.friction_state is not None:   # what the chain must give against it
+                        if hysteresis is None:
+                            direction = 1.0 if target_force >= force else -1.0
+                        else:
+                            direction = (1.0 if self.branch == 'loading' else -1.0
+                                         if self.branch == 'unloading' else self.friction_state.direction)
+                        chain_force = self.model.chain_force_for_jaw_friction_scalar(
+                            target_force, jaw, obj, direction, inputs.jaw_velocity)
                     if hysteresis is not None:
-                        feedforward = hysteresis.current_for_force(target_force, wrist, jaw, obj,
-                                                                   branch)
+                        feedforward = hysteresis.current_for_force(chain_force, wrist, jaw, obj,
+                                                                   self.branch)
                     else:
-                        feedforward = self.model.current_for_force_scalar(target_force, wrist, jaw, obj)
+                        feedforward = self.model.current_for_force_scalar(chain_force, wrist, jaw, obj)
                 except (ValueError, ArithmeticError) as exc:
                     feedforward = 0.0
                     reasons = reasons + (f'no feedforward: {exc}',)

@@ -31,6 +31,7 @@ from grip_force_ros.model import transmission as _tx
 from grip_force_ros.model.array_path import ArrayPath
 from grip_force_ros.model.contact import OBJECTS, ModelError, check_object
 from grip_force_ros.model.fitted_path import FittedPath
+from grip_force_ros.model.jaw_friction import JawFriction
 from grip_force_ros.model.scalar_path import ScalarPath
 from grip_force_ros.params import ParameterError, check_consistency
 
@@ -141,6 +142,8 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
         self._rn = p.drive_pulley_radius
         self._tip, self._inner = p.jaw_moment_arm_tip, p.jaw_moment_arm_inner
         self._pull_per_grip = _contact.PULL_OUT_PER_MU * p.needle_friction_coefficient
+        #: friction, spring and load loss at the jaw (jaw_friction.py); none for the ideal instrument
+        self.jaw_friction = JawFriction.from_params(p) if losses else JawFriction()
         self._init_scalar_path(p.cable_radius)    # scalar_path.py: the control-loop fast path
         self._init_array_path()                   # array_path.py: vectorised constants
         self._init_fitted_path()                  # fitted_path.py: the tables, where they apply
@@ -201,7 +204,7 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
         return torque, lam, f0
 
     def forward(self, current, wrist_angle, jaw_angle, obj: str = 'needle', motor_velocity=0.0,
-                jaw_velocity=0.0) -> ForwardResult:
+                jaw_velocity=0.0, direction=None) -> ForwardResult:
         """Grip force and more from the motor current (arrays broadcast).
 
         Parameters
@@ -215,8 +218,13 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
         obj : str
             One of :data:`OBJECTS`.
         motor_velocity, jaw_velocity : float or array
-            Drum rate (rad/s, positive closing) and jaw opening rate (rad/s); only the
-            (tiny) inertial term of M' uses them.
+            Drum rate (rad/s, positive closing) and jaw opening rate (rad/s); the (tiny)
+            inertial term of M' uses them, the jaw's viscous friction the jaw rate.
+        direction : float or array, optional
+            Friction state s in [-1, 1] of the jaw friction (``jaw_friction.py``: +1 sliding
+            closing, -1 opening). None, or an instrument without jaw friction terms: the
+            chain alone (the paper's model). With it, ``jaw_torque`` is the torque the
+            jaw holds and the grip force follows it.
 
         Returns
         -------
@@ -246,6 +254,8 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
             torque *= self._rn                                # M = r_n F0 (lambda_n - fraction) (N*m)
         if _moving(motor_velocity, jaw_velocity, mv, jv):
             torque += _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
+        if direction is not None and self.jaw_friction.active:
+            torque[...] = self.jaw_friction.jaw_torque_array(torque, jaw, direction, jv)
         np.clip(torque, 0.0, np.inf, out=grip)                # max(M, 0), NaN stays NaN
         grip *= self._contact_gain(obj, jaw)                  # F_J (N)
         if obj == 'needle':
@@ -258,10 +268,12 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
         return ForwardResult(grip, pull, torque, efficiency, drum_tension)
 
     def inverse(self, grip_force, wrist_angle, jaw_angle, obj: str = 'needle', motor_velocity=0.0,
-                jaw_velocity=0.0):
+                jaw_velocity=0.0, direction=None):
         """Return the current (A) that gives ``grip_force`` (N) (arrays broadcast).
 
         A zero force returns the current at which the jaw just starts to squeeze.
+        ``direction``: the friction state s in [-1, 1] of the jaw friction, as in
+        :meth:`forward` (None: the chain alone); the current is on that branch.
 
         Raises
         ------
@@ -280,11 +292,12 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
             raise ModelError(f'grip force must be finite and >= 0 N, got {force[~(force >= 0.0)][:3]!r}')
         gain = self._contact_gain(obj, jaw)                   # F_J / max(M, 0) (1/m)
         moving = _moving(motor_velocity, jaw_velocity, mv, jv)
+        friction = direction is not None and self.jaw_friction.active
         if isinstance(gain, float):
             if gain <= 0.0 and high > 0.0:
                 raise ModelError(f'no contact: a positive grip force cannot be produced with obj={obj!r} '
                                  'at these jaw angles')
-            if self._one_dimensional and shape != () and gain > 0.0 and not moving:
+            if self._one_dimensional and shape != () and gain > 0.0 and not moving and not friction:
                 self._torque_per_amp_at_zero_tension(wrist)   # ModelError if no current grips
                 return self._current_for_force_from_fit(force, gain, high)
             torque = force / gain if gain > 0.0 else np.zeros(shape)          # M needed (N*m)
@@ -294,6 +307,8 @@ class GripForceModel(ScalarPath, ArrayPath, FittedPath):
                                  'at these jaw angles')
             with np.errstate(divide='ignore', invalid='ignore'):
                 torque = np.where(force > 0.0, force / gain, 0.0)
+        if friction:                                          # the chain torque that holds it
+            torque = self.jaw_friction.chain_torque_array(torque, jaw, direction, jv)
         if moving:
             torque -= _tx.inertial_moment(-jv, mv, self._rn, self.params.jaw_mass, self.params.drum_mass)
         per_amp = self._torque_per_amp_at_zero_tension(wrist)   # dM/dI at I = 0 (N*m/A)

@@ -113,6 +113,135 @@ class ScalarPath:
                 return value * position                                   # I (A)
         return self._solve_current(torque, wrist_angle, 0.0)
 
+    # ---------------------------------------------------------------- with the jaw friction
+    def jaw_torque_scalar(self, current: float, wrist_angle: float, jaw_angle: float,
+                          direction: float = 1.0, jaw_velocity: float = 0.0) -> float:
+        """Torque the jaw holds (N*m) for one sample, friction state ``direction`` (control-loop fast path).
+
+        Parameters
+        ----------
+        current : float
+            Motor current (A), positive closes.
+        wrist_angle, jaw_angle : float
+            Wrist pitch and jaw opening angle (rad).
+        direction : float
+            Friction state s in [-1, 1] of the jaw friction (+1 sliding closing).
+        jaw_velocity : float
+            Jaw opening rate (rad/s), for the jaw's viscous friction.
+
+        Returns
+        -------
+        float
+            The chain torque M (loading edge) through
+            :meth:`~grip_force_ros.model.jaw_friction.JawFriction.jaw_torque`; M itself
+            when the instrument has no jaw friction terms.
+        """
+        torque = self._torque_scalar(current, wrist_angle)
+        friction = self.jaw_friction
+        if not friction.active:
+            return torque
+        return friction.jaw_torque(torque, jaw_angle, direction, jaw_velocity)
+
+    def grip_force_friction_scalar(self, current: float, wrist_angle: float, jaw_angle: float,
+                                   obj: str = 'needle', direction: float = 1.0,
+                                   jaw_velocity: float = 0.0) -> float:
+        """Grip force (N) for one sample with the jaw friction in state ``direction``.
+
+        :meth:`grip_force_scalar` (bit for bit) when the instrument has no jaw friction
+        terms; arguments as :meth:`jaw_torque_scalar`.
+        """
+        if not self.jaw_friction.active:
+            return self.grip_force_scalar(current, wrist_angle, jaw_angle, obj)
+        torque = self.jaw_torque_scalar(current, wrist_angle, jaw_angle, direction, jaw_velocity)
+        if torque <= 0.0:
+            return 0.0
+        return torque * _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+
+    def current_for_force_friction_scalar(self, grip_force: float, wrist_angle: float,
+                                          jaw_angle: float, obj: str = 'needle',
+                                          direction: float = 1.0,
+                                          jaw_velocity: float = 0.0) -> float:
+        """Return the current (A) for a grip force (N) on the branch of friction state ``direction``.
+
+        The chain torque that holds the force against the jaw friction
+        (:meth:`~grip_force_ros.model.jaw_friction.JawFriction.chain_torque`), then the
+        chain's loading-edge current for it. :meth:`current_for_force_scalar` (bit for
+        bit) when the instrument has no jaw friction terms.
+
+        Raises
+        ------
+        ModelError
+            As :meth:`current_for_force_scalar`.
+        """
+        friction = self.jaw_friction
+        if not friction.active:
+            return self.current_for_force_scalar(grip_force, wrist_angle, jaw_angle, obj)
+        if not grip_force >= 0.0 or grip_force == math.inf:
+            raise ModelError(f'grip force must be finite and >= 0 N, got {grip_force!r}')
+        torque = 0.0
+        if grip_force > 0.0:
+            gain = _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+            if gain <= 0.0:
+                raise ModelError(f'no contact: a positive grip force cannot be produced with '
+                                 f'obj={obj!r} at jaw angle {jaw_angle!r} rad')
+            torque = grip_force / gain
+        return self.current_for_chain_torque_scalar(
+            friction.chain_torque(torque, jaw_angle, direction, jaw_velocity), wrist_angle)
+
+    def force_through_jaw_friction_scalar(self, chain_force: float, jaw_angle: float, obj: str,
+                                          direction: float, jaw_velocity: float = 0.0,
+                                          current: float = 0.0, wrist_angle: float = 0.0) -> float:
+        """Grip force (N) the jaw holds when the chain alone would give ``chain_force`` (N).
+
+        For an estimate that already follows the chain's stick band
+        (:class:`~grip_force_ros.model.hysteresis.HystereticGripForce`): its force, as a
+        chain torque through the contact gain, through the jaw friction in state
+        ``direction`` (jaw angle in rad, jaw opening rate in rad/s), and back. 0 with no
+        contact. A chain force of 0 (the chain cannot squeeze) is the loading-edge chain
+        torque of ``current`` (A) at ``wrist_angle`` (rad) where that is negative, else 0:
+        a current opening the jaw takes from what the friction holds.
+        """
+        gain = _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+        if gain <= 0.0:
+            return 0.0
+        if chain_force > 0.0:
+            chain = chain_force / gain
+        else:
+            chain = self._torque_scalar(current, wrist_angle)
+            if chain > 0.0:
+                chain = 0.0
+        torque = self.jaw_friction.jaw_torque(chain, jaw_angle, direction, jaw_velocity)
+        return torque * gain if torque > 0.0 else 0.0
+
+    def chain_force_for_jaw_friction_scalar(self, grip_force: float, jaw_angle: float, obj: str,
+                                            direction: float, jaw_velocity: float = 0.0) -> float:
+        """Return the chain's grip force (N) that holds ``grip_force`` (N) against the jaw friction.
+
+        The inverse of :meth:`force_through_jaw_friction_scalar`, for a chain inverse that
+        takes a force (the stick band's ``current_for_force``); 0 where the jaw friction
+        or spring alone holds the force. ``grip_force`` as given with no contact (the
+        chain inverse refuses it).
+        """
+        gain = _contact.contact_gain_scalar(obj, jaw_angle, self._tip, self._inner)
+        if gain <= 0.0:
+            return grip_force
+        torque = self.jaw_friction.chain_torque(grip_force / gain, jaw_angle, direction, jaw_velocity)
+        return torque * gain if torque > 0.0 else 0.0
+
+    def current_for_chain_torque_scalar(self, torque: float, wrist_angle: float) -> float:
+        """Return the loading-edge current (A) with chain torque M(I) = ``torque`` (N*m), at rest.
+
+        Negative torques (the jaw friction or spring holding more than the grip needs)
+        give the negative current of the linear part.
+        """
+        if self.affine:
+            lam = self._efficiency_scalar(0.0, wrist_angle)
+            per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
+            if per_amp <= 0.0:
+                raise ModelError(self._no_grip_message(lam))
+            return torque / per_amp
+        return self._solve_current(torque, wrist_angle, 0.0)
+
     def _solve_current(self, torque: float, wrist_angle: float, inertial: float) -> float:
         """Solve for the current with M(I) + inertial = torque, tension-dependent friction (brentq)."""
         need = torque - inertial

@@ -82,6 +82,47 @@ INSTRUMENT = [
        min=0.0, max=1.0, read_only=True),
     _P('jaw_mass', 'double', 0.001, 'kg', 'End effector (jaw) mass m_n (Table 1: m4 = 1 g).',
        min=0.0, max=1.0, read_only=True),
+    # --- friction, spring and load loss at the jaw (model/jaw_friction.py); all 0: off -------------
+    _P('jaw_coulomb_friction', 'double', 0.0, 'N*m',
+       'Coulomb friction C0 at the jaw at jaw_spring_rest_angle: the chain torque the jaw loses '
+       'while the drive slides closing and keeps while it slides opening (friction state s, '
+       'jaw_friction_width). 0 = off (the paper gives none). A da Vinci Maryland forceps: '
+       '75 mN*m (docs/real_data.md).',
+       min=0.0, max=1.0, read_only=True),
+    _P('jaw_coulomb_friction_slope', 'double', 0.0, 'N*m/rad',
+       'Change C1 of the Coulomb friction per rad of jaw opening about jaw_spring_rest_angle '
+       '(friction along the stroke: C = max(C0 + C1 (phi - phi_r), 0)). 0 = constant.',
+       min=-1.0, max=1.0, read_only=True),
+    _P('jaw_friction_width', 'double', 0.02, 'rad',
+       'Dahl width of the friction state over the drive (drum) angle: each displacement dx moves '
+       's toward sign(dx) by 1 - exp(-|dx|/width), so the friction reverses over a few widths '
+       'and sticks without motion. Used only when a jaw friction term is nonzero. Default: the '
+       'rig estimator\'s 0.02 rad (docs/real_data.md).',
+       min=1e-6, max=1.0, read_only=True),
+    _P('jaw_spring_torque', 'double', 0.0, 'N*m',
+       'Position spring moment K0 at jaw_spring_rest_angle, opening positive (it takes chain '
+       'torque from the grip): K = K0 + k1 (phi - phi_r) + k2 (phi - phi_r)^2. 0 = off.',
+       min=-1.0, max=1.0, read_only=True),
+    _P('jaw_spring_slope', 'double', 0.0, 'N*m/rad',
+       'Linear term k1 of the position spring per rad of jaw opening (negative: restoring, the '
+       'spring closes an opened jaw). 0 = off.',
+       min=-10.0, max=10.0, read_only=True),
+    _P('jaw_spring_curvature', 'double', 0.0, 'N*m/rad^2',
+       'Quadratic term k2 of the position spring. 0 = off.',
+       min=-10.0, max=10.0, read_only=True),
+    _P('jaw_spring_rest_angle', 'double', 0.0, 'rad',
+       'Jaw angle phi_r about which the position spring and the friction along the stroke are '
+       'expanded.',
+       min=-math.pi, max=math.pi, read_only=True),
+    _P('jaw_viscous_friction', 'double', 0.0, 'N*m*s/rad',
+       "Viscous friction d at the jaw on its closing rate (torque d * (-jaw velocity) taken from "
+       'the grip). 0 = off.',
+       min=0.0, max=1.0, read_only=True),
+    _P('jaw_efficiency_load_gain', 'double', 0.0, '1/(N*m)',
+       'Load-dependent efficiency q: a friction q * tau^2 on the held torque tau, in the '
+       'direction of the friction state, so the efficiency of each direction (the chain\'s, '
+       'pulley_friction_coefficient through the stick band) falls as the load grows. 0 = off.',
+       min=0.0, max=100.0, read_only=True),
     # --- the dVRK's jaw effort <-> current conversion (model/dvrk_jaw.py, docs/dvrk.md) ---------
     _P('dvrk_jaw_coupling', 'double', 1.2177, 'rad/rad',
        "Jaw coupling c of the dVRK tool file: the jaw row's last entry of "

@@ -23,6 +23,14 @@ Equations of motion (torques in N*m)::
     Jj dwj/dt = -r_n Tn (1 - f/lambda) + M_contact(phi, wj) - (jaw_damping + viscous) wj
                 + pivot friction + hysteresis, creep and position-spring moments (effects)
 
+The instrument's own jaw friction and spring (the ``jaw_*`` parameters,
+:mod:`grip_force_ros.model.jaw_friction`, all 0 in the paper's instruments) are the same
+physics as those effects, added to them: the Coulomb friction at the jaw ``C(phi) + q tau^2``
+(``tau`` the jaw's drive moment at the step's start) adds to ``pivot_coulomb_friction``, the
+viscous friction to the jaw damping, the spring ``K(phi)`` to the opening moments. The model
+is what the controller is told, the effects are what it is not; with the terms at 0 the
+plant's arithmetic is the one without them (the code is skipped).
+
 The position spring (effect ``position_spring`` = S, ``position_spring_rest_angle`` =
 phi_r) is a preloaded torsion spring at the jaw: opening moment ``S (1 - phi / phi_r)``
 (N*m), S at the closed jaw, 0 at phi_r. It is a jaw torque like the others: it moves the
@@ -59,6 +67,7 @@ from typing import Any, Mapping
 from grip_force_ros.model import contact as _contact
 from grip_force_ros.model import friction as _friction
 from grip_force_ros.model.contact import OBJECTS
+from grip_force_ros.model.jaw_friction import JawFriction
 from grip_force_ros.params.sim import jaw_open_stop
 from grip_force_ros.sim.effects import SimError, effect_overrides
 
@@ -186,6 +195,12 @@ class InstrumentSim:
         self._tau_current = p.current_loop_time_constant
         # effects
         self._pivot_coulomb = p.pivot_coulomb_friction
+        # the instrument's own jaw friction and spring (model/jaw_friction.py): the same Coulomb
+        # friction at the jaw as the pivot_coulomb_friction effect, added to it
+        self._jaw_friction = JawFriction.from_params(p)
+        self._jaw_friction_on = self._jaw_friction.active
+        if self._jaw_friction_on:
+            self._jaw_damping += self._jaw_friction.viscous                # as viscous_friction
         self._hysteresis = p.cable_hysteresis
         self._backlash_half = 0.5 * p.backlash * self._rn                  # m of cable
         self._creep = p.viscoelastic_creep
@@ -361,6 +376,14 @@ class InstrumentSim:
         drive_arm = self._drive_arm()            # m: jaw moment per N of jaw-side tension
         kj_cable = k2 * rn * drive_arm           # N*m/rad, cable stiffness seen by the jaw
         coulomb = self._pivot_coulomb
+        jaw_spring = 0.0
+        if self._jaw_friction_on:           # at the step's start: friction along the stroke and load
+            fr = self._jaw_friction
+            held = drive_arm * self._tension_jaw                               # N*m on the jaw
+            coulomb += fr.coulomb_at(self._phi) + fr.load_gain * held * held
+            jaw_spring = fr.spring_at(self._phi)                               # N*m, opening
+            if fr.spring_slope < 0.0:
+                kj_cable -= fr.spring_slope      # its restoring stiffness, implicit as the others
         g2 = self._backlash_half
         hyst_frac = self._hysteresis
         cw = self._coupling * self._wrist
@@ -411,6 +434,8 @@ class InstrumentSim:
                 c_loc += zeta2 * math.sqrt(stop_k * jj)
             # opening moments, N*m (the position spring: S (1 - phi/phi_r) = S - rate*phi)
             drive = -drive_arm * tn + hyst + creep + spring + (spring_closed - spring_rate * phi)
+            if jaw_spring != 0.0:
+                drive += jaw_spring
             momentum = jj * wj + h * drive
             if coulomb > 0.0:
                 if abs(momentum) <= h * coulomb:

@@ -15,6 +15,7 @@ from scipy.signal import lfilter
 from grip_force_ros.logs import LogError, iter_log, measured_column, normalise_log
 from grip_force_ros.logs.columns import OBJECT_COLUMN
 from grip_force_ros.model.contact import contact_gain
+from grip_force_ros.model.jaw_friction import dahl_direction
 from grip_force_ros.objects import OBJECTS
 
 #: Time (s) after the predicted load starts or stops that is left out as a transient.
@@ -290,6 +291,8 @@ def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
     direction_aware : bool
         Apply the model's pulley friction in the direction of cable slip
         (:func:`capstan_tension`); False: the loading branch (``GripForceModel.forward``).
+        Either way an instrument with jaw friction terms gets them, in the friction state
+        of its drum angle (:mod:`grip_force_ros.model.jaw_friction`).
     jaw_side_cable_length : float, optional
         Free cable length (m) between the pulleys and the jaw (:func:`cable_lengths`):
         sets how fast the wrist moves a stuck cable across the friction band (stiffness
@@ -342,6 +345,12 @@ def nominal(inputs: Mapping, model, *, direction_aware: bool = True,
         torque = torque + arm * (tn - efficiency * drum_tension)
     else:
         tn, uncertain = efficiency * drum_tension, np.zeros(n, dtype=bool)
+    friction = getattr(model, 'jaw_friction', None)
+    if friction is not None and friction.active:
+        # the instrument's jaw friction and spring (model/jaw_friction.py), its friction state
+        # following the drum angle (through a reversal the Dahl state moves the friction across)
+        direction = dahl_direction(np.asarray(inputs['motor'], float), friction.width)
+        torque = friction.jaw_torque_array(torque, jaw, direction, inputs['jaw_velocity'])
     predicted = torque if inputs['measured'] == 'jaw_torque' else np.maximum(torque, 0.0) * gain
     return {'nominal': np.asarray(predicted, float), 'torque': torque, 'drum_tension': drum_tension,
             'jaw_tension': tn, 'efficiency': efficiency, 'gain': gain, 'uncertain': uncertain,

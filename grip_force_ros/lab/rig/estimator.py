@@ -43,6 +43,8 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy.signal import butter, lfilter, lfilter_zi
 
+from grip_force_ros.model import jaw_friction as _jaw_friction
+
 #: Columns an estimator may read: the robot's motor side.
 ALLOWED_INPUTS = ('t', 'current', 'current_command', 'motor_angle', 'motor_shaft_angle')
 #: Columns it must never read (jaw side, the input-disk torque sensor, the resisting motor).
@@ -120,10 +122,10 @@ def causal_velocity(angle: np.ndarray, dt: float, window_s: float, cutoff_hz: fl
 
 
 def dahl_direction(angle: np.ndarray, width: float, start: float = 0.0) -> np.ndarray:
-    """Friction direction state s in [-1, 1] driven by displacement (Dahl model).
+    """Friction direction state s in [-1, 1] of a record: the instrument's Dahl model.
 
-    Each displacement dx moves s towards sign(dx) by the fraction
-    1 - exp(-|dx|/width): no motion, no change (the state sticks).
+    :func:`grip_force_ros.model.jaw_friction.dahl_direction` (the instrument physics),
+    with the estimator's error for a bad width.
 
     Parameters
     ----------
@@ -136,16 +138,7 @@ def dahl_direction(angle: np.ndarray, width: float, start: float = 0.0) -> np.nd
     """
     if width <= 0:
         raise EstimatorError(f'hysteresis width must be > 0 rad, got {width!r}')
-    dx = np.diff(angle, prepend=angle[0])
-    decay = np.exp(-np.abs(dx) / width)
-    target = np.sign(dx)
-    out = np.empty(angle.size)
-    s = float(start)
-    for i, (d, g, tgt) in enumerate(zip(dx.tolist(), decay.tolist(), target.tolist())):
-        if d != 0.0:
-            s = tgt + (s - tgt) * g
-        out[i] = s
-    return out
+    return _jaw_friction.dahl_direction(angle, width, start)
 
 
 def observer_gains(weight: np.ndarray, gain: float) -> np.ndarray:
@@ -452,32 +445,9 @@ def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
 REFERENCE_TORQUE = 0.1
 
 
-def invert_forward(current, a, quad, beta):
-    """Jaw torque (N*m) solving I = a*tau + quad*tau**2 + beta, and the local slope dI/dtau.
-
-    Parameters
-    ----------
-    current, beta : ndarray
-        Measured (filtered) current and the torque-free part of the forward model (A).
-    a : ndarray
-        Linear coefficient alpha(s) (A/(N*m)), > 0 for a physical fit.
-    quad : ndarray or float
-        Quadratic coefficient alpha1_quad * s (A/(N*m)^2); 0 gives tau = (I - beta)/a.
-
-    Returns
-    -------
-    (ndarray, ndarray)
-        The root continuous with the linear solution, tau = 2y/(a + sqrt(a^2 + 4 quad y))
-        (y = I - beta; where the square root would be negative, the turning point
-        -a/(2 quad)), and |dI/dtau| there (A/(N*m)).
-    """
-    y = current - beta
-    a = np.where(np.abs(a) < 1e-6, 1e-6, a)
-    if np.all(np.asarray(quad) == 0.0):
-        return y / a, np.abs(a)
-    a = np.maximum(a, 1e-6)
-    root = np.sqrt(np.maximum(a * a + 4.0 * quad * y, 0.0))
-    return 2.0 * y / (a + root), root
+#: Jaw torque (N*m) solving I = a*tau + quad*tau**2 + beta, and the local slope dI/dtau:
+#: the instrument's branch solve (:func:`grip_force_ros.model.jaw_friction.solve_branch`).
+invert_forward = _jaw_friction.solve_branch
 
 
 #: Seconds at the start of a training run left out when its load level is taken (the

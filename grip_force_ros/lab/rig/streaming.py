@@ -16,6 +16,7 @@ import numpy as np
 from scipy.signal import butter, lfilter_zi
 
 from grip_force_ros.lab.rig.estimator import POSITION_RANGE, CableFrictionObserver, EstimatorError
+from grip_force_ros.model.jaw_friction import dahl_step
 
 
 class _Lowpass:
@@ -102,12 +103,8 @@ class StreamingJawTorqueObserver:
             out = out * x + c
         return out
 
-    @staticmethod
-    def _dahl(state: float, d: float, width: float) -> float:
-        if d == 0.0:
-            return state
-        target = 1.0 if d > 0 else -1.0
-        return target + (state - target) * math.exp(-abs(d) / width)
+    #: One Dahl step of the friction state (the instrument's, model/jaw_friction.py).
+    _dahl = staticmethod(dahl_step)
 
     def step(self, current: float, motor_angle: float, motor_shaft_angle: float | None = None) -> float:
         """Advance one sample and return the jaw torque estimate (N*m).
