@@ -89,8 +89,8 @@ class ControlInputs:
     or why the sample was rejected (str). A rejected sample (``(False, reason)``) is not
     stored; the source is marked faulted (its ``*_fault`` attribute holds the reason) until
     the next accepted sample. A sample whose stamp equals the previous stamp is a duplicate:
-    ignored without refreshing the receive time (``(False, None)``). A stamp of NaN or 0.0 (an unset ROS header) skips the
-    stamp checks.
+    ignored without refreshing the receive time (``(False, None)``). A stamp of NaN or 0.0
+    (an unset ROS header) skips the stamp checks.
     """
 
     __slots__ = (
@@ -206,7 +206,8 @@ class ControlInputs:
         lo, hi, tol = self.master_angle_min, self.master_angle_max, self.master_angle_tolerance
         if angle < lo - tol or angle > hi + tol:
             return _REJECTED, self.reject('master', receive_time,
-                               f'gripper angle {angle:.3f} rad outside [{lo - tol:.3f}, {hi + tol:.3f}]')
+                                          f'gripper angle {angle:.3f} rad outside '
+                                          f'[{lo - tol:.3f}, {hi + tol:.3f}]')
         clamped = False
         if angle < lo:
             angle, clamped = lo, True
@@ -237,15 +238,16 @@ class ControlInputs:
             return _REJECTED, self.reject('instrument', receive_time, why)
         if not (_isfinite(wrist_angle) and _isfinite(jaw_angle) and _isfinite(jaw_velocity)):
             return _REJECTED, self.reject('instrument', receive_time,
-                               f'non-finite value (wrist {wrist_angle!r}, jaw {jaw_angle!r}, '
-                               f'jaw velocity {jaw_velocity!r})')
+                                          f'non-finite value (wrist {wrist_angle!r}, jaw {jaw_angle!r}, '
+                                          f'jaw velocity {jaw_velocity!r})')
         if abs(wrist_angle) > self.wrist_angle_limit:
             return _REJECTED, self.reject('instrument', receive_time,
-                               f'wrist angle {wrist_angle:.3f} rad beyond +-{self.wrist_angle_limit:.3f}')
+                                          f'wrist angle {wrist_angle:.3f} rad beyond '
+                                          f'+-{self.wrist_angle_limit:.3f}')
         if jaw_angle < self.jaw_angle_min or jaw_angle > self.jaw_angle_max:
             return _REJECTED, self.reject('instrument', receive_time,
-                               f'jaw angle {jaw_angle:.3f} rad outside '
-                               f'[{self.jaw_angle_min:.3f}, {self.jaw_angle_max:.3f}]')
+                                          f'jaw angle {jaw_angle:.3f} rad outside '
+                                          f'[{self.jaw_angle_min:.3f}, {self.jaw_angle_max:.3f}]')
         self.wrist_angle = wrist_angle
         self.jaw_angle = jaw_angle
         self.jaw_velocity = jaw_velocity
@@ -274,11 +276,12 @@ class ControlInputs:
             return _REJECTED, self.reject('actuator', receive_time, why)
         if not (_isfinite(measured_current) and _isfinite(motor_angle) and _isfinite(motor_velocity)):
             return _REJECTED, self.reject('actuator', receive_time,
-                               f'non-finite value (current {measured_current!r}, motor angle '
-                               f'{motor_angle!r}, motor velocity {motor_velocity!r})')
+                                          f'non-finite value (current {measured_current!r}, motor angle '
+                                          f'{motor_angle!r}, motor velocity {motor_velocity!r})')
         if abs(measured_current) > self.current_limit:
             return _REJECTED, self.reject('actuator', receive_time,
-                               f'measured current {measured_current:.3f} A beyond +-{self.current_limit:.3f}')
+                                          f'measured current {measured_current:.3f} A beyond '
+                                          f'+-{self.current_limit:.3f}')
         self.measured_current = measured_current
         self.motor_angle = motor_angle
         self.motor_velocity = motor_velocity
@@ -305,7 +308,7 @@ class ControlInputs:
             return _REJECTED, self.reject('force', receive_time, f'grip force {grip_force!r} not finite')
         if abs(grip_force) > self.force_limit:
             return _REJECTED, self.reject('force', receive_time,
-                               f'grip force {grip_force:.3f} N beyond +-{self.force_limit:.1f}')
+                                          f'grip force {grip_force:.3f} N beyond +-{self.force_limit:.1f}')
         self.measured_force = grip_force
         self.force_interval = next_interval(self.force_interval, receive_time - self.force_time)
         self.force_time = receive_time

@@ -75,6 +75,7 @@ def matching_qos(offered: Iterable[QoSProfile]) -> QoSProfile:
 
 _RCLError = _rclpy_impl.RCLError
 
+
 class InputRejected(ValueError):
     """A received message is malformed; ``str()`` is the reason for /diagnostics."""
 

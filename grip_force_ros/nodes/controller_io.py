@@ -74,6 +74,7 @@ class _NoStep:
 #: state the node steps on with the controller's clock: rejected, duplicated or unstamped).
 NO_STEP = _NoStep()
 
+
 class ControllerIO:
     """What both profiles share: the master, the load cell, the force outputs.
 
@@ -252,7 +253,7 @@ class CrtkControllerIO(ControllerIO):
         return msg.sec * 1_000_000_000 + msg.nanosec if fresh and stamp != 0.0 else None
 
     def command(self, out, stamp_ns: int) -> bytes:
-        """Return the current command (A) for ``instrument/actuator/servo_jf``, as CDR bytes."""
+        """Return the CDR bytes of the motor current setpoint (A) on ``instrument/actuator/servo_jf``."""
         sec, nanosec = divmod(stamp_ns, 1_000_000_000)
         return self._servo.write(sec, nanosec, (out.current_command,))
 

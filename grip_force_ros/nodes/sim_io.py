@@ -273,7 +273,7 @@ class DvrkSimIO(SimIO):
         self.arm.update(now)
         if self.arm.key() != self._published_state:
             self._log.info(f'{self.arm_name}: {self.arm.state}, '
-                                        f'{"homed" if self.arm.is_homed else "not homed"}')
+                           f'{"homed" if self.arm.is_homed else "not homed"}')
             self.publish_operating_state()
 
     # ------------------------------------------------------------------ commands

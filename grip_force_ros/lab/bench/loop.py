@@ -368,7 +368,8 @@ def run_product(seconds: float, domain_id: int, config: str | None = None, warmu
         ``other_commands`` (commands that answer no fresh state: the controller's timer
         fallback), ``worst``.
     """
-    return run_products(seconds, domain_id, config, warmup, rt_priority, controller_params, namespaces=('',), load_cell=load_cell)['']
+    return run_products(seconds, domain_id, config, warmup, rt_priority, controller_params,
+                        namespaces=('',), load_cell=load_cell)['']
 
 
 #: The loop's goals: product p99 and full-path p99 at most this many times the reference
