@@ -231,6 +231,6 @@ def _hold_error(plant_friction, told):
 
 
 def test_a_controller_told_the_friction_holds_the_target():
-    """Sensorless on the paper instrument with 10 mN*m at the jaw: -21 % untold, within 5 % told."""
+    """Sensorless on the paper instrument with 10 mN*m at the jaw: -21.5 % untold, -1.1 % told."""
     assert _hold_error(0.01, told=False) < -0.15
-    assert abs(_hold_error(0.01, told=True)) < 0.05
+    assert abs(_hold_error(0.01, told=True)) < 0.03
