@@ -367,12 +367,15 @@ class GripController:
             if friction is not None:          # the jaw friction: its state follows the drum
                 direction = friction.step(inputs.motor_angle)
                 if not self.use_sensor:
-                    if friction.sliding or not friction.slid:
-                        estimate = self.model.force_through_jaw_friction_scalar(
-                            estimate, jaw, obj, direction, inputs.jaw_velocity,
-                            inputs.measured_current, wrist)
-                    else:                     # reversing: the jaw sticks, the current does not
-                        estimate = self.estimated_force   # show the load; hold the estimate
+                    # the jaw holds its force until the chain pushes it out of the friction's
+                    # band [closing edge, opening edge]: a stuck jaw's current does not show it
+                    chain, model = estimate, self.model
+                    low = model.force_through_jaw_friction_scalar(
+                        chain, jaw, obj, 1.0, inputs.jaw_velocity, inputs.measured_current, wrist)
+                    high = model.force_through_jaw_friction_scalar(
+                        chain, jaw, obj, -1.0, inputs.jaw_velocity, inputs.measured_current, wrist)
+                    held = self.estimated_force
+                    estimate = low if held < low else high if held > high else held
         except (ValueError, ArithmeticError) as exc:
             return self._safe((f'force estimate failed: {exc}',), inputs)
         self.last_wrist = wrist

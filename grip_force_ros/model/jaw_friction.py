@@ -46,7 +46,7 @@ import numpy as np
 from grip_force_ros.model.contact import ModelError
 
 __all__ = ['JawFriction', 'FrictionState', 'dahl_step', 'dahl_direction', 'solve_branch',
-           'SLIDING_THRESHOLD']
+           'two_branch_gain_efficiency', 'SLIDING_THRESHOLD']
 
 #: |s| at and above which the friction direction counts as known (the jaw slides).
 SLIDING_THRESHOLD = 0.9
@@ -139,6 +139,29 @@ def solve_branch(value, a, quad, beta):
     a = np.maximum(a, 1e-6)
     root = np.sqrt(np.maximum(a * a + 4.0 * quad * y, 0.0))
     return 2.0 * y / (a + root), root
+
+
+def two_branch_gain_efficiency(alpha_drive: float, alpha_back: float) -> tuple[float, float]:
+    """Loss-free gain and one-way efficiency of a transmission from its two branch slopes.
+
+    A capstan-like friction proportional to tension costs the driving direction what it
+    gives the back-driven one: current per torque ``alpha_drive = 1/(G eta)`` while the
+    motor drives, ``alpha_back = eta/G`` while the load back-drives it.
+
+    Parameters
+    ----------
+    alpha_drive, alpha_back : float
+        Branch slopes dI/dtau (A/(N*m)) while driving (closing) and back-driven (opening).
+
+    Returns
+    -------
+    (float, float)
+        ``G = 1/sqrt(alpha_drive alpha_back)`` (N*m/A) and ``eta = sqrt(alpha_back/alpha_drive)``
+        (-); NaN, NaN unless both slopes are positive.
+    """
+    if alpha_drive > 0 and alpha_back > 0:
+        return 1.0 / math.sqrt(alpha_drive * alpha_back), math.sqrt(alpha_back / alpha_drive)
+    return float('nan'), float('nan')
 
 
 @dataclass(frozen=True)

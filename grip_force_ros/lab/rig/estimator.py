@@ -412,11 +412,7 @@ def _physical(names: Sequence[str], values: np.ndarray) -> dict[str, float]:
     coef = dict(zip(names, values))
     a0, a1 = coef['alpha0'], coef.get('alpha1', 0.0)
     a_drive, a_back = a0 + a1, a0 - a1
-    if a_drive > 0 and a_back > 0:
-        gain = 1.0 / math.sqrt(a_drive * a_back)         # G = 1/sqrt(alpha_c*alpha_o), N*m/A
-        eff = math.sqrt(a_back / a_drive)                 # eta = sqrt(alpha_o/alpha_c)
-    else:
-        gain, eff = float('nan'), float('nan')
+    gain, eff = _jaw_friction.two_branch_gain_efficiency(a_drive, a_back)   # N*m/A, -
     out = {'gain_Nm_per_A': gain, 'efficiency': eff, 'offset_Nm': -coef['offset'] * gain}
     if 'alpha1_quad' in coef:
         # branch slopes dI/dtau at 0.1 N*m: alpha0 +- (alpha1 + 2 * alpha1_quad * tau)
