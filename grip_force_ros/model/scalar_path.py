@@ -96,11 +96,7 @@ class ScalarPath:
                              f'at jaw angle {jaw_angle!r} rad')
         torque = grip_force / gain
         if self.affine:
-            lam = self._efficiency_scalar(0.0, wrist_angle)
-            per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
-            if per_amp <= 0.0:
-                raise ModelError(self._no_grip_message(lam))
-            return torque / per_amp
+            return self._affine_current(torque, wrist_angle)
         rows = self._current_rows
         if rows is not None:                      # the vectorised path's table, ~1 us instead of ~15
             position = torque / self._current_fit[0].step                 # M / step (-), > 0
@@ -235,12 +231,16 @@ class ScalarPath:
         give the negative current of the linear part.
         """
         if self.affine:
-            lam = self._efficiency_scalar(0.0, wrist_angle)
-            per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
-            if per_amp <= 0.0:
-                raise ModelError(self._no_grip_message(lam))
-            return torque / per_amp
+            return self._affine_current(torque, wrist_angle)
         return self._solve_current(torque, wrist_angle, 0.0)
+
+    def _affine_current(self, torque: float, wrist_angle: float) -> float:
+        """Return the current (A) giving chain torque ``torque`` (N*m) on an affine chain, at rest."""
+        lam = self._efficiency_scalar(0.0, wrist_angle)
+        per_amp = self.tension_per_amp * self._rn * (lam - self.resistance_fraction)
+        if per_amp <= 0.0:
+            raise ModelError(self._no_grip_message(lam))
+        return torque / per_amp
 
     def _solve_current(self, torque: float, wrist_angle: float, inertial: float) -> float:
         """Solve for the current with M(I) + inertial = torque, tension-dependent friction (brentq)."""
