@@ -15,6 +15,7 @@ are: :mod:`grip_force_ros.params.files` (``instrument_path``, ``list_instruments
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -36,7 +37,8 @@ if len(SPECS) != len(SCHEMA):  # pragma: no cover - a programming error
     raise RuntimeError('duplicate parameter name in the schema')
 
 __all__ = ['SCHEMA', 'SPECS', 'ParamSpec', 'ParamSet', 'ParameterError', 'make_params',
-           'load_params_file', 'read_params_yaml', 'specs_in', 'to_yaml', 'check_consistency',
+           'load_params_file', 'read_params_yaml', 'rewrite_instrument_file', 'specs_in', 'to_yaml',
+           'check_consistency',
            'DEFAULT_INSTRUMENT', 'instrument_path', 'list_instruments', 'markdown_table']
 
 
@@ -173,3 +175,60 @@ def to_yaml(params: Mapping[str, Any], groups: Iterable[str] = ('instrument', 'l
         body[spec.name] = list(value) if isinstance(value, tuple) else value
     text = yaml.safe_dump({'/**': {'ros__parameters': body}}, sort_keys=False)
     return (header + text) if header else text
+
+
+#: One parameter line of an instrument file: indent, key, value, comment.
+_LINE = re.compile(r'^(?P<indent>\s+)(?P<key>\w+):\s*(?P<value>[^#\n]*?)\s*(#.*)?$')
+
+
+def rewrite_instrument_file(base: str | Path, out: str | Path,
+                            values: Mapping[str, tuple], header: str, *, replaces: str = '') -> None:
+    """Write ``out``: the instrument file ``base`` with some parameters' values replaced.
+
+    The line of each replaced parameter gets its new value and, as its comment, the unit
+    and the value's source (as in the shipped files); a parameter the base does not have
+    is added after the others; every other line stays as it is. ``header`` becomes the
+    first line (a comment), replacing any line of the base that starts with ``replaces``.
+    The result is validated against the schema before it replaces ``out``.
+
+    Parameters
+    ----------
+    base, out : path-like
+        The instrument YAML read, and the one written (its folder is made).
+    values : mapping of str to (value, str)
+        Parameter name -> (new value, where it comes from).
+    header : str
+        A comment line (starting with ``#``) saying how the file was made.
+    replaces : str, optional
+        Lines of the base starting with this are dropped (an earlier header of the same tool).
+
+    Raises
+    ------
+    ParameterError
+        The result is invalid (``out`` is then left as it was).
+    """
+    base, out = Path(base), Path(out)
+    lines = [ln for ln in base.read_text().splitlines() if not (replaces and ln.startswith(replaces))]
+
+    def line(indent: str, key: str) -> str:
+        value, source = values[key]
+        return f"{indent}{f'{key}: {value!r}':<35}# {SPECS[key].unit:<8}{source}"
+
+    done = set()
+    for i, text in enumerate(lines):
+        m = _LINE.match(text)
+        if m and m['key'] in values:
+            lines[i] = line(m['indent'], m['key'])
+            done.add(m['key'])
+    # a new key goes with the parameters: the deepest indent (not ros__parameters' own)
+    indent = max((m['indent'] for m in map(_LINE.match, lines) if m), key=len, default='    ')
+    lines += [line(indent, key) for key in values if key not in done]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + '.tmp')
+    tmp.write_text('\n'.join([header] + lines) + '\n')
+    try:
+        load_params_file(tmp)
+    except ParameterError:
+        tmp.unlink()
+        raise
+    tmp.replace(out)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from pathlib import Path
 from typing import Any
 
@@ -135,9 +134,6 @@ def tool_facts(doc: dict, name: str, base_wrist_finger_coupling: float = 1.0) ->
     }
 
 
-_LINE = re.compile(r'^(?P<indent>\s+)(?P<key>\w+):\s*(?P<value>[^#\n]*?)\s*(#.*)?$')
-
-
 def import_tool(tool: str | Path, base: str | Path, out: str | Path) -> dict[str, tuple]:
     """Write ``out``: the base instrument file with the tool file's jaw facts.
 
@@ -155,7 +151,7 @@ def import_tool(tool: str | Path, base: str | Path, out: str | Path) -> dict[str
     ParameterError
         The tool file, the base file or the result is invalid (the output is not written).
     """
-    from grip_force_ros.params import SPECS, load_params_file, read_params_yaml
+    from grip_force_ros.params import SPECS, load_params_file, read_params_yaml, rewrite_instrument_file
     tool, base, out = Path(tool), Path(base), Path(out)
     base_values = read_params_yaml(base)
     load_params_file(base)                                    # the base must be valid itself
@@ -163,31 +159,7 @@ def import_tool(tool: str | Path, base: str | Path, out: str | Path) -> dict[str
                        float(base_values.get('wrist_finger_coupling',
                                              SPECS['wrist_finger_coupling'].default)))
     header_start = '# dVRK facts ('
-    lines = [ln for ln in base.read_text().splitlines() if not ln.startswith(header_start)]
-    done = set()
-    for i, line in enumerate(lines):
-        m = _LINE.match(line)
-        if m and m['key'] in facts:
-            key = m['key']
-            value, source = facts[key]
-            lines[i] = f"{m['indent']}{f'{key}: {value!r}':<35}# {SPECS[key].unit:<8}{source}"
-            done.add(key)
-    # a new key goes with the parameters: the deepest indent (not ros__parameters' own)
-    indent = max((m['indent'] for m in map(_LINE.match, lines) if m), key=len, default='    ')
-    for key in facts:
-        if key not in done:
-            value, source = facts[key]
-            lines.append(f"{indent}{f'{key}: {value!r}':<35}# {SPECS[key].unit:<8}{source}")
     header = (f'{header_start}jaw limits, jaw effort limit, jaw and pitch couplings) imported from '
               f'{tool.name} by `grip-force import-dvrk-tool`; every other number from {base.name}')
-    text = '\n'.join([header] + lines) + '\n'
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + '.tmp')
-    tmp.write_text(text)
-    try:
-        load_params_file(tmp)
-    except ParameterError:
-        tmp.unlink()
-        raise
-    tmp.replace(out)
+    rewrite_instrument_file(base, out, facts, header, replaces=header_start)
     return facts
