@@ -27,6 +27,7 @@ COMMANDS = {
     'import-rig': 'import_rig',
     'import-dvrk-tool': 'import_dvrk_tool',
     'realdata': 'realdata',
+    'twin': 'twin',
     'diagnose': 'diagnose',
     'blindcheck': 'blindcheck',
     'faultcheck': 'faultcheck',
