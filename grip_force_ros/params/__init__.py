@@ -212,7 +212,7 @@ def rewrite_instrument_file(base: str | Path, out: str | Path,
 
     def line(indent: str, key: str) -> str:
         value, source = values[key]
-        return f"{indent}{f'{key}: {value!r}':<34} # {SPECS[key].unit:<8}{source}"
+        return f"{indent}{f'{key}: {value!r}':<34} # {SPECS[key].unit:<7} {source}"
 
     done = set()
     for i, text in enumerate(lines):

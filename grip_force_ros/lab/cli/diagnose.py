@@ -25,6 +25,10 @@ def add_arguments(parser) -> None:
     parser.add_argument('--rate', type=float, default=200.0,
                         help='analysis rate (Hz): logs are block-averaged to it (default 200)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    parser.add_argument('--adopt', metavar='OUT.yaml',
+                        help='write the --config file with the verdict\'s effects as instrument terms '
+                             '(and the re-identified parameters), diagnose the same logs against it, '
+                             'and add adopted: {file, gap_before, gap_after, ...} to the result')
 
 
 def _parameters(calibration: dict) -> str:
@@ -53,6 +57,23 @@ def _summary(result: dict) -> str:
     for r in result['ranking'][:5]:
         lines.append(f"  {r['score']:7.3f}  {r['effect']:28s} rmse {r['holdout_rmse']:.4g}")
     return '\n'.join(lines)
+
+
+def _adopt(result: dict, args, loaded: list, n_train: int, say) -> dict:
+    """Write the adopted file, diagnose the same logs against it: the result's ``adopted``."""
+    from grip_force_ros.lab.diagnosis import run_diagnosis
+    from grip_force_ros.lab.diagnosis.adopt import write
+    from grip_force_ros.params import load_params_file, read_params_yaml
+    values, skipped = write(result, args.config, args.adopt, read_params_yaml(args.config))
+    say(f'adopted {", ".join(values) or "nothing"} into {args.adopt}; diagnosing against it')
+    again = run_diagnosis(loaded[:n_train], loaded[n_train:] or None, load_params_file(args.adopt),
+                          analysis_rate=args.rate, default_object=args.object, progress=say).result
+    before, after = result['verdict'], again['verdict']
+    return {'file': str(args.adopt), 'gap_before': before['gap_before'], 'gap_after': after['gap_before'],
+            'shrink': 1.0 - after['gap_before'] / before['gap_before'] if before['gap_before'] else 0.0,
+            'unit': before['unit'], 'terms': {k: v[0] for k, v in values.items()},
+            'not_adopted': skipped, 'verdict_after': after['effects'],
+            'gap_after_with_its_effects': after['gap_after']}
 
 
 def run(args) -> int:
@@ -84,6 +105,12 @@ def run(args) -> int:
         print(f'error: {exc}', file=sys.stderr)
         return 1
     d.result['logs'] = {'train': train, 'test': list(args.test)}
+    if args.adopt:
+        try:
+            d.result['adopted'] = _adopt(d.result, args, loaded, len(train), say)
+        except (ParameterError, DiagnosisError) as exc:
+            print(f'error: --adopt: {exc}', file=sys.stderr)
+            return 1
     if args.report:
         from grip_force_ros.lab.diagnosis import write_report
         path = write_report(d, args.report, sources=train + list(args.test))
@@ -94,4 +121,11 @@ def run(args) -> int:
         print(json.dumps(d.result, indent=1, default=float))
     else:
         print(_summary(d.result))
+        if 'adopted' in d.result:
+            a = d.result['adopted']
+            print(f"adopted into {a['file']}: {', '.join(a['terms']) or 'nothing'}; held-out gap "
+                  f"{a['gap_before']:.4g} -> {a['gap_after']:.4g} {a['unit']} rms (shrink "
+                  f"{100 * a['shrink']:.0f} %), verdict against it: {' + '.join(a['verdict_after'])}")
+            for s in a['not_adopted']:
+                print(f"  not adopted: {s['effect']}: {s['reason']}")
     return 0

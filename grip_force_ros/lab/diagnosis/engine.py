@@ -678,7 +678,10 @@ def run_diagnosis(train_logs: Sequence, test_logs: Sequence | None = None, param
     regions = _regions(data, base['resid_f'], unit)                                          # 2.
     result = {'verdict': verdict, 'ranking': ranking, 'regions': regions, 'split': split,
               'calibration': calibration, 'measured': measured, 'unit': unit,
-              'samples': {'train': int(data.train.sum()), 'test': int(data.test.sum())}}
+              'samples': {'train': int(data.train.sum()), 'test': int(data.test.sum())},
+              # the training logs' stroke (rad) of each angle a position spring follows
+              'strokes': {k: [float(v) for v in r]
+                          for k, r in data.frames[0].get('stroke', {}).items()}}
     return Diagnosis(result, _held_out_series(data, base, final['resid_f']))
 
 
