@@ -47,3 +47,31 @@ def test_calibrated_sensorless_spread_on_three_instruments_with_plants_20_percen
           f"fitted mu {fits}; {report['wall_time']:.0f} s")
     assert all(r is not None and math.isfinite(r) for r in ratios.values()), ratios
     assert report['spread_controlled'] <= SPREAD_GOAL, (ratios, report['spread_controlled'])
+
+
+def test_plants_mismatched_with_configs_are_refused(tmp_path):
+    from grip_force_ros.params import instrument_path
+    paper = instrument_path('paper_needle_driver')
+    with pytest.raises(ValueError, match='one controller file per plant'):
+        compare_instruments(tmp_path, plants=[paper, paper], configs=[paper], conditions=('sensor',))
+
+
+@pytest.mark.timeout(600)
+def test_plants_run_as_given_with_their_own_files_on_the_load_cell(tmp_path):
+    """--plants: the sims run the given files (no perturbation), each controller its plant's
+    file by default; on the load cell both hold the target, the one with jaw friction too."""
+    from grip_force_ros.params import instrument_path, load_params_file, rewrite_instrument_file
+    paper = instrument_path('paper_needle_driver')
+    rubbing = tmp_path / 'paper_with_jaw_friction.yaml'
+    rewrite_instrument_file(paper, rubbing, {'jaw_coulomb_friction': (0.01, 'test plant'),
+                                             'instrument_name': ('paper_rubbing', 'test plant')},
+                            '# the paper needle driver with 10 mN*m of Coulomb friction at the jaw')
+    report = compare_instruments(tmp_path / 'compare', plants=[paper, rubbing], conditions=('sensor',),
+                                 task_duration=TASK, plot=False)
+    assert report['plants'] == [str(paper), str(rubbing)] and report['plant_error'] is None
+    assert not report['runs_not_completed'], '; '.join(report['runs_not_completed'])
+    assert not report['runs_still_spoiled'], '; '.join(report['runs_still_spoiled'])
+    for inst, plant in zip(report['instruments'], (paper, rubbing)):
+        assert inst['plant'] == {} and inst['plant_file'] == str(plant) == inst['config']
+        assert abs(inst['runs']['sensor']['steady_ratio'] - 1.0) < 0.03, inst['runs']['sensor']
+    assert load_params_file(rubbing).jaw_coulomb_friction == 0.01

@@ -39,7 +39,12 @@ def add_arguments(parser) -> None:
                              'sensorless, uncalibrated, load cell and naive; prints the spreads')
     parser.add_argument('--configs', nargs='+', metavar='YAML',
                         help='instruments of --compare-instruments (default: config/*.yaml '
-                             'except maryland)')
+                             'except maryland; with --plants: the controller file of each plant, '
+                             'default the plant\'s own)')
+    parser.add_argument('--plants', nargs='+', metavar='YAML',
+                        help='--compare-instruments: the simulated plants\' instrument files, in '
+                             'place of the shipped instruments off by --plant-error (e.g. twins of '
+                             'rig folders, grip-force twin)')
     parser.add_argument('--plant-error', type=float, default=0.2,
                         help='--compare-instruments: relative error of the simulated plant\'s '
                              'friction and cable stiffness vs the YAML (default %(default)s)')
@@ -265,9 +270,10 @@ def run(args) -> int:
             from grip_force_ros.lab.demo.compare import TASK_DURATION, compare_instruments
             out = Path(args.out) if args.out else _default_out('compare')
             configs = [instrument_path(c) for c in args.configs] if args.configs else None
+            plants = [instrument_path(c) for c in args.plants] if args.plants else None
             with load:
                 report = compare_instruments(
-                    out, configs=configs, plant_error=args.plant_error,
+                    out, configs=configs, plants=plants, plant_error=args.plant_error,
                     parallel=args.parallel, domain_id=args.domain_id,
                     task_duration=args.duration or TASK_DURATION,
                     log=None if args.quiet else sys.stderr, rt_priority=args.rt_priority)

@@ -213,7 +213,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                         plant_error: float = 0.2, parallel: bool = False,
                         domain_id: int | None = None, task_duration: float = TASK_DURATION,
                         log: TextIO | None = None, conditions: Sequence[str] = CONDITIONS,
-                        plot: bool = True, rt_priority: int | None = None) -> dict[str, Any]:
+                        plot: bool = True, rt_priority: int | None = None,
+                        plants: Sequence[Path] | None = None) -> dict[str, Any]:
     """Calibrate, then run the four conditions on every instrument; return the report.
 
     Parameters
@@ -221,9 +222,13 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     out_dir : path
         Everything goes here: calibration bags and YAMLs, one directory per run.
     configs : sequence of Path, optional
-        Instrument YAMLs (default :func:`comparison_configs`).
+        Instrument YAMLs the controllers are given (default :func:`comparison_configs`; with
+        ``plants``, the plants' own files).
     plant_error : float
-        Relative friction / stiffness error of each simulated plant.
+        Relative friction / stiffness error of each simulated plant (not with ``plants``).
+    plants : sequence of Path, optional
+        Instrument YAMLs the simulated plants run, in place of the perturbed ``configs``
+        (e.g. twins of rig folders, ``grip-force twin``): plant k with controller file k.
     parallel : bool
         Run the instruments of a stage at the same time (one process and
         ROS domain each). Needs spare cores: each run is three 1 kHz nodes.
@@ -264,21 +269,30 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     started = time.monotonic()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    configs = [Path(c) for c in (configs or comparison_configs())]
+    plants = [Path(c) for c in plants] if plants else None
+    configs = [Path(c) for c in (configs or plants or comparison_configs())]
+    if plants is not None and len(plants) != len(configs):
+        raise ValueError(f'--plants gives {len(plants)} files, --configs {len(configs)}: one '
+                         'controller file per plant')
     if len(configs) < 2:
         raise ValueError('--compare-instruments needs at least two instrument YAMLs')
-    names = [load_params_file(c).instrument_name for c in configs]
+    sims = plants or configs
+    names = [load_params_file(c).instrument_name for c in sims]
+    if len(set(names)) < len(names):        # two plants of one instrument name: their files'
+        names = [f'{k}_{name}' for k, name in enumerate(names)]
     n = len(configs)
     if domain_id is not None:
         domains = list(range(domain_id, domain_id + n))
     else:   # free domains, held until this function returns (no other run takes them)
         held = reserve_domains(n)
         domains = held.ids
-    scales = [plant_scales(k, plant_error) for k in range(n)]
+    scales = [{} if plants else plant_scales(k, plant_error) for k in range(n)]
     scheduling = {} if rt_priority is None else {'rt_priority': rt_priority}
     gain = naive_gain(configs[0])
-    _log(log, f'compare: {n} instruments {names}, plants off by {plant_error:.0%} '
-              f'(friction, stiffness), naive gain {gain:.4f} A, domains {domains}')
+    plant_text = ('plants ' + ', '.join(p.name for p in plants) if plants else
+                  f'plants off by {plant_error:.0%} (friction, stiffness)')
+    _log(log, f'compare: {n} instruments {names}, {plant_text}, naive gain {gain:.4f} A, '
+              f'domains {domains}')
 
     # --- 1. calibration grasp on the load cell, per instrument ------------------------------
     # A current staircase (the naive map: current proportional to the master closing, no
@@ -290,7 +304,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
     for k, config in enumerate(configs):
         params = load_params_file(config)
         csv_path = calibration_csv(params, out_dir / names[k] / 'calibration_master.csv')
-        jobs.append({'spec': dict(config=config, duration=0.0, label=f'{names[k]}/calibration',
+        jobs.append({'spec': dict(config=config, sim_config=sims[k], duration=0.0,
+                                  label=f'{names[k]}/calibration',
                                   controller='naive',
                                   controller_overrides={
                                       'naive_current_closed': calibration_current(params)},
@@ -324,14 +339,16 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
                              'bag': run['bag'],
                              'problems': run.get('problems', []),
                              'spoiled_attempts': run['spoiled_attempts']})
+        plant_mu = (load_params_file(sims[k]).pulley_friction_coefficient
+                    * scales[k].get('friction_scale', 1.0))
         _log(log, f"  {names[k]}: mu {fit.before['pulley_friction_coefficient']:.4f} -> "
                   f"{fit.values['pulley_friction_coefficient']:.4f} +/- "
                   f"{fit.std_errors['pulley_friction_coefficient']:.4f} (plant "
-                  f"{fit.before['pulley_friction_coefficient'] * scales[k]['friction_scale']:.4f})")
+                  f"{plant_mu:.4f})")
 
     # --- 2..5. the four conditions -------------------------------------------------------
     def spec_for(condition: str, k: int) -> dict:
-        base = dict(config=configs[k], sim_config=configs[k], duration=task_duration,
+        base = dict(config=configs[k], sim_config=sims[k], duration=task_duration,
                     label=f'{names[k]}/{condition}', sim_overrides=scales[k], **scheduling)
         if condition == 'controlled':
             base.update(config=calibrated[k], controller_overrides={'force_sensor_enabled': False})
@@ -359,7 +376,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
 
     instruments = []
     for k in range(n):
-        per = {'name': names[k], 'config': str(configs[k]), 'plant': scales[k],
+        per = {'name': names[k], 'config': str(configs[k]), 'plant_file': str(sims[k]),
+               'plant': scales[k],
                'calibration': calibrations[k], 'runs': {}}
         for condition in conditions:
             r = runs[condition][k]
@@ -395,7 +413,8 @@ def compare_instruments(out_dir: str | Path, configs: Sequence[Path] | None = No
         + [f"{i['name']}/{c}: {i['runs'][c]['problems'][0]}"
            for i in instruments for c in conditions if not i['runs'][c]['completed']])
     report['naive_current_closed'] = gain
-    report['plant_error'] = plant_error
+    report['plant_error'] = None if plants else plant_error
+    report['plants'] = [str(p) for p in plants] if plants else None
     report['task_duration'] = task_duration
     report['wall_time'] = time.monotonic() - started
     report['out_dir'] = str(out_dir)
@@ -438,6 +457,8 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(f'spoiled by a starved node after {ATTEMPTS} attempts: {item}')
     for item in report.get('runs_not_completed') or []:
         lines.append(f'NOT COMPLETED: {item}')
-    lines.append(f"(steady hold force / target; plants off by {report['plant_error']:.0%}; "
+    plants = (f"plants {', '.join(Path(p).name for p in report['plants'])}" if report.get('plants')
+              else f"plants off by {report['plant_error']:.0%}")
+    lines.append(f"(steady hold force / target; {plants}; "
                  f"{report['wall_time']:.0f} s; {report['out_dir']})")
     return '\n'.join(lines)
