@@ -57,6 +57,10 @@ def add_arguments(parser) -> None:
                         help='transfer: score the offline estimate of the recorded runs (the '
                              'observer forward and backward in time; the start of a run gets '
                              'its own level) instead of the real-time one')
+    parser.add_argument('--oneill', nargs='?', const='Tool_4_Maryland_L_4', metavar='DIR', default=None,
+                        help="score the estimator under O'Neill et al. 2018's protocol (random "
+                             '70/15/15 split of the samples, closing portions; default folder '
+                             'Tool_4_Maryland_L_4), beside the published 4.42 mN m')
     parser.add_argument('--no-load-model', action='store_true',
                         help='transfer: the observer averages the jaw torque itself instead of '
                              'the load level with the load\'s learned shape along the stroke '
@@ -173,7 +177,27 @@ def _run_floor(args) -> int:
     return 0
 
 
+def _run_oneill(args) -> int:
+    from grip_force_ros.lab.rig import RigDataError
+    from grip_force_ros.lab.rig.oneill import score
+    try:
+        result = score(args.oneill, progress=lambda msg: print(f'[realdata] {msg}', file=sys.stderr))
+    except RigDataError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        print(f"O'Neill protocol on {result['folder']}: test RMSE mean {result['mean_test_rmse_mNm']:.2f}, "
+              f"worst {result['worst_test_rmse_mNm']:.2f} mN m over {len(result['seeds'])} seeds "
+              f"(published {result['published_rmse_mNm']:.2f}; raw-current line "
+              f"{result['mean_linear_test_rmse_mNm']:.2f})\n{result['protocol']}")
+    return 0
+
+
 def run(args) -> int:
+    if args.oneill:
+        return _run_oneill(args)
     if args.floor:
         return _run_floor(args)
     if args.train or args.test:

@@ -587,16 +587,23 @@ class CableFrictionObserver:
         a = np.column_stack(torque_cols + [nuisance[mask]])
         return coef_names + names, a, sig.current[mask], tau
 
-    def fit(self, runs: Sequence, *, cache: dict | None = None) -> 'CableFrictionObserver':
+    def fit(self, runs: Sequence, *, cache: dict | None = None,
+            masks: Sequence[np.ndarray] | None = None) -> 'CableFrictionObserver':
         """Fit the forward model on the sliding samples of ``runs`` (least squares).
 
         Parameter uncertainty: leave-one-run-out jackknife over ``runs``.
         ``cache``: a dict the caller keeps to reuse per-run signals across fits
         (keyed by the run object's id and the settings; keep the runs alive).
+        ``masks``: one boolean array per run, the samples the fit may read (a split of
+        individual samples, :mod:`.oneill`); the signals are still computed over the whole
+        run (causal filters and the friction state need its history).
         """
         if not runs:
             raise EstimatorError('fit needs at least one run')
-        blocks = [self._normal_equations(r, cache) for r in runs]
+        if masks is not None:
+            blocks = [self._masked_normal_equations(r, m, cache) for r, m in zip(runs, masks, strict=True)]
+        else:
+            blocks = [self._normal_equations(r, cache) for r in runs]
         names = blocks[0][0]
         ata = sum(b[1] for b in blocks)
         aty = sum(b[2] for b in blocks)
@@ -645,6 +652,15 @@ class CableFrictionObserver:
                 values = np.zeros(len(names))
                 values[keep] = np.linalg.solve(ata[np.ix_(keep, keep)], aty[keep])
         return values
+
+    def _masked_normal_equations(self, source, mask: np.ndarray, cache=None):
+        """:meth:`_normal_equations` over the sliding samples of ``source`` where ``mask`` holds."""
+        sig = self._design(source, cache)[0]
+        names, a, y, tau = self._rows(source, cache)
+        keep = np.asarray(mask, bool)[sig.sliding > 0]
+        a, y = a[keep], y[keep]
+        picked = tau[np.asarray(mask, bool)]
+        return names, a.T @ a, a.T @ y, a.shape[0], float(np.sum(picked)), picked.size
 
     def _normal_equations(self, source, cache=None):
         """(names, A'A, A'y, sliding samples, sum of torque, samples) of one run."""
