@@ -35,7 +35,7 @@ MAY_IMPORT = {
     'lab.tune': {'objects', 'effects', 'control', 'model', 'params'},
     'lab.processes': {'nodes'},
     'lab.harness': {'nodes'},
-    'lab.rig': {'model', 'lab.plotting'},
+    'lab.rig': {'model', 'params', 'lab.plotting'},      # params: an instrument twin's file
     'lab.diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'lab.plotting'},
     'lab.reproduce': {'objects', 'effects', 'model', 'params', 'lab.plotting'},
     'lab.figures': {'objects', 'effects', 'model', 'control', 'sim', 'lab.closed_loop', 'trajectories',

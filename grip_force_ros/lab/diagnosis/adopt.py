@@ -38,7 +38,7 @@ HEADER = '# Adopted from a diagnosis ('
 
 
 def effect_parameters(result: Mapping) -> dict:
-    """The described parameters of each named effect of a diagnosis result, by effect name."""
+    """Return the described parameters of each named effect of a diagnosis result, by effect name."""
     verdict = result['verdict']
     named = [e for e in verdict['effects'] if e != 'none']
     out = {}
@@ -51,7 +51,7 @@ def effect_parameters(result: Mapping) -> dict:
 
 
 def _spring_terms(c, stroke, base: Mapping, where: str) -> dict:
-    """The file's spring plus the diagnosis' (Legendre ``c`` over ``stroke``), about mid-stroke.
+    """Return the file's spring plus the diagnosis' (Legendre ``c`` over ``stroke``), about mid-stroke.
 
     The file's Coulomb friction along the stroke is re-centred on the new rest angle too
     (``coulomb_at`` is C0 + C1 (phi - rest)), so that the friction is unchanged.

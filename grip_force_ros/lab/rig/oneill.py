@@ -46,13 +46,13 @@ SHARES = (0.70, 0.15, 0.15)
 
 
 def inner_samples(run) -> np.ndarray:
-    """Samples away from the run's ends (bool): the first and last second dropped."""
+    """Return the samples away from the run's ends (bool): the first and last second dropped."""
     t = run.t - run.t[0]
     return (t >= EDGE_S) & (t <= t[-1] - EDGE_S)
 
 
 def closing_samples(run) -> np.ndarray:
-    """Samples where the drive closes faster than :data:`CLOSING_SPEED` (bool)."""
+    """Return the samples where the drive closes faster than :data:`CLOSING_SPEED` (bool)."""
     dt = float(np.median(np.diff(run.t)))
     return causal_velocity(run.motor_angle, dt, 0.02, 10.0) > CLOSING_SPEED   # rad/s, closing +
 
@@ -82,7 +82,7 @@ def _rmse(errors: list[np.ndarray]) -> float:
 
 
 def score(folder=FOLDER, seeds: Sequence[int] = (0, 1, 2, 3, 4), progress=None) -> dict:
-    """The protocol's test RMSE of the observer and of the raw-current line, per seed.
+    """Score the observer and the raw-current line under the protocol (test RMSE per seed).
 
     Returns
     -------

@@ -92,7 +92,7 @@ class Twin:
     notes: list = field(default_factory=list)
 
     def to_json(self) -> dict:
-        """The ``--json`` answer: ``{parameters, heldout_rmse, ...}`` (SI units, N*m for RMSE)."""
+        """Return the ``--json`` answer: ``{parameters, heldout_rmse, ...}`` (SI units, N*m for RMSE)."""
         return {'parameters': self.parameters, 'heldout_rmse': self.heldout_rmse,
                 'heldout_rmse_after_startup': self.heldout_rmse_after_startup,
                 'cross_validation': self.cross_validation,
@@ -167,7 +167,7 @@ def _terms(settings) -> int:
 
 
 def choose_structure(train: Sequence, cache: dict) -> tuple:
-    """The terms and the Dahl width with the best cross-validated RMSE on ``train``.
+    """Choose the terms and the Dahl width with the best cross-validated RMSE on ``train``.
 
     Each candidate (:data:`STRUCTURES` x :data:`WIDTH_GRID`) is fitted with one run of
     ``train`` left out at a time and scored on it (causal estimate, every sample); the
