@@ -21,6 +21,8 @@ def add_arguments(parser) -> None:
                              f'{DEVELOPMENT_SEEDS[-1]} are the development seeds the diagnosis was tuned on)')
     parser.add_argument('--seeds', type=int, default=1, metavar='N',
                         help='number of seeds, from --seed on: the mean and the worst seed (default 1)')
+    parser.add_argument('--workers', type=int, default=1, metavar='N',
+                        help='diagnose N seeds at once, one process each (same figures; default 1)')
     parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
 
 
@@ -76,7 +78,8 @@ def run(args) -> int:
     if args.seeds < 1:
         print('error: --seeds must be at least 1', file=sys.stderr)
         return 2
-    result = run_blindcheck(quick=args.quick, seed=args.seed, seeds=args.seeds, progress=say)
+    result = run_blindcheck(quick=args.quick, seed=args.seed, seeds=args.seeds, progress=say,
+                            workers=args.workers)
     if args.json:
         print(json.dumps(result, indent=1, default=float))
     else:
