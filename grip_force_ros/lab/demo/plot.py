@@ -152,9 +152,11 @@ def compare_plot(report: Mapping, path: str | Path) -> Path:
     ax.set_ylabel('steady hold grip force / target [-]')
     target = next((i['runs'][c]['target_force'] for c in conditions for i in report['instruments']
                    if i['runs'][c].get('target_force')), 0.0)
-    error = report.get('plant_error', 0.2)
-    ax.set_title(f'same master trajectory, {len(names)} instruments, plants {error:.0%} off their '
-                 f'YAML (target {target:.1f} N)', fontsize=10)
+    error = report.get('plant_error')
+    plants = (f'plants {error:.0%} off their YAML' if error is not None else
+              'plants as given (--plants)')
+    ax.set_title(f'same master trajectory, {len(names)} instruments, {plants} (target {target:.1f} N)',
+                 fontsize=10)
     ax.legend(fontsize=8, loc='upper left')
     ax.grid(True, axis='y', alpha=0.3)
     fig.tight_layout()
