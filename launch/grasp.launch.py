@@ -52,7 +52,7 @@ def _nodes(context):
 
     # Ctrl-C reaches the three at once; they leave one after another, the master first, so
     # that none is torn down while another one's leaving reaches it (Fast DDS's spinning
-    # set_listener, eProsima/Fast-DDS#6513: common.wait_for_peers_to_leave).
+    # set_listener, eProsima/Fast-DDS#6513: lifetime.leave_after).
     return [node('sim_instrument', leave_after=('controller', 'master')),
             *controller_actions(arg('namespace'), [params, controller],
                                 arg('autostart').lower() == 'true', leave_after=('master',)),

@@ -301,7 +301,7 @@ def demo_bag(tmp_path_factory):
     from sensor_msgs.msg import JointState
 
     from grip_force_ros.lab.demo.recorder import RecorderNode, SpinThread
-    from grip_force_ros.nodes.common import wait_until
+    from grip_force_ros.lab.processes import wait_until
 
     path = tmp_path_factory.mktemp('demo') / 'bag'
     ctx = Context()

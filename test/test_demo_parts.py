@@ -21,7 +21,7 @@ from grip_force_ros.lab.processes import (NodeProcess, ProcessGroup, can_use_rea
                                           recorder_rt_priority, ros_args, ros_environment,
                                           scheduling_of)
 from grip_force_ros.lab.demo.run import TaskClock
-from grip_force_ros.nodes.common import wait_until
+from grip_force_ros.lab.processes import wait_until
 from grip_force_ros.params import make_params
 from grip_force_ros.trajectories import needle_grasp, read_csv
 

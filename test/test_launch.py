@@ -101,12 +101,14 @@ def _wait_for_param(node, name, env, timeout=90.0):
 def _named(text: str) -> str:
     """A launch log, after the name of a known deadlock its nodes' native stacks show.
 
-    A node whose teardown runs long writes them to the log (``watch_own_teardown``).
+    Only a node whose teardown the laboratory watches writes native stacks to its log
+    (``lab.node_process``); under ``ros2 launch`` a teardown past its limit leaves its Python
+    stacks (``lifetime.limit_teardown``), where no deadlock is named.
     """
     return f'{known_deadlock(text) or "no known deadlock in the log"}\n{text}'
 
 
-#: A node's line as it stops after its peers (``common.leave_after``), in a launch log.
+#: A node's line as it stops after its peers (``lifetime.leave_after``), in a launch log.
 _LEAVING = re.compile(r'\[(?:INFO|WARN)\] \[(?P<stamp>[\d.]+)\] \[(?:\w+\.)*(?P<node>\w+)\]: '
                       r'leaving (?P<how>after|with) (?P<rest>.*)')
 

@@ -33,8 +33,9 @@ MAY_IMPORT = {
     'lab.plotting': set(),
     'lab.closed_loop': {'control'},
     'lab.tune': {'objects', 'effects', 'control', 'model', 'params'},
-    'lab.processes': {'nodes'},
-    'lab.harness': {'nodes'},
+    'lab.node_process': {'nodes'},
+    'lab.processes': {'lab.node_process'},
+    'lab.harness': {'nodes', 'lab.processes'},
     'lab.rig': {'model', 'params', 'lab.plotting'},      # params: an instrument twin's file
     'lab.diagnosis': {'objects', 'effects', 'model', 'sim', 'identify', 'logs', 'params', 'lab.plotting'},
     'lab.reproduce': {'objects', 'effects', 'model', 'params', 'lab.plotting'},
@@ -44,9 +45,9 @@ MAY_IMPORT = {
                  'model', 'logs', 'trajectories', 'params', 'topics', 'lab.plotting'},
     'lab.faults': {'objects', 'effects', 'nodes', 'lab.processes', 'lab.harness', 'control', 'model', 'sim',
                    'params', 'topics'},
-    'lab.bench': {'nodes', 'lab.processes', 'lab.harness', 'control', 'model', 'sim', 'lab.closed_loop',
-                  'lab.diagnosis', 'logs', 'params', 'topics', 'objects', 'effects', 'lab.demo',
-                  'trajectories'},
+    'lab.bench': {'nodes', 'lab.node_process', 'lab.processes', 'lab.harness', 'control', 'model', 'sim',
+                  'lab.closed_loop', 'lab.diagnosis', 'logs', 'params', 'topics', 'objects', 'effects',
+                  'lab.demo', 'trajectories'},
     'lab.cli': None,                                   # the command: anything
 }
 PRODUCT = {part for part in MAY_IMPORT if not part.startswith('lab.')}
@@ -267,6 +268,6 @@ def test_rclpy_and_messages_only_in_the_ros_parts():
 
 
 def test_process_launching_has_no_rclpy():
-    for path in (LAB / 'processes.py', PACKAGE / 'nodes' / 'lifetime.py'):
+    for path in (LAB / 'processes.py', LAB / 'node_process.py'):
         names = {name.split('.')[0] for _, name in imported(path)}
         assert not names & ROS_MODULES, path

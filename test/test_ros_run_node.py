@@ -25,8 +25,8 @@ from rclpy.context import Context
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from grip_force_ros.nodes import common
-from grip_force_ros.nodes.common import run_node, shutdown_follows
+from grip_force_ros.nodes import lifetime
+from grip_force_ros.nodes.lifetime import run_node
 
 pytestmark = pytest.mark.ros
 
@@ -105,32 +105,19 @@ def test_a_signal_shutting_the_context_down_inside_try_shutdown_is_a_clean_exit(
 
     def raced(context=None):
         real(context=context)    # the signal handler's shutdown, after the check passed
-        raise common._RCLError('failed to shutdown: rcl_shutdown already called on the given context')
+        raise lifetime._RCLError('failed to shutdown: rcl_shutdown already called on the given context')
     monkeypatch.setattr(rclpy, 'try_shutdown', raced)
     assert run_node(_Finishes, 'finishes', []) == 0
 
 
 def test_a_shutdown_error_with_the_context_still_up_is_raised(monkeypatch):
     def fails(context=None):
-        raise common._RCLError('failed to shutdown: something else')
+        raise lifetime._RCLError('failed to shutdown: something else')
     monkeypatch.setattr(rclpy, 'try_shutdown', fails)
-    with pytest.raises(common._RCLError, match='something else'):
+    with pytest.raises(lifetime._RCLError, match='something else'):
         run_node(_Finishes, 'finishes', [])
     monkeypatch.undo()
     rclpy.try_shutdown()
-
-
-def test_shutdown_follows_waits_for_the_context_to_go_down():
-    rclpy.init()
-    try:
-        assert not shutdown_follows(wait=0.1)          # up, and nobody shuts it down
-        threading.Timer(0.05, rclpy.try_shutdown).start()
-        started = time.monotonic()
-        assert shutdown_follows(wait=30.0)
-        assert time.monotonic() - started < 30.0
-        assert shutdown_follows(wait=0.0)              # already down
-    finally:
-        rclpy.try_shutdown()
 
 
 class _RecordingExecutor:
@@ -156,8 +143,8 @@ def test_the_executor_ends_before_the_node_is_destroyed(monkeypatch, kind):
     """The executor shuts down first: a node destroyed first leaves its handles to the
     EventsExecutor's destructor, which can hang the process at its stop."""
     events = []
-    real_make = common.make_executor
-    monkeypatch.setattr(common, 'make_executor',
+    real_make = lifetime.make_executor
+    monkeypatch.setattr(lifetime, 'make_executor',
                         lambda: _RecordingExecutor(real_make(kind=kind), events))
 
     class _FinishesAndRecords(_Finishes):
@@ -207,29 +194,38 @@ class _SignalsItselfInsideItsTick(Node):
 @pytest.mark.parametrize('kind', ['events', 'single'])
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_inside_a_callback_ends_the_spin_after_that_callback(monkeypatch, kind, signum):
-    real_make = common.make_executor
-    monkeypatch.setattr(common, 'make_executor', lambda: real_make(kind=kind))
+    real_make = lifetime.make_executor
+    monkeypatch.setattr(lifetime, 'make_executor', lambda: real_make(kind=kind))
     monkeypatch.setattr(_SignalsItselfInsideItsTick, 'signum', signum)
     monkeypatch.setattr(_SignalsItselfInsideItsTick, 'made', [])
-    before = {s: signal.getsignal(s) for s in common.SignalStop.SIGNALS}
+    before = {s: signal.getsignal(s) for s in lifetime.SignalStop.SIGNALS}
     assert run_node(_SignalsItselfInsideItsTick, 'signals_itself', []) == 0
     node = _SignalsItselfInsideItsTick.made[0]
     assert 50 in node.finished_ticks, 'the tick the signal came in was cut short'
     # The spin ends a few periods after the signal: the wake timer fires 1 ms later. 200
     # periods leave room for a loaded machine; a signal that never ends the spin runs on.
     assert node.ticks - 50 <= 200, node.ticks
-    assert {s: signal.getsignal(s) for s in common.SignalStop.SIGNALS} == before
+    assert {s: signal.getsignal(s) for s in lifetime.SignalStop.SIGNALS} == before
     assert not rclpy.ok()
 
 
 class _Graph:
-    """A stand-in node for :func:`common.wait_for_peers_to_leave`: who is up when (monotonic s)."""
+    """A stand-in node for :func:`lifetime.leave_after`: who is up when (monotonic s)."""
 
     def __init__(self, namespace: str, up_until: dict):
-        self.namespace, self.up_until, self.looks = namespace, up_until, 0
+        self.namespace, self.up_until, self.looks, self.lines = namespace, up_until, 0, []
 
     def get_namespace(self):
         return self.namespace
+
+    def get_logger(self):
+        return self
+
+    def info(self, line):
+        self.lines.append(('INFO', line))
+
+    def warning(self, line):
+        self.lines.append(('WARN', line))
 
     def get_node_names_and_namespaces(self):
         self.looks += 1
@@ -241,33 +237,36 @@ def test_a_stopping_node_waits_for_its_peers_to_leave_then_settles():
     start = time.monotonic()
     graph = _Graph('/psm1', {('master', '/psm1'): start + 0.3, ('controller', '/psm1'): start + 0.2,
                              ('master', '/'): float('inf')})     # another namespace: not a peer
-    assert common.wait_for_peers_to_leave(graph, ('controller', 'master'), timeout=10.0,
-                                          settle=0.2) == ()
+    assert lifetime.leave_after(graph, ('controller', 'master'), timeout=10.0, settle=0.2) == ()
     # gone at 0.3 s, then the settle (0.2 s): no sooner; 10 s would be a wait for /master
     assert 0.5 <= time.monotonic() - start < 10.0
+    assert [level for level, _ in graph.lines] == ['INFO'], graph.lines
+    assert graph.lines[0][1].startswith('leaving after controller, master (waited '), graph.lines
 
 
 def test_a_stopping_node_whose_peers_are_gone_still_settles():
     # gone a moment ago: the callback that took its leaving may still run
     graph = _Graph('/', {('sim_instrument', '/'): float('inf')})
     start = time.monotonic()
-    assert common.wait_for_peers_to_leave(graph, ('master',), timeout=10.0, settle=0.2) == ()
+    assert lifetime.leave_after(graph, ('master',), timeout=10.0, settle=0.2) == ()
     assert graph.looks == 1                     # one look at the graph, then the settle
     assert 0.2 <= time.monotonic() - start < 10.0
 
 
 def test_a_node_with_no_peers_to_leave_after_does_not_wait():
     graph = _Graph('/', {('master', '/'): float('inf')})
-    assert common.wait_for_peers_to_leave(graph, (), timeout=10.0, settle=10.0) == ()
-    assert common.wait_for_peers_to_leave(None, ('master',), timeout=10.0, settle=10.0) == ()
-    assert graph.looks == 0
+    assert lifetime.leave_after(graph, (), timeout=10.0, settle=10.0) == ()
+    assert lifetime.leave_after(None, ('master',), timeout=10.0, settle=10.0) == ()
+    assert graph.looks == 0 and graph.lines == []
 
 
 def test_a_peer_still_up_at_the_timeout_is_left_behind_and_named():
     graph = _Graph('/', {('master', '/'): float('inf'), ('controller', '/'): 0.0})
     start = time.monotonic()
-    assert common.wait_for_peers_to_leave(graph, ('controller', 'master'), timeout=0.3) == ('master',)
+    assert lifetime.leave_after(graph, ('controller', 'master'), timeout=0.3) == ('master',)
     assert time.monotonic() - start >= 0.3
+    assert len(graph.lines) == 1 and graph.lines[0][0] == 'WARN', graph.lines
+    assert graph.lines[0][1].startswith('leaving with master still up after '), graph.lines
 
 
 def test_the_peers_to_leave_after_come_from_the_environment():
@@ -300,13 +299,13 @@ def test_a_node_stopped_by_a_signal_is_torn_down_after_its_peer_has_left(monkeyp
     rclpy.init(context=peer_context)
     peer = Node('leaves_first', context=peer_context)
     events = {}
-    real_close = common.close_node
+    real_close = lifetime.close_node
 
     def recording_close(executor, *nodes):
         events['teardown'] = time.monotonic()
         real_close(executor, *nodes)
-    monkeypatch.setattr(common, 'close_node', recording_close)
-    real_handle = common.SignalStop._handle
+    monkeypatch.setattr(lifetime, 'close_node', recording_close)
+    real_handle = lifetime.SignalStop._handle
 
     def handle_then_let_the_peer_leave_later(self, signum, frame):
         real_handle(self, signum, frame)
@@ -318,7 +317,7 @@ def test_a_node_stopped_by_a_signal_is_torn_down_after_its_peer_has_left(monkeyp
         peer.destroy_node()
         events['peer left'] = time.monotonic()
         rclpy.try_shutdown(context=peer_context)
-    monkeypatch.setattr(common.SignalStop, '_handle', handle_then_let_the_peer_leave_later)
+    monkeypatch.setattr(lifetime.SignalStop, '_handle', handle_then_let_the_peer_leave_later)
     try:
         assert run_node(_SignalsItselfOnceItSeesItsPeer, 'leaves_second', []) == 0
     finally:
@@ -326,7 +325,7 @@ def test_a_node_stopped_by_a_signal_is_torn_down_after_its_peer_has_left(monkeyp
             peer.destroy_node()
             rclpy.try_shutdown(context=peer_context)
     assert events['peer left'] < events['teardown'], events
-    assert events['teardown'] - events['signal'] >= 1.0 + common.PEER_LEAVE_SETTLE, events
+    assert events['teardown'] - events['signal'] >= 1.0 + lifetime.PEER_LEAVE_SETTLE, events
 
 
 class _SignalsItselfWhileStarting(Node):
@@ -388,9 +387,9 @@ def test_shutdown_once_shuts_a_given_context_down_once():
     """The in-process orchestrators (faults, harness) own contexts of their own."""
     context = Context()
     rclpy.init(context=context)
-    common.shutdown_once(context)
+    lifetime.shutdown_once(context)
     assert not rclpy.ok(context=context)
-    common.shutdown_once(context)          # already down: nothing to do, no error
+    lifetime.shutdown_once(context)          # already down: nothing to do, no error
 
 
 def test_a_runner_keeps_the_test_process_heap_out_of_full_collections():
@@ -404,12 +403,14 @@ def test_a_runner_keeps_the_test_process_heap_out_of_full_collections():
 
 
 #: A node process run by ``run_node`` with a short teardown limit: its node ends at once and
-#: its ``destroy_node`` takes ``{destroy}`` s; then the process lives on ``{after}`` s.
+#: its ``destroy_node`` takes ``{destroy}`` s; then the process lives on ``{after}`` s. Its
+#: teardown watched by the laboratory's watcher (``lab.node_process``) when ``{watched}``.
 _TEARDOWN_SCRIPT = '''
 import sys, time
 import rclpy.task
 from rclpy.node import Node
-from grip_force_ros.nodes import common
+from grip_force_ros.lab import node_process
+from grip_force_ros.nodes import lifetime
 
 
 class Ends(Node):
@@ -423,19 +424,22 @@ class Ends(Node):
         super().destroy_node()
 
 
-common.TEARDOWN_LIMIT = 2.0
-common.NATIVE_STACKS_AT = 0.1
-code = common.run_node(Ends, 'teardown_limit', [])
+lifetime.TEARDOWN_LIMIT = 2.0
+node_process.NATIVE_STACKS_AT = 0.1
+if {watched}:
+    node_process.install()
+code = lifetime.run_node(Ends, 'teardown_limit', [])
 time.sleep({after})
 print('ended with', code, flush=True)
 sys.exit(code)
 '''
 
 
-def _run_teardown(destroy: float, after: float, env: dict | None = None):
+def _run_teardown(destroy: float, after: float, env: dict | None = None, watched: bool = True):
     """Run the script; its result, the time it took (s) and its pid."""
     started = time.monotonic()
-    proc = subprocess.Popen([sys.executable, '-c', _TEARDOWN_SCRIPT.format(destroy=destroy, after=after)],
+    script = _TEARDOWN_SCRIPT.format(destroy=destroy, after=after, watched=watched)
+    proc = subprocess.Popen([sys.executable, '-c', script],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         out, err = proc.communicate(timeout=120)
@@ -452,7 +456,17 @@ def _watchers_of(pid: int) -> list[str]:
     return found.stdout.splitlines()
 
 
-def test_a_teardown_that_does_not_end_leaves_its_stacks_and_is_killed():
+def test_a_teardown_past_its_limit_leaves_its_python_stacks_and_exits_1():
+    """The product's own guard (no laboratory watcher): 60 s in ``destroy_node``, limit 2 s."""
+    done, took, pid = _run_teardown(destroy=60.0, after=0.0, watched=False)
+    assert done.returncode == 1, (done.returncode, done.stdout, done.stderr)
+    assert took < 60.0                        # not waited out: ended by the limit
+    assert 'Timeout' in done.stderr and 'in destroy_node' in done.stderr, done.stderr
+    assert '[teardown]' not in done.stderr and 'ended with' not in done.stdout
+    assert _watchers_of(pid) == []
+
+
+def test_a_watched_teardown_that_does_not_end_leaves_its_stacks_and_is_killed():
     """A teardown stuck past the limit leaves every thread's stack and is killed.
 
     Here: 60 s in ``destroy_node``, limit 2 s. The native stacks (gdb) come first, which say
@@ -495,7 +509,8 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
     """A node run SCHED_FIFO (the demo's under load) must not hand that class to the watcher
     and its gdb. Checked from a SCHED_BATCH parent, which needs no privilege: the watcher
     runs SCHED_OTHER (without ``chrt -o`` in its script it stays SCHED_BATCH)."""
-    from grip_force_ros.nodes.lifetime import stop_watch, watch_own_teardown
+    from grip_force_ros.lab.node_process import stop_watch, watch_own_teardown
+    from grip_force_ros.lab.processes import wait_until
 
     parent = os.sched_getscheduler(0), os.sched_getparam(0)
     os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
@@ -506,7 +521,7 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
     assert watch is not None
     pid = watch.process.pid
     try:
-        assert common.wait_until(lambda: os.sched_getscheduler(pid) == os.SCHED_OTHER, 30.0, 0.05), \
+        assert wait_until(lambda: os.sched_getscheduler(pid) == os.SCHED_OTHER, 30.0, 0.05), \
             os.sched_getscheduler(pid)
         assert len(_watchers_of(os.getpid())) == 1          # the helper sees a live one
     finally:
@@ -517,25 +532,34 @@ def test_the_teardown_watcher_leaves_the_nodes_scheduling_class():
 def test_a_teardown_goes_on_without_its_watcher_where_none_can_start(monkeypatch):
     """No temporary file (a full /tmp) or no ``sh``: no watcher, and no exception out of the
     teardown's ``finally`` (which would skip the node's destruction)."""
-    from grip_force_ros.nodes import lifetime
+    from grip_force_ros.lab import node_process
 
     def no_file():
         raise OSError(28, 'No space left on device')
 
-    monkeypatch.setattr(lifetime.tempfile, 'TemporaryFile', no_file)
-    assert lifetime.watch_own_teardown(60.0, 60.0) is None
+    monkeypatch.setattr(node_process.tempfile, 'TemporaryFile', no_file)
+    assert node_process.watch_own_teardown(60.0, 60.0) is None
+    end_guard = node_process.watched_teardown(60.0)      # the node's own limit instead
+    end_guard()
     monkeypatch.undo()
     monkeypatch.setenv('PATH', '/nonexistent')
-    assert lifetime.watch_own_teardown(60.0, 60.0) is None
-    lifetime.stop_watch(None)                  # what run_node then does
+    assert node_process.watch_own_teardown(60.0, 60.0) is None
+    node_process.stop_watch(None)
 
 
-def test_a_teardown_within_the_limit_leaves_no_timer_behind():
+@pytest.mark.parametrize('watched', [True, False])
+def test_a_teardown_within_the_limit_leaves_no_timer_behind(watched):
     """``run_node`` also runs inside test processes: the limit must not outlive the teardown,
     nor must the watcher of its native stacks (nor its ``sleep``)."""
-    done, _, pid = _run_teardown(destroy=0.0, after=1.5)
+    done, _, pid = _run_teardown(destroy=0.0, after=2.5, watched=watched)
     assert done.returncode == 0, (done.returncode, done.stdout, done.stderr)
     assert 'ended with 0' in done.stdout
     assert 'Timeout' not in done.stderr, done.stderr
-    assert '[teardown]' not in done.stderr, done.stderr     # alive 1.5 s past the 0.2 s watch
+    assert '[teardown]' not in done.stderr, done.stderr     # alive 2.5 s past the 2 s limit
     assert _watchers_of(pid) == []
+
+
+def test_the_laboratory_knows_the_nodes_stack_signal():
+    """The process harness asks a hung node for its stacks with the signal ``run_node`` catches."""
+    from grip_force_ros.lab import node_process
+    assert node_process.STACK_DUMP_SIGNAL == lifetime.STACK_DUMP_SIGNAL

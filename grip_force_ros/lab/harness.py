@@ -12,6 +12,7 @@ next to a 1 kHz controller needs on a small machine):
 """
 from __future__ import annotations
 
+import gc
 import threading
 from typing import Any, Callable
 
@@ -21,11 +22,32 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 
-from grip_force_ros.nodes.common import (close_node, freeze_heap, make_executor, shutdown_once,
-                                         unfreeze_heap, wait_until)
+from grip_force_ros.lab.processes import wait_until
+from grip_force_ros.nodes.common import make_executor
+from grip_force_ros.nodes.lifetime import close_node, shutdown_once
 
 #: Longest time the spinning thread stays inside the executor before yielding (s).
 SPIN_SLICE = 0.01
+
+
+def freeze_heap() -> None:
+    """Collect once, then leave every object alive now out of later full collections.
+
+    For nodes run inside a large process (a test process, the fault check): they share its
+    garbage collector, and a full collection scans the whole heap while the nodes wait. In a
+    process that had collected this suite (~450 000 objects) the automatic full collections
+    that building probe-like records set off took ~250 ms each (9 of 9); with the heap frozen
+    first, 0-4 ms (17 of them): an in-process controller stalled by 125 ms is beyond every
+    watchdog. The node processes do not need it: no collection at all in 20 s of their steady
+    1 kHz running (BENCHMARKS.md). :func:`unfreeze_heap` gives the objects back to the collector.
+    """
+    gc.collect()
+    gc.freeze()
+
+
+def unfreeze_heap() -> None:
+    """Undo :func:`freeze_heap`: the frozen objects are collected again."""
+    gc.unfreeze()
 
 
 class RosRunner:

@@ -5,8 +5,8 @@ The one owner of
 * the ROS environment of a child (:func:`ros_environment`): DDS discovery on
   loopback unless the user chose a range (:func:`ensure_local_discovery`, the
   package's only Python copy of that rule), the domain id the caller gives;
-* the command line of a node (:func:`node_command`): the console script beside
-  this interpreter, else ``python -m grip_force_ros.nodes.<name>``, or what
+* the command line of a node (:func:`node_command`): the node's ``main`` with its teardown
+  watched (``python -m grip_force_ros.lab.node_process <name>``), or what
   ``GRIP_FORCE_NODE_<NAME>`` says; then ``--ros-args`` (:func:`ros_args`) with
   every value as the YAML literal ROS parses (:func:`ros_arg_value`);
 * the process (:class:`NodeProcess`): started with its output in a log file,
@@ -20,9 +20,8 @@ The one owner of
 
 The demo, the benchmarks, the fault check, the soak and the tests start nodes
 through this module. Nodes inside this process (a test reaching into a node):
-:class:`grip_force_ros.lab.harness.RosRunner`. What a node does about its own process
-(the peers it leaves after, its stack signal, its teardown watcher, ``python_module``):
-:mod:`grip_force_ros.nodes.lifetime`, which this module builds on.
+:class:`grip_force_ros.lab.harness.RosRunner`. A node's teardown watcher, its stack signal and
+libc's ``prctl``: :mod:`grip_force_ros.lab.node_process`.
 """
 from __future__ import annotations
 
@@ -41,8 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, MutableMapping, Sequence
 
-from grip_force_ros.nodes.lifetime import PRCTL, STACK_DUMP_SIGNAL, STACK_DUMP_WAIT, python_module
-from grip_force_ros.nodes.lifetime import wait_until  # noqa: F401 (re-exported)
+from grip_force_ros.lab.node_process import PRCTL, STACK_DUMP_SIGNAL, STACK_DUMP_WAIT
 
 #: The node executables of the package (console scripts of setup.py).
 NODE_EXECUTABLES = ('controller', 'sim_instrument', 'master')
@@ -70,6 +68,21 @@ def log_errors(text: str) -> list[str]:
 
 class ProcessError(RuntimeError):
     """A node process could not be started or died early."""
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
+    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return bool(predicate())
+
+
+def python_module(module: str, *args: str) -> list[str]:
+    """Command line running ``python -m module args`` with this interpreter."""
+    return [sys.executable, '-m', module, *args]
 
 
 # ---------------------------------------------------------------- environment
@@ -221,9 +234,9 @@ def node_executable(name: str) -> list[str]:
 
     ``GRIP_FORCE_NODE_<NAME>`` in this process's environment (e.g.
     ``GRIP_FORCE_NODE_SIM_INSTRUMENT``) replaces it, e.g. to run against another
-    build or a hardware driver (split like a shell would). Otherwise the console
-    script next to the running interpreter (a plain ``master`` on the PATH might
-    be someone else's program), else ``python -m grip_force_ros.nodes.<name>``.
+    build or a hardware driver (split like a shell would). Otherwise the node's
+    ``main`` run by this interpreter with its teardown watched
+    (:func:`grip_force_ros.lab.node_process.main`).
 
     Raises
     ------
@@ -235,10 +248,7 @@ def node_executable(name: str) -> list[str]:
     override = os.environ.get(f'GRIP_FORCE_NODE_{name.upper()}')
     if override:
         return shlex.split(override)
-    script = Path(sys.executable).parent / name
-    if script.is_file() and os.access(script, os.X_OK):
-        return [str(script)]
-    return python_module(f'grip_force_ros.nodes.{name}')
+    return python_module('grip_force_ros.lab.node_process', name)
 
 
 def node_command(name: str, params_file: str | os.PathLike | None = None,
@@ -365,7 +375,7 @@ def end_with_parent(sig: int = signal.SIGTERM) -> bool:
     handles it from its first line, and a KeyboardInterrupt raised inside an import's weakref
     callback is discarded: 27 of 7200 SIGINTs sent in a child's first 30 ms, none of 3000
     SIGTERMs). SIGTERM ends a process that has no
-    handler for it yet, and a node that has one (``nodes.common.SignalStop``) stops as on
+    handler for it yet, and a node that has one (``nodes.lifetime.SignalStop``) stops as on
     Ctrl-C; ``ros2 launch`` handles it too.
 
     Parameters
@@ -613,7 +623,7 @@ class ProcessGroup:
     env: dict[str, str]
     log_dir: Path | None = None
     #: Time (s) from SIGINT to SIGTERM. Past the nodes' own teardown limit (4 s,
-    #: ``common.TEARDOWN_LIMIT``): a SIGTERM sooner could come while the teardown watch has gdb
+    #: ``lifetime.TEARDOWN_LIMIT``): a SIGTERM sooner could come while the teardown watch has gdb
     #: on the node and cut its native stacks short.
     grace: float = 5.0
     processes: list[NodeProcess] = field(default_factory=list)

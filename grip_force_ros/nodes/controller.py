@@ -97,9 +97,10 @@ from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
-from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS, run_node
+from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS
 from grip_force_ros.nodes.controller_io import NO_STEP, controller_io
 from grip_force_ros.nodes.controller_services import ControllerServices
+from grip_force_ros.nodes.lifetime import run_node
 from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 

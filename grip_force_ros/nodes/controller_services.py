@@ -36,6 +36,7 @@ import math
 import os
 import shutil
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -50,7 +51,6 @@ from grip_force_ros.control import Mode
 from grip_force_ros.objects import OBJECTS
 from grip_force_ros.identify.procedures import (CurrentStaircase, GraspRecording, SensorZero,
                                                 calibration_current)
-from grip_force_ros.nodes.lifetime import python_module
 from grip_force_ros.params import to_yaml
 
 #: Longest wait for the first load-cell sample after subscribing to it (s).
@@ -362,9 +362,8 @@ class Calibration(Procedure):
         self.recording.close()
         self.fit_deadline = now + FIT_TIMEOUT
         self.fit = subprocess.Popen(
-            python_module('grip_force_ros.identify.command', '--config', str(self.config_path),
-                          '--log', str(self.log_path), '--out', str(self.path),
-                          '--object', self.obj, '--json'),
+            [sys.executable, '-m', 'grip_force_ros.identify.command', '--config', str(self.config_path),
+             '--log', str(self.log_path), '--out', str(self.path), '--object', self.obj, '--json'],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     def _report(self) -> None:

@@ -1,48 +1,55 @@
-"""A node process's own lifetime, no rclpy: what a shipped node does about its own process.
+"""How a node process runs and stops: :func:`run_node` (ros2/demos style) and its teardown.
 
-The one owner of
-
-* the order a node leaves in when a signal stops it: the peers it waits for, from
-  :data:`LEAVE_AFTER_ENV` (:func:`leave_after_environment` for a launch file,
-  :func:`leave_after_peers` for the node);
-* the signal on which a node writes its threads' Python stacks (:data:`STACK_DUMP_SIGNAL`);
-* the watcher of a node's own teardown (:func:`watch_own_teardown`, :func:`stop_watch`):
-  native stacks (gdb) when it runs long, an end at its limit;
-* the command line of a Python child a node starts (:func:`python_module`: the
-  controller's calibration fit).
-
-Used by :func:`grip_force_ros.nodes.common.run_node`, the launch files and the
-laboratory's process harness (:mod:`grip_force_ros.lab.processes`), which starts nodes
-as child processes.
+* SIGINT or SIGTERM asks the spin to stop (:class:`SignalStop`): the callback running ends,
+  the spin returns, the teardown runs. Before the spin a signal interrupts the start; during
+  the teardown it is ignored. Exit code 0 then, 2 when the node refuses its parameters.
+* The teardown (executor, node, context: :func:`close_node`, :func:`shutdown_once`) may take
+  :data:`TEARDOWN_LIMIT` s; past it every thread's Python stack goes to stderr and the
+  process exits 1 (:data:`teardown_guard`), before ``ros2 launch`` kills it (10 s after SIGINT).
+* :data:`STACK_DUMP_SIGNAL` writes every thread's Python stack to stderr at any time.
+* A node launched with :data:`LEAVE_AFTER_ENV` stops after the peers it names (:func:`leave_after`).
 """
 from __future__ import annotations
 
-import fcntl
+import faulthandler
 import os
 import signal
-import subprocess
 import sys
-import tempfile
 import time
-from typing import Any, Callable, Mapping, NamedTuple, Sequence
+from typing import Callable, Mapping, Sequence
 
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy_impl
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
 
-def wait_until(predicate: Callable[[], bool], timeout: float, poll: float = 0.005) -> bool:
-    """Poll ``predicate()`` until it is true or ``timeout`` s pass; returns its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(poll)
-    return bool(predicate())
+from grip_force_ros.nodes import realtime
+from grip_force_ros.nodes.common import make_executor
 
-
-#: Environment variable of a node process: the names of the nodes (comma-separated, in the
-#: node's namespace) whose leaving the node waits for when a signal stops it
-#: (``common.wait_for_peers_to_leave``). ``ros2 launch`` sends SIGINT to every node at once;
-#: the package's launch files set it so that the master leaves first, then the controller,
-#: then the sim (:func:`leave_after_environment`).
+_RCLError = _rclpy_impl.RCLError
+#: Signal on which a node writes every thread's Python stack to stderr (``faulthandler``).
+STACK_DUMP_SIGNAL = signal.SIGUSR1
+#: Time a node's teardown may take (s): with :data:`PEER_LEAVE_WAIT` before it, under 10 s.
+TEARDOWN_LIMIT = 4.0
+#: Time (s) within which the context going down makes a callback's error a shutdown's race.
+SHUTDOWN_RACE_WAIT = 2.0
+#: Longest a spin waits in C++ before a signal is looked at (s); the wake timer's delay (s).
+SPIN_SLICE, WAKE_DELAY = 0.5, 0.001
+#: Environment variable: the node names (comma-separated) a node leaves after on a signal.
 LEAVE_AFTER_ENV = 'GRIP_FORCE_LEAVE_AFTER'
+#: Longest wait for those peers (s), and the pause once they are gone (s).
+PEER_LEAVE_WAIT, PEER_LEAVE_SETTLE = 3.0, 0.1
+
+
+def limit_teardown(limit: float) -> Callable[[], None]:
+    """Python stacks and exit code 1 after ``limit`` s (wall time); returns what cancels it."""
+    faulthandler.dump_traceback_later(limit, exit=True)
+    return faulthandler.cancel_dump_traceback_later
+
+
+#: Called with :data:`TEARDOWN_LIMIT` as the teardown starts; returns what ends the guard.
+teardown_guard: Callable[[float], Callable[[], None]] = limit_teardown
 
 
 def leave_after_environment(peers: Sequence[str]) -> dict[str, str]:
@@ -52,140 +59,136 @@ def leave_after_environment(peers: Sequence[str]) -> dict[str, str]:
 
 def leave_after_peers(env: Mapping[str, str] | None = None) -> tuple[str, ...]:
     """Return the node names in :data:`LEAVE_AFTER_ENV` of ``env`` (default ``os.environ``)."""
-    text = (os.environ if env is None else env).get(LEAVE_AFTER_ENV, '')
-    return tuple(name.strip() for name in text.split(',') if name.strip())
+    names = (os.environ if env is None else env).get(LEAVE_AFTER_ENV, '').split(',')
+    return tuple(name.strip() for name in names if name.strip())
 
 
-def python_module(module: str, *args: str) -> list[str]:
-    """Command line running ``python -m module args`` with this interpreter."""
-    return [sys.executable, '-m', module, *args]
+def leave_after(node, peers: Sequence[str], timeout: float = PEER_LEAVE_WAIT,
+                settle: float = PEER_LEAVE_SETTLE) -> tuple[str, ...]:
+    """Wait up to ``timeout`` s for ``peers`` (in ``node``'s namespace) to leave, then ``settle`` s.
 
-
-#: A node started by :func:`grip_force_ros.nodes.common.run_node` writes every thread's
-#: Python stack to its log on this signal (``faulthandler``). A process about to be killed
-#: because it did not end on SIGINT and SIGTERM gets it first, so the log says where it hung.
-STACK_DUMP_SIGNAL = signal.SIGUSR1
-#: Time given to a process to write its stacks before it is killed (s).
-STACK_DUMP_WAIT = 0.3
-
-
-def _load_prctl() -> Callable[..., int] | None:
-    try:
-        import ctypes
-        return ctypes.CDLL(None, use_errno=True).prctl
-    except (OSError, AttributeError):  # not Linux
-        return None
-
-
-#: libc's ``prctl``, looked up here, in the parent: a child between ``fork`` and ``exec`` of
-#: a parent with threads (DDS has several) must not ``dlopen``, whose lock another thread
-#: may have held at the fork.
-PRCTL = _load_prctl()
-
-
-_PR_SET_PTRACER = 0x59616d61  # prctl option, <linux/prctl.h> (Yama)
-
-#: The watcher of :func:`watch_own_teardown`: plain ``sh`` and ``gdb``, outside this process,
-#: because a teardown stuck in C below Python may hold the GIL (no Python thread runs then).
-#: It leaves the scheduling class it inherits (SCHED_FIFO for the demo's nodes under load) for
-#: SCHED_OTHER first: gdb reading stacks for seconds must not outrank the machine's other work.
-#: It stops the process (SIGSTOP) while gdb starts and reads and continues it after, then gives
-#: it the rest of its limit: the limit counts the time the process runs, not the time gdb held
-#: it (a wall-clock limit, running on while gdb read for over a second, would end a slow
-#: teardown the moment gdb let go). A process still tearing down at the limit gets
-#: STACK_DUMP_SIGNAL (its Python stacks, ``faulthandler``), then SIGKILL. A lock (``flock`` on
-#: the process's temporary file ``$3``, opened anew through ``/proc``: a lock of its own, not
-#: the process's) makes each of the watcher's steps on the process and the process's own end
-#: of the watch (:func:`stop_watch`) exclude each other: a teardown that ends just then is never
-#: left stopped, and ``[ -ef ]`` (the same file) makes sure a pid reused meanwhile is not hit.
-#: Arguments: delay before the stacks (s), pid, fd of the lock file, rest of the limit (s), the
-#: limit (s, for the message), the stack signal's number, the time to write stacks (s).
-_TEARDOWN_WATCH = r'''exec 1>&2
-chrt -o -p 0 $$ >/dev/null 2>&1
-sleep "$1"
-exec 9<"/proc/$2/fd/$3" 2>/dev/null || exit 0
-flock -n 9 || exit 0
-kill -STOP "$2" 2>/dev/null || exit 0
-echo "[teardown] pid $2 still tearing down after $1 s; stopped for its native stacks (gdb):"
-if command -v gdb >/dev/null 2>&1; then
-  timeout 120 gdb -p "$2" -batch -nx -iex "set auto-load python-scripts off" -ex "thread apply all bt"
-else
-  echo "[teardown] no gdb on this machine"
-fi
-kill -CONT "$2"
-flock -u 9
-sleep "$4"
-flock -n 9 || exit 0
-[ "/proc/$2/fd/$3" -ef /dev/fd/9 ] || exit 0
-echo "[teardown] pid $2 still tearing down after $5 s of its own time; its Python stacks, then SIGKILL:"
-kill -"$6" "$2" 2>/dev/null || exit 0
-sleep "$7"
-kill -KILL "$2" 2>/dev/null'''
-
-
-class TeardownWatch(NamedTuple):
-    """A running :func:`watch_own_teardown` watcher and the lock it shares with this process."""
-
-    process: subprocess.Popen
-    lock: Any          # this process's temporary file, which the watcher locks while it has it stopped
-
-
-def watch_own_teardown(after: float, limit: float) -> TeardownWatch | None:
-    """Start a watcher of this process's teardown: native stacks at ``after`` s, an end at ``limit``.
-
-    For a teardown that may hang in the middleware: ``faulthandler`` shows the Python
-    frame (``destroy_node``), not where in Fast DDS it waits. The watcher sleeps ``after``
-    s, then, if this process still runs and :func:`stop_watch` has not begun, stops it,
-    attaches gdb (where installed), writes every thread's native stack to the stderr it
-    shares with this process (the node's log) and continues it. It then waits the rest of
-    ``limit``; a teardown still running then has its Python stacks written
-    (:data:`STACK_DUMP_SIGNAL`) and is killed (SIGKILL): the time gdb held the process does
-    not count. End it with :func:`stop_watch` once the teardown has ended.
-
-    Parameters
-    ----------
-    after : float
-        Delay (s) before the native stacks are taken.
-    limit : float
-        Time (s) the teardown may run, not counting the time stopped for gdb; not less than
-        ``after``.
-
-    Returns
-    -------
-    TeardownWatch or None
-        The watcher (its own session), None where it cannot be started (no ``sh``, no
-        temporary file): the teardown then goes on without it.
+    Why: Fast DDS's participant deletion spins for good inside a discovery callback, which a
+    peer's leaving brings (eProsima/Fast-DDS#6513). Logs a line; returns the peers still up.
     """
-    lock = None
-    try:
-        lock = tempfile.TemporaryFile()
-        watcher = subprocess.Popen(['sh', '-c', _TEARDOWN_WATCH, 'teardown-watch', f'{after:g}',
-                                    str(os.getpid()), str(lock.fileno()), f'{max(limit - after, 0.0):g}',
-                                    f'{limit:g}', str(int(STACK_DUMP_SIGNAL)), f'{STACK_DUMP_WAIT:g}'],
-                                   stdin=subprocess.DEVNULL, start_new_session=True)
-    except OSError:
-        if lock is not None:
-            lock.close()
-        return None
-    if PRCTL is not None:   # Yama ptrace_scope 1 lets only ancestors trace: name the watcher
-        PRCTL(_PR_SET_PTRACER, watcher.pid, 0, 0, 0)
-    return TeardownWatch(watcher, lock)
+    if node is None or not peers:
+        return ()
+    namespace, started = node.get_namespace(), time.monotonic()
+
+    def present() -> tuple[str, ...]:
+        try:
+            graph = set(node.get_node_names_and_namespaces())
+        except (_RCLError, RuntimeError):     # the context is already down: nobody to wait for
+            return ()
+        return tuple(name for name in peers if (name, namespace) in graph)
+
+    while (still_up := present()) and time.monotonic() < started + timeout:
+        time.sleep(0.01)
+    if still_up:
+        node.get_logger().warning(f'leaving with {", ".join(still_up)} still up after '
+                                  f'{time.monotonic() - started:.2f} s')
+        return still_up
+    time.sleep(settle)
+    node.get_logger().info(f'leaving after {", ".join(peers)} (waited {time.monotonic() - started:.2f} s)')
+    return ()
 
 
-def stop_watch(watch: TeardownWatch | None) -> None:
-    """End a :func:`watch_own_teardown` watcher and its ``sleep`` (its process group).
+class SignalStop:
+    """SIGINT and SIGTERM ask the spin to stop; they never raise inside a callback.
 
-    Takes the watcher's lock first: a watcher that has this process stopped for gdb holds it
-    until it has continued the process (and one ending it at the limit, until it is killed).
+    While spinning, a signal resets :attr:`wake`, a stopped one-shot timer that ends the spin
+    (rclpy's own handler raises KeyboardInterrupt wherever the main thread is: mostly inside a
+    1 kHz callback). Before the spin it raises KeyboardInterrupt; after it, it is ignored.
     """
-    if watch is None:
-        return
-    fcntl.flock(watch.lock.fileno(), fcntl.LOCK_EX)
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.requested, self.phase, self.wake = False, 'starting', None
+        self._previous = {signum: signal.signal(signum, self._handle) for signum in self.SIGNALS}
+
+    def restore(self) -> None:
+        """Put back the handlers found at construction."""
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _handle(self, signum, frame) -> None:
+        self.requested = True
+        if self.phase == 'starting':
+            raise KeyboardInterrupt
+        if self.phase == 'spinning':
+            self.wake.reset()
+
+
+def run_node(make_node: Callable[[], 'rclpy.node.Node'], node_name: str,
+             args: list[str] | None = None) -> int:
+    """Run node ``make_node()`` until it finishes (its ``finished`` Future) or a signal; exit code."""
+    faulthandler.register(STACK_DUMP_SIGNAL, all_threads=True)
     try:
-        os.killpg(watch.process.pid, signal.SIGKILL)
-    except ProcessLookupError:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _RCLError as exc:   # e.g. an unparsable --params-file: a clear line, no traceback
+        print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
+        return 2
+    node = executor = finished = None
+    stop = SignalStop()
+
+    def wake():
+        stop.wake.cancel()
+        if not finished.done():
+            finished.set_result(None)
+    try:
+        try:
+            node = make_node()
+            realtime.prepare(node)    # memory locked, stack and heap pre-faulted, CPU affinity
+        except ValueError as exc:     # ParameterError and every domain error: one clear line
+            print(f'[{node_name}] refusing to start: {exc}', file=sys.stderr)
+            return 2
+        executor = make_executor()
+        executor.add_node(node)
+        finished = getattr(node, 'finished', None) or Future()
+        stop.wake, stop.phase = node.create_timer(WAKE_DELAY, wake, autostart=False), 'spinning'
+        # In slices: Jazzy's EventsExecutor never returns from a spin once the context is down.
+        while rclpy.ok() and not finished.done() and not stop.requested:
+            executor.spin_until_future_complete(finished, timeout_sec=SPIN_SLICE)
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    watch.process.wait()
-    watch.lock.close()
-    if PRCTL is not None:   # no tracer named any more (the pid may be reused)
-        PRCTL(_PR_SET_PTRACER, 0, 0, 0, 0)
+    except (_RCLError, RuntimeError):   # a context shut down under a queued callback: no fault
+        deadline = time.monotonic() + SHUTDOWN_RACE_WAIT
+        while rclpy.ok() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if rclpy.ok():
+            raise
+    finally:
+        stop.phase = 'stopping'
+        if stop.requested:      # a signal may have reached the peers too (launch's Ctrl-C)
+            try:
+                leave_after(node, leave_after_peers())
+            except Exception as exc:  # noqa: BLE001 - the teardown below must run whatever
+                print(f'[{node_name}] not waiting for peers to leave: {exc!r}', file=sys.stderr)
+        end_guard = teardown_guard(TEARDOWN_LIMIT)
+        try:
+            realtime.finish(node)     # the loop's queued log lines
+            close_node(executor, node)
+            executor = node = finished = stop.wake = None   # the executor's destructor, guarded
+            shutdown_once()
+        finally:
+            end_guard()
+            stop.restore()
+    return 0
+
+
+def close_node(executor, *nodes) -> None:
+    """Shut ``executor`` down, then destroy each of ``nodes`` (None entries are skipped)."""
+    if executor is not None:    # first: a node destroyed first leaves its handles to its destructor
+        executor.shutdown()
+    for node in nodes:
+        if node is not None:
+            node.destroy_node()
+
+
+def shutdown_once(context=None) -> None:
+    """Shut ``context`` (default: the default one) down unless it is, or is just being, down."""
+    try:
+        rclpy.try_shutdown(context=context)
+    except _RCLError:           # a signal handler's shutdown came between the check and the call
+        if rclpy.ok(context=context):
+            raise

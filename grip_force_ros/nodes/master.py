@@ -18,7 +18,8 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import STATE_PUB_QOS, run_node
+from grip_force_ros.nodes.common import STATE_PUB_QOS
+from grip_force_ros.nodes.lifetime import run_node
 from grip_force_ros.nodes.realtime import loop_log
 from grip_force_ros.nodes.ros_params import declare_node_parameters
 from grip_force_ros.nodes.wire import JointStateWriter

@@ -42,7 +42,8 @@ from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.nodes.common import close_node, shutdown_once, stamp_nanoseconds, state_qos
+from grip_force_ros.nodes.common import stamp_nanoseconds, state_qos
+from grip_force_ros.nodes.lifetime import close_node, shutdown_once
 from grip_force_ros.lab.bench.stats import latency_summary, missed_periods
 
 #: Longest wait for the first answer before giving up (s).

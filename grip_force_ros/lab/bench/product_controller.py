@@ -24,8 +24,9 @@ import sys
 import numpy as np
 from rclpy.utilities import remove_ros_args
 
-from grip_force_ros.nodes.common import run_node
+from grip_force_ros.lab import node_process
 from grip_force_ros.nodes.controller import ControllerNode
+from grip_force_ros.nodes.lifetime import run_node
 
 #: Columns of the record (ns): the answered actuator-state stamp, the controller's clock at the
 #: step, and the sample stamps of the inputs the step used (0: none yet, or no stamp).
@@ -80,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     argv = list(sys.argv if argv is None else argv)
     opts = build_parser().parse_args(remove_ros_args(argv)[1:])
+    node_process.install()      # its teardown watched, as the harness's nodes
     return run_node(functools.partial(BenchController, opts), 'controller', argv)
 
 

@@ -24,8 +24,9 @@ import time
 import numpy as np
 from rclpy.utilities import remove_ros_args
 
+from grip_force_ros.lab import node_process
 from grip_force_ros.lab.bench.child import _Window
-from grip_force_ros.nodes.common import run_node
+from grip_force_ros.nodes.lifetime import run_node
 from grip_force_ros.nodes.sim_instrument import SimInstrumentNode
 from grip_force_ros.sim.loop_latency import LoopLatency
 
@@ -98,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     argv = list(sys.argv if argv is None else argv)
     opts = build_parser().parse_args(remove_ros_args(argv)[1:])
+    node_process.install()      # its teardown watched, as the harness's nodes
     return run_node(functools.partial(BenchSim, opts), 'sim_instrument', argv)
 
 

@@ -22,7 +22,7 @@ from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.control import Mode
-from grip_force_ros.nodes.common import shutdown_once
+from grip_force_ros.nodes.lifetime import shutdown_once
 from grip_force_ros.params import SPECS
 
 _USED = ('master_angle_min', 'master_contact_angle', 'grip_force_max', 'force_map_exponent',

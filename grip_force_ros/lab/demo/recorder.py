@@ -252,7 +252,7 @@ class SpinThread:
         """Stop spinning and end the executor; the caller then destroys the node.
 
         The executor ends here, with the node still alive (see
-        :func:`~grip_force_ros.nodes.common.close_node`).
+        :func:`~grip_force_ros.nodes.lifetime.close_node`).
         """
         self._stop.set()
         self._thread.join(timeout=5.0)

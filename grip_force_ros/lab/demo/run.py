@@ -295,7 +295,7 @@ def _start_master(recorder, spec: RunSpec, group: ProcessGroup, master: NodeProc
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter_client import AsyncParameterClient
 
-    from grip_force_ros.nodes.common import close_node
+    from grip_force_ros.nodes.lifetime import close_node
 
     values = spec.master_values()
     ns = spec.namespace.strip('/')

@@ -166,7 +166,7 @@ class _Probe:
         return False
 
     def close(self):
-        from grip_force_ros.nodes.common import close_node, shutdown_once
+        from grip_force_ros.nodes.lifetime import close_node, shutdown_once
         self._stop = True
         self._thread.join(timeout=2.0)
         close_node(self.executor, self.node)   # the executor first: see close_node

@@ -101,9 +101,9 @@ class Session:
         from rclpy.parameter import Parameter
 
         from grip_force_ros.lab.faults.probe import FaultProbe
-        from grip_force_ros.nodes.common import freeze_heap, make_executor
+        from grip_force_ros.nodes.common import make_executor
         from grip_force_ros.nodes.controller import ControllerNode
-        from grip_force_ros.lab.harness import SPIN_SLICE
+        from grip_force_ros.lab.harness import SPIN_SLICE, freeze_heap
 
         freeze_heap()     # a full collection of a large process's heap stalls the nodes here
         values = read_params_yaml(config)
@@ -196,7 +196,8 @@ class Session:
         self.sim = self._start_sim()
 
     def close(self) -> None:
-        from grip_force_ros.nodes.common import shutdown_once, unfreeze_heap
+        from grip_force_ros.lab.harness import unfreeze_heap
+        from grip_force_ros.nodes.lifetime import shutdown_once
         self._stop = True
         restarting = getattr(self, '_restarting', None)
         if restarting is not None:      # let a pending restart finish (or see _stop) first
