@@ -3,8 +3,8 @@
 The controller runs in this process (its ``GripController.step`` is wrapped to
 record every period); the simulated instrument and the master run as separate
 processes (``python -m grip_force_ros.lab.node_process <name>``: the installed
-executables' ``main``, their teardown watched), as they do in the demo. Discovery is on localhost and each test
-process has its own ROS_DOMAIN_ID (conftest.py).
+executables' ``main``, their teardown watched), as they do in the demo. Discovery is on
+localhost and each test process has its own ROS_DOMAIN_ID (conftest.py).
 """
 from __future__ import annotations
 
