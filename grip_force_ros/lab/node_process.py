@@ -156,9 +156,11 @@ def stop_watch(watch: TeardownWatch | None) -> None:
 
 
 def watched_teardown(limit: float) -> Callable[[], None]:
-    """A teardown guard for ``run_node``: :func:`watch_own_teardown` with native stacks at
-    :data:`NATIVE_STACKS_AT` of ``limit`` (s); where no watcher can start, the node's own limit.
-    Returns what ends the guard."""
+    """Return a teardown guard for ``run_node``: :func:`watch_own_teardown` of ``limit`` (s).
+
+    Native stacks at :data:`NATIVE_STACKS_AT` of ``limit``; where no watcher can start, the
+    node's own limit. The returned callable ends the guard.
+    """
     watch = watch_own_teardown(NATIVE_STACKS_AT * limit, limit)
     if watch is None:
         from grip_force_ros.nodes import lifetime
