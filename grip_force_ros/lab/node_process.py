@@ -175,8 +175,11 @@ def install() -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run node executable ``argv[0]`` (``controller``, ``sim_instrument``, ``master``) with
-    the rest of ``argv`` as its command line, its teardown watched (:func:`install`)."""
+    """Run node executable ``argv[0]`` with the rest of ``argv`` as its command line.
+
+    ``argv[0]`` is ``controller``, ``sim_instrument`` or ``master``; its teardown is watched
+    (:func:`install`).
+    """
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv:
         print('usage: python -m grip_force_ros.lab.node_process NODE [ARGS...]', file=sys.stderr)
