@@ -149,8 +149,9 @@ class GripController:
         self.mode = _SAFE               # starts safe until every input has arrived
         self.retuned = False            # parameters changed at runtime: preset on the next step
         self.estimated_force = 0.0      # N, last good estimate
-        #: the estimate's band of the last step (N; ControlOutput.band_low, band_high) and
-        #: whether the estimate was held inside it (ControlOutput.estimate_held)
+        #: the jaw friction's band of the last sensorless step (N; ControlOutput.band_low,
+        #: band_high) and whether the estimate was held inside it (ControlOutput.estimate_held);
+        #: kept only where there is a band (band_status)
         self.band_low = self.band_high = 0.0
         self.estimate_held = False
         self.last_now = -math.inf
@@ -254,12 +255,15 @@ class GripController:
 
         ``estimate``: ``held in stick, band <width> N`` while the estimate is held inside the
         jaw friction's band (a change of load does not show in the current), ``on the band's
-        edge (the jaw slides), band <width> N`` while the chain pushes it along an edge;
-        ``load cell, no band``, ``no jaw friction terms, no band`` or, in the safe state,
-        ``safe state: the last estimate kept, no band``. ``estimate_band_N`` (the width),
+        edge (the jaw slides), band <width> N`` while the chain pushes it along an edge,
+        ``follows the current, no band`` where the band has no width (no contact); ``load
+        cell, no band``, ``no jaw friction terms, no band`` or, in the safe state, ``safe
+        state: the last estimate kept, no band``. ``estimate_band_N`` (the width),
         ``estimate_band_low_N`` and ``estimate_band_high_N``: the last step's band.
         """
         low, high = self.band_low, self.band_high
+        if self.use_sensor or self.friction_state is None or self.mode is _SAFE:
+            low = high = self.estimated_force
         width = high - low
         if self.use_sensor:
             state = 'load cell, no band'
@@ -269,6 +273,8 @@ class GripController:
             state = 'safe state: the last estimate kept, no band'
         elif self.estimate_held:
             state = f'held in stick, band {width:.3f} N'
+        elif not width > 0.0:                # no contact, or no Coulomb term: no width
+            state = 'follows the current, no band'
         else:
             state = f"on the band's edge (the jaw slides), band {width:.3f} N"
         return {'estimate': state, 'estimate_band_N': f'{width:.3f}',
@@ -428,6 +434,7 @@ class GripController:
                     held, banded = self.estimated_force, True
                     estimate = low if held < low else high if held > high else held
                     inside = low < held < high   # held in stick (on an edge: the chain pushes it)
+                    self.band_low, self.band_high, self.estimate_held = low, high, inside
         except (ValueError, ArithmeticError) as exc:
             return self._safe((f'force estimate failed: {exc}',), inputs)
         self.last_wrist = wrist
@@ -437,11 +444,8 @@ class GripController:
             force = estimate
             if not _isfinite(force):
                 return self._safe(('force estimate not finite',), inputs)
-        if banded:
-            self.band_low, self.band_high = low, high
-        else:
-            self.band_low = self.band_high = force
-        self.estimate_held = inside
+        if not banded:                       # no band: its edges are the estimate
+            low = high = force
 
         gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity, dt)
         previous_mode = self.mode
@@ -524,8 +528,7 @@ class GripController:
         if limits_hit:
             self.limit_steps += 1
         return ControlOutput(command, target_force, force, self.pull_out_per_force * force,
-                             mode, limits_hit, reasons, target_jaw, feedforward,
-                             self.band_low, self.band_high, inside)
+                             mode, limits_hit, reasons, target_jaw, feedforward, low, high, inside)
 
     def _safe(self, reasons: tuple, inputs: ControlInputs) -> ControlOutput:
         """Safe state: ramp the current to 0 A at the slew limit, keep the last estimate."""
