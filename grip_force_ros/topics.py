@@ -9,6 +9,7 @@ CRTK-style names, as used by the dVRK. All remappable with ``--ros-args -r``.
 | instrument/actuator/measured_js | sensor_msgs/JointState | sim/hw -> controller | jaw_drum: position (rad), velocity (rad/s), effort = measured current (A) |
 | instrument/actuator/servo_jf | sensor_msgs/JointState | controller -> sim/hw | jaw_drum: effort = current command (A) |
 | grip/estimated_force | geometry_msgs/WrenchStamped | controller -> any | force.z = grip force (N), force.x = needle pull-out force (N) |
+| grip/estimate_band | geometry_msgs/WrenchStamped | controller -> any | force.x, force.y = the estimate band's low and high edge (N), force.z = the estimated grip force (N) |
 | grip/target_force | geometry_msgs/WrenchStamped | controller -> any | force.z = target grip force (N) |
 | grip/measured_force | geometry_msgs/WrenchStamped | sim load cell -> any | force.z = measured grip force (N) |
 | /diagnostics | diagnostic_msgs/DiagnosticArray | controller, sim | state, limits hit, watchdog, rejected inputs |
@@ -26,6 +27,7 @@ INSTRUMENT_JS = 'instrument/measured_js'
 ACTUATOR_JS = 'instrument/actuator/measured_js'
 SERVO_CURRENT = 'instrument/actuator/servo_jf'
 ESTIMATED_FORCE = 'grip/estimated_force'
+ESTIMATE_BAND = 'grip/estimate_band'
 TARGET_FORCE = 'grip/target_force'
 MEASURED_FORCE = 'grip/measured_force'
 DIAGNOSTICS = '/diagnostics'
@@ -74,6 +76,7 @@ class TopicSet:
     actuator_js: str
     command: str
     estimated_force: str
+    estimate_band: str
     target_force: str
     measured_force: str
     operating_state: str | None = None
@@ -83,7 +86,8 @@ class TopicSet:
         """Every topic a demo of this profile records (its rosbag2), /diagnostics last."""
         extra = (self.operating_state,) if self.operating_state else ()
         return (self.master_js, self.instrument_js, self.actuator_js, self.command,
-                self.estimated_force, self.target_force, self.measured_force) + extra + (DIAGNOSTICS,)
+                self.estimated_force, self.estimate_band, self.target_force,
+                self.measured_force) + extra + (DIAGNOSTICS,)
 
 
 def dvrk_topic(device: str, name: str) -> str:
@@ -121,11 +125,12 @@ def topic_set(interface: str = 'crtk', arm: str = 'PSM1', master: str = 'MTML') 
     """
     if interface == 'crtk':
         return TopicSet('crtk', MASTER_JS, INSTRUMENT_JS, ACTUATOR_JS, SERVO_CURRENT,
-                        ESTIMATED_FORCE, TARGET_FORCE, MEASURED_FORCE)
+                        ESTIMATED_FORCE, ESTIMATE_BAND, TARGET_FORCE, MEASURED_FORCE)
     if interface == 'dvrk':
         return TopicSet('dvrk', dvrk_topic(master, DVRK_GRIPPER_JS), dvrk_topic(arm, DVRK_ARM_JS),
                         dvrk_topic(arm, DVRK_JAW_JS), dvrk_topic(arm, DVRK_JAW_SERVO),
-                        dvrk_topic(arm, ESTIMATED_FORCE), dvrk_topic(arm, TARGET_FORCE),
+                        dvrk_topic(arm, ESTIMATED_FORCE), dvrk_topic(arm, ESTIMATE_BAND),
+                        dvrk_topic(arm, TARGET_FORCE),
                         dvrk_topic(arm, MEASURED_FORCE), dvrk_topic(arm, DVRK_OPERATING_STATE),
                         dvrk_topic(arm, DVRK_STATE_COMMAND))
     raise ValueError(f"unknown interface {interface!r}: 'crtk' or 'dvrk'")

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 
 import numpy as np
 import psutil
@@ -366,6 +367,44 @@ def test_summary_plot_is_written(tmp_path):
     windows = analysis.phase_windows(task, 0.0)
     path = summary_plot(data, windows, analysis.force_metrics(data, windows), tmp_path / 's.png')
     assert path.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and path.stat().st_size > 30_000
+
+
+def test_summary_plot_shades_the_estimate_band_when_it_has_a_width(tmp_path, monkeypatch):
+    """grip/estimate_band: shaded in the force panel where high > low; no band, no shading."""
+    from matplotlib.axes import Axes
+
+    from grip_force_ros.lab.demo.messages import values_of
+    from grip_force_ros.lab.demo.plot import has_band, summary_plot
+    shaded = []
+    fill = Axes.fill_between
+
+    def recorded(self, x, y1, y2=0, **kwargs):
+        shaded.append((np.asarray(y1), np.asarray(y2), kwargs))
+        return fill(self, x, y1, y2, **kwargs)
+
+    monkeypatch.setattr(Axes, 'fill_between', recorded)
+    task = needle_grasp()
+    data = synthetic_run(task)
+    data['t'] = data['t'] - 10.0
+    windows = analysis.phase_windows(task, 0.0)
+    metrics = analysis.force_metrics(data, windows)
+    flat = {**data, 'estimate_band_low': data['estimated_force'].copy(),
+            'estimate_band_high': data['estimated_force'].copy()}     # no band: width 0
+    summary_plot(flat, windows, metrics, tmp_path / 'flat.png')
+    assert shaded == [] and not has_band(flat['estimate_band_low'], flat['estimate_band_high'])
+    band = {**data, 'estimate_band_low': np.maximum(data['estimated_force'] - 3.0, 0.0),
+            'estimate_band_high': data['estimated_force'] + 3.0}
+    band['estimate_band_low'][:10] = np.nan                             # a silent topic: a gap
+    path = summary_plot(band, windows, metrics, tmp_path / 'band.png')
+    assert path.stat().st_size > 30_000 and len(shaded) == 1
+    low, high, kwargs = shaded[0]
+    assert 'estimate band' in kwargs['label'] and not kwargs['where'][:10].any()
+    assert np.array_equal(high, band['estimate_band_high'], equal_nan=True)
+    # what the bag's message means: force.x, force.y the edges (force.z the estimate)
+    msg = types.SimpleNamespace(wrench=types.SimpleNamespace(
+        force=types.SimpleNamespace(x=1.0, y=7.5, z=4.0)))
+    assert values_of(topics.ESTIMATE_BAND, msg) == {'estimate_band_low': 1.0,
+                                                    'estimate_band_high': 7.5}
 
 
 # ---------------------------------------------------------------- recorder

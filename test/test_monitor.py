@@ -27,6 +27,9 @@ def test_render_shows_values_units_and_silence():
     line = plain_line(snap)
     assert 'target=4.000' in line and 'measured=3.950' in line and 'diag=WARN' in line
     assert controller_mode([]) == '?'
+    snap.values.update(estimate_band_low=0.0, estimate_band_high=7.269)
+    snap.ages[topics.ESTIMATE_BAND] = 0.01
+    assert 'estimate band      0.000 .. 7.269 N' in '\n'.join(render(snap))
 
 
 def _publish(domain_id: int, stop: threading.Event) -> None:

@@ -201,8 +201,9 @@ class _Recorder:
 
 
 def _record_outputs(ctl, log) -> None:
-    ctl._command_pub, ctl._estimate_pub, ctl._target_pub = (
-        _Recorder('command', log), _Recorder('estimate', log), _Recorder('target', log))
+    ctl._command_pub, ctl._estimate_pub, ctl._band_pub, ctl._target_pub = (
+        _Recorder('command', log), _Recorder('estimate', log), _Recorder('band', log),
+        _Recorder('target', log))
 
 
 def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
@@ -239,25 +240,28 @@ def test_outputs_carry_the_stamp_of_the_state_they_answer(node):
 
 
 def test_command_every_step_forces_at_their_own_rate(node):
-    """The current command goes out in every step; the estimated and target force at
-    force_output_rate (100 Hz: the first step, then not before 10 ms minus half a period)."""
+    """The current command goes out in every step; the estimated force, its band and the
+    target force at force_output_rate (100 Hz: the first step, then not before 10 ms minus
+    half a period)."""
     ctl, clock, steps = node
     log = []
     _record_outputs(ctl, log)
     assert ctl.params.force_output_rate == 100.0
     _state(ctl)
-    assert log == ['command', 'estimate', 'target']
+    assert log == ['command', 'estimate', 'band', 'target']
     for _ in range(4):
         clock.now += ctl._period
         _state(ctl)
-    assert log[3:] == ['command'] * 4, 'the forces wait for their period'
+    assert log[4:] == ['command'] * 4, 'the forces wait for their period'
     time.sleep(0.0105)                                              # the node's ROS clock
     clock.now += ctl._period
     _state(ctl)
-    assert log[7:] == ['command', 'estimate', 'target']
+    assert log[8:] == ['command', 'estimate', 'band', 'target']
     # the one sent is the step's own output, stamped with the controller's clock at it
     est = ctl._estimate_pub.last
     assert est.wrench.force.z == ctl.last_output.estimated_force
+    band = ctl._band_pub.last.wrench.force        # paper instrument: no band, the estimate
+    assert (band.x, band.y, band.z) == (ctl.last_output.estimated_force,) * 3
     assert est.header.stamp.sec > 0
 
 

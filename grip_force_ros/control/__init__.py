@@ -29,7 +29,14 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
     out.reasons            # tuple of str: why safe, what was clamped; () when all is well
     out.target_jaw_angle   # [rad] jaw target in free motion (measured jaw angle otherwise)
     out.feedforward_current  # [A]
-    ctrl.status(inputs)      # dict[str, str] for /diagnostics: mode, reasons, counters, rejections
+    out.band_low, out.band_high  # [N] the sensorless estimate's band: the jaw friction holds the
+                                 #     force between them while the jaw sticks (jaw friction
+                                 #     terms on); else both the estimate (no band)
+    out.band_width         # [N]  band_high - band_low (0: no band; load cell, paper instruments)
+    out.estimate_held      # bool: the estimate is held strictly inside the band (stick: a
+                           #       change of load does not show in the current)
+    ctrl.status(inputs)      # dict[str, str] for /diagnostics: mode, reasons, counters, rejections,
+                             # the band ('estimate': 'held in stick, band 0.412 N', ...)
     ctrl.update_params(new_params)  # runtime change (validated ParamSet), bumpless; the node
                                     # refuses read-only parameters first (ParamSpec.read_only)
 

@@ -52,7 +52,19 @@ _FREE, _GRIP, _SAFE = Mode.FREE, Mode.GRIP, Mode.SAFE
 
 
 class ControlOutput(NamedTuple):
-    """Result of one control period (SI units)."""
+    """Result of one control period (SI units).
+
+    The last three fields are the estimate's band: the grip forces (N) between which the
+    sensorless estimate of an instrument with jaw friction terms
+    (:attr:`GripController.friction_state`) is held while the jaw sticks, from the chain's
+    force through the jaw friction in the closing state (``band_low``) to that in the
+    opening state (``band_high``), at this period's current and jaw angle. Inside it a
+    change of load does not show in the current. ``estimate_held`` is true while the
+    estimate lies strictly inside (held in stick), false while the chain pushes it along an
+    edge (the jaw slides: the current shows the force). With the load cell, without jaw
+    friction terms and in the safe state there is no band: ``band_low == band_high ==
+    estimated_force`` (:attr:`band_width` 0 N) and ``estimate_held`` is false.
+    """
 
     current_command: float      # A, motor current command (positive closes the jaw)
     target_force: float         # N, grip force target (0 in free motion and safe state)
@@ -63,6 +75,14 @@ class ControlOutput(NamedTuple):
     reasons: tuple              # of str: why safe, what was clamped or unavailable
     target_jaw_angle: float     # rad, jaw target in free motion, else the measured jaw angle
     feedforward_current: float  # A, inverse-model current for the target force
+    band_low: float             # N, the estimate band's low edge (closing friction state)
+    band_high: float            # N, the estimate band's high edge (opening friction state)
+    estimate_held: bool         # the estimate is held inside the band (the jaw sticks)
+
+    @property
+    def band_width(self) -> float:
+        """Width of the estimate's band, ``band_high - band_low`` (N); 0 when there is none."""
+        return self.band_high - self.band_low
 
 
 class GripController:
@@ -129,6 +149,11 @@ class GripController:
         self.mode = _SAFE               # starts safe until every input has arrived
         self.retuned = False            # parameters changed at runtime: preset on the next step
         self.estimated_force = 0.0      # N, last good estimate
+        #: the jaw friction's band of the last sensorless step (N; ControlOutput.band_low,
+        #: band_high) and whether the estimate was held inside it (ControlOutput.estimate_held);
+        #: kept only where there is a band (band_status)
+        self.band_low = self.band_high = 0.0
+        self.estimate_held = False
         self.last_now = -math.inf
         self.last_dt = self.period      # s, the step time of the last step
         self.safe_steps = 0             # consecutive safe periods
@@ -213,6 +238,7 @@ class GripController:
                'object_kind': self.object_kind,
                'feedback': 'force sensor' if self.use_sensor else 'model estimate',
                **self._gain_status}
+        out.update(self.band_status())
         out['late_inputs'] = str(sum(self.late_counts.values()))
         for source, count in self.late_counts.items():
             if count:
@@ -223,6 +249,36 @@ class GripController:
             for reason, count in sorted(inputs.rejected.items(), key=lambda kv: -kv[1])[:5]:
                 out[f'rejected: {reason}'] = str(count)
         return out
+
+    def band_status(self) -> dict:
+        """Key/value strings of the estimate's band for /diagnostics (forces in N).
+
+        ``estimate``: ``held in stick, band <width> N`` while the estimate is held inside the
+        jaw friction's band (a change of load does not show in the current), ``on the band's
+        edge (the jaw slides), band <width> N`` while the chain pushes it along an edge,
+        ``follows the current, no band`` where the band has no width (no contact); ``load
+        cell, no band``, ``no jaw friction terms, no band`` or, in the safe state, ``safe
+        state: the last estimate kept, no band``. ``estimate_band_N`` (the width),
+        ``estimate_band_low_N`` and ``estimate_band_high_N``: the last step's band.
+        """
+        low, high = self.band_low, self.band_high
+        if self.use_sensor or self.friction_state is None or self.mode is _SAFE:
+            low = high = self.estimated_force
+        width = high - low
+        if self.use_sensor:
+            state = 'load cell, no band'
+        elif self.friction_state is None:
+            state = 'no jaw friction terms, no band'
+        elif self.mode is _SAFE:
+            state = 'safe state: the last estimate kept, no band'
+        elif self.estimate_held:
+            state = f'held in stick, band {width:.3f} N'
+        elif not width > 0.0:                # no contact, or no Coulomb term: no width
+            state = 'follows the current, no band'
+        else:
+            state = f"on the band's edge (the jaw slides), band {width:.3f} N"
+        return {'estimate': state, 'estimate_band_N': f'{width:.3f}',
+                'estimate_band_low_N': f'{low:.3f}', 'estimate_band_high_N': f'{high:.3f}'}
 
     def new_inputs(self) -> ControlInputs:
         """Return an empty :class:`ControlInputs` with this instrument's plausibility ranges."""
@@ -353,6 +409,7 @@ class GripController:
             reasons = ('master angle clamped to its range',)
 
         hysteresis = self.hysteresis
+        banded = inside = False              # the estimate has a jaw friction band; held inside it
         try:
             if hysteresis is not None:       # sensorless, direction-aware
                 measured = inputs.measured_current
@@ -374,8 +431,10 @@ class GripController:
                         chain, jaw, obj, 1.0, inputs.jaw_velocity, inputs.measured_current, wrist)
                     high = model.force_through_jaw_friction_scalar(
                         chain, jaw, obj, -1.0, inputs.jaw_velocity, inputs.measured_current, wrist)
-                    held = self.estimated_force
+                    held, banded = self.estimated_force, True
                     estimate = low if held < low else high if held > high else held
+                    inside = low < held < high   # held in stick (on an edge: the chain pushes it)
+                    self.band_low, self.band_high, self.estimate_held = low, high, inside
         except (ValueError, ArithmeticError) as exc:
             return self._safe((f'force estimate failed: {exc}',), inputs)
         self.last_wrist = wrist
@@ -385,6 +444,8 @@ class GripController:
             force = estimate
             if not _isfinite(force):
                 return self._safe(('force estimate not finite',), inputs)
+        if not banded:                       # no band: its edges are the estimate
+            low = high = force
 
         gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity, dt)
         previous_mode = self.mode
@@ -467,7 +528,7 @@ class GripController:
         if limits_hit:
             self.limit_steps += 1
         return ControlOutput(command, target_force, force, self.pull_out_per_force * force,
-                             mode, limits_hit, reasons, target_jaw, feedforward)
+                             mode, limits_hit, reasons, target_jaw, feedforward, low, high, inside)
 
     def _safe(self, reasons: tuple, inputs: ControlInputs) -> ControlOutput:
         """Safe state: ramp the current to 0 A at the slew limit, keep the last estimate."""
@@ -489,6 +550,9 @@ class GripController:
             self.limit_steps += 1
         self.force_map.reset()
         force = self.estimated_force
+        self.band_low = self.band_high = force
+        self.estimate_held = False
         jaw = inputs.jaw_angle
         return ControlOutput(command, 0.0, force, self.pull_out_per_force * force, _SAFE,
-                             limits_hit, reasons, jaw if _isfinite(jaw) else 0.0, 0.0)
+                             limits_hit, reasons, jaw if _isfinite(jaw) else 0.0, 0.0,
+                             force, force, False)

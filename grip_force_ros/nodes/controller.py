@@ -16,8 +16,10 @@ Publishes:
     instrument/actuator/servo_jf      jaw_drum: effort = current command (A), every control step
                                       (one per instrument state, ``expected_state_rate``)
     grip/estimated_force              force.z = grip force (N), force.x = needle pull-out force (N)
+    grip/estimate_band                force.x, force.y = the estimate band's low and high edge (N),
+                                      force.z = grip force (N): held in stick while x < z < y
     grip/target_force                 force.z = target grip force (N)
-        both at ``force_output_rate`` (100 Hz), right after the step's command;
+        all three at ``force_output_rate`` (100 Hz), right after the step's command;
 and ``/diagnostics`` at 10 Hz and on a change of mode, limits or input faults. The 1 kHz
 messages are read and written as serialized bytes (:mod:`grip_force_ros.nodes.wire`).
 
@@ -183,7 +185,7 @@ class ControllerNode(LifecycleNode):
         self._loop_entities: list = []  # the loop's subscriptions and publishers (configure)
         self._force_sub = None         # the load cell's subscription, while listened to
         self._force_wanted = False     # a service needs the load cell (start_procedure)
-        self._command_pub = self._estimate_pub = self._target_pub = None
+        self._command_pub = self._estimate_pub = self._target_pub = self._band_pub = None
         self._next_forces_ns = 0       # controller clock (ns) at which the forces are due
         self._running = False          # the loop steps (active, not stopping)
         self.procedure = None          # a service's procedure or the deactivation ramp, or None
@@ -364,6 +366,7 @@ class ControllerNode(LifecycleNode):
         self._next_forces_ns = now_ns + self.io.forces_period_ns
         self.io.fill_forces(self.last_output, now_ns)    # the last ramp step's
         self._estimate_pub.publish(self.io.estimate_msg)
+        self._band_pub.publish(self.io.band_msg)
         self._target_pub.publish(self.io.target_msg)
         self._publish_diagnostics(stamp.to_msg(), self.last_output)
 
@@ -384,8 +387,9 @@ class ControllerNode(LifecycleNode):
         self._command_pub = self.create_publisher(JointState, names.command, STATE_PUB_QOS)
         self._estimate_pub = self.create_publisher(WrenchStamped, names.estimated_force,
                                                    STATE_PUB_QOS)
+        self._band_pub = self.create_publisher(WrenchStamped, names.estimate_band, STATE_PUB_QOS)
         self._target_pub = self.create_publisher(WrenchStamped, names.target_force, STATE_PUB_QOS)
-        entities += (self._command_pub, self._estimate_pub, self._target_pub)
+        entities += (self._command_pub, self._estimate_pub, self._band_pub, self._target_pub)
         self._next_forces_ns = 0
         self._follow_force()
         io.attach(self)
@@ -420,7 +424,7 @@ class ControllerNode(LifecycleNode):
             else:
                 self.destroy_publisher(entity)
         self._loop_entities = []
-        self._command_pub = self._estimate_pub = self._target_pub = None
+        self._command_pub = self._estimate_pub = self._target_pub = self._band_pub = None
         for timer in (self._timer, self._fallback):
             if timer is not None:
                 self.destroy_timer(timer)
@@ -583,6 +587,7 @@ class ControllerNode(LifecycleNode):
             self._next_forces_ns = now_ns + io.forces_period_ns
             io.fill_forces(out, now_ns)
             self._estimate_pub.publish(io.estimate_msg)
+            self._band_pub.publish(io.band_msg)
             self._target_pub.publish(io.target_msg)
 
         if out.limits_hit:

@@ -5,7 +5,8 @@ the loop, the timing and /diagnostics; the profile object made by :func:`control
 says which topics and converts: a ``read_*`` method turns one message into the controller's
 :class:`~grip_force_ros.control.ControlInputs` (given as an argument) and tells whether the
 node steps on it; :meth:`ControllerIO.command` turns a step's output into the command
-message; :meth:`ControllerIO.fill_forces` fills the force messages. The profile objects
+message; :meth:`ControllerIO.fill_forces` fills the force messages (the estimate's band
+among them). The profile objects
 never call the node. Topics:
 
 ``crtk`` (:class:`CrtkControllerIO`; topics.py, docs/ros_interface.md)
@@ -97,8 +98,10 @@ class ControllerIO:
         and clears them).
     forces_period_ns : int
         Least time between two publications of the force outputs (ns).
-    estimate_msg, target_msg : WrenchStamped
-        The force outputs, filled by :meth:`fill_forces` (reused every time).
+    estimate_msg, band_msg, target_msg : WrenchStamped
+        The force outputs, filled by :meth:`fill_forces` (reused every time): the estimated
+        force, the estimate's band (``grip/estimate_band``: force.x and force.y the band's
+        low and high edge, force.z the estimated force, N) and the target force.
     """
 
     interface = ''
@@ -111,6 +114,8 @@ class ControllerIO:
         # Messages reused every step: fill, do not rebuild.
         self.estimate_msg = WrenchStamped()
         self.estimate_msg.header.frame_id = topics.JAW_FRAME
+        self.band_msg = WrenchStamped()
+        self.band_msg.header.frame_id = topics.JAW_FRAME
         self.target_msg = WrenchStamped()
         self.target_msg.header.frame_id = topics.JAW_FRAME
 
@@ -156,12 +161,21 @@ class ControllerIO:
 
     # ------------------------------------------------------------------ outputs
     def fill_forces(self, out, now_ns: int) -> None:
-        """Fill :attr:`estimate_msg` and :attr:`target_msg` with ``out``, stamped ``now_ns`` (ns)."""
+        """Fill the three force messages with ``out``, stamped ``now_ns`` (ns).
+
+        The band: force.x = ``out.band_low``, force.y = ``out.band_high``, force.z =
+        ``out.estimated_force`` (N): the estimate is held in stick while x < z < y; the
+        width is y - x (0: no band, with the load cell or without jaw friction terms).
+        """
         sec, nanosec = divmod(now_ns, 1_000_000_000)
         est = self.estimate_msg
         est.header.stamp.sec, est.header.stamp.nanosec = sec, nanosec
         est.wrench.force.z = out.estimated_force
         est.wrench.force.x = out.pull_out_force
+        band = self.band_msg
+        band.header.stamp.sec, band.header.stamp.nanosec = sec, nanosec
+        force = band.wrench.force
+        force.x, force.y, force.z = out.band_low, out.band_high, out.estimated_force
         target = self.target_msg
         target.header.stamp.sec, target.header.stamp.nanosec = sec, nanosec
         target.wrench.force.z = out.target_force

@@ -66,9 +66,10 @@ CONTROLLER = [
        'meanwhile. Never below the feedback watchdogs.',
        min=0.002, max=1.0, group=_G),
     _P('force_output_rate', 'double', 100.0, 'Hz',
-       'Rate of the estimated and target force outputs (grip/estimated_force, '
-       'grip/target_force): nobody reads them at the loop\'s rate, and two publishes a period '
-       'would cost the loop (BENCHMARKS.md, "The nodes\' own cost"). The command keeps the '
+       'Rate of the estimated force, its band and the target force outputs (grip/estimated_force, '
+       'grip/estimate_band, grip/target_force): nobody reads them at the loop\'s rate, and two '
+       'publishes a period would cost the loop (BENCHMARKS.md, "The nodes\' own cost"). The '
+       'command keeps the '
        'state rate; at or above expected_state_rate the forces go out every step.',
        min=1.0, max=STATE_RATE_MAX, group=_G),
     _P('stamp_future_tolerance', 'double', 0.1, 's',

@@ -18,6 +18,7 @@ TOPIC_TYPES: dict[str, str] = {
     topics.ACTUATOR_JS: 'sensor_msgs/msg/JointState',
     topics.SERVO_CURRENT: 'sensor_msgs/msg/JointState',
     topics.ESTIMATED_FORCE: 'geometry_msgs/msg/WrenchStamped',
+    topics.ESTIMATE_BAND: 'geometry_msgs/msg/WrenchStamped',
     topics.TARGET_FORCE: 'geometry_msgs/msg/WrenchStamped',
     topics.MEASURED_FORCE: 'geometry_msgs/msg/WrenchStamped',
     topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray',
@@ -30,6 +31,7 @@ FIELDS: dict[str, tuple[str, ...]] = {
     topics.ACTUATOR_JS: ('motor_angle', 'motor_velocity', 'current'),    # rad, rad/s, A
     topics.SERVO_CURRENT: ('current_command',),              # A
     topics.ESTIMATED_FORCE: ('estimated_force', 'pull_out_force'),       # N, N
+    topics.ESTIMATE_BAND: ('estimate_band_low', 'estimate_band_high'),   # N, N
     topics.TARGET_FORCE: ('target_force',),                  # N
     topics.MEASURED_FORCE: ('measured_force',),              # N (load cell)
 }
@@ -80,6 +82,9 @@ def values_of(topic: str, msg: Any) -> dict[str, float]:
     if topic == topics.ESTIMATED_FORCE:
         return {'estimated_force': float(msg.wrench.force.z),
                 'pull_out_force': float(msg.wrench.force.x)}
+    if topic == topics.ESTIMATE_BAND:
+        return {'estimate_band_low': float(msg.wrench.force.x),
+                'estimate_band_high': float(msg.wrench.force.y)}
     if topic == topics.TARGET_FORCE:
         return {'target_force': float(msg.wrench.force.z)}
     if topic == topics.MEASURED_FORCE:
@@ -129,11 +134,12 @@ class RecordedTopics:
                        names.actuator_js: ('jaw_angle', 'jaw_velocity', 'current'),  # rad, rad/s, A
                        names.command: ('current_command',),                        # A
                        names.estimated_force: ('estimated_force', 'pull_out_force'),  # N, N
+                       names.estimate_band: ('estimate_band_low', 'estimate_band_high'),  # N, N
                        names.target_force: ('target_force',),                      # N
                        names.measured_force: ('measured_force',)}                  # N
         self.types = {names.master_js: js, names.instrument_js: js, names.actuator_js: js,
                       names.command: js, names.estimated_force: wrench,
-                      names.target_force: wrench, names.measured_force: wrench,
+                      names.estimate_band: wrench, names.target_force: wrench, names.measured_force: wrench,
                       topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}
 
     def values(self, topic: str, msg: Any) -> dict[str, float]:
@@ -158,6 +164,7 @@ class RecordedTopics:
             return {'current_command': self.conversion.current(
                 _joint(msg, topics.JAW_JOINT, 'effort', 0))}
         for crtk_topic, own in ((topics.ESTIMATED_FORCE, n.estimated_force),
+                                (topics.ESTIMATE_BAND, n.estimate_band),
                                 (topics.TARGET_FORCE, n.target_force),
                                 (topics.MEASURED_FORCE, n.measured_force)):
             if topic == own:

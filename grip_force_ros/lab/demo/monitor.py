@@ -65,6 +65,8 @@ def render(snapshot: Snapshot, header: str = '') -> list[str]:
              f'{_rate(s, topics.TARGET_FORCE)}',
              f'  estimated force  {_v(s, "estimated_force")} N          '
              f'{_rate(s, topics.ESTIMATED_FORCE)}   pull-out {_v(s, "pull_out_force")} N',
+             f'  estimate band    {_v(s, "estimate_band_low")} .. '
+             f'{_v(s, "estimate_band_high").strip()} N  {_rate(s, topics.ESTIMATE_BAND)}',
              f'  measured force   {_v(s, "measured_force")} N          '
              f'{_rate(s, topics.MEASURED_FORCE)}',
              f'  current command  {_v(s, "current_command")} A          '

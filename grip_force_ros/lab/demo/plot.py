@@ -18,8 +18,10 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     """Write the summary figure of one run.
 
     Panels: master gripper angle and jaw angle (rad); target, estimated and
-    measured grip force and the estimated needle pull-out force (N); current
-    command and measured current (A). Phases are shaded; the steady hold
+    measured grip force and the estimated needle pull-out force (N), with the estimate's
+    band (``estimate_band_low`` .. ``estimate_band_high``, N) shaded where it has a width
+    (an instrument with jaw friction terms, sensorless; the panel's scale is the forces',
+    so a far edge may leave it); current command and measured current (A). Phases are shaded; the steady hold
     window is marked. Every trace is drawn as ``data`` holds it: on one time axis
     (s), NaN where a topic was silent (a gap in its line).
 
@@ -68,6 +70,11 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     ax.legend(loc='upper right', fontsize=8)
 
     ax = axes[1]
+    low, high = data.get('estimate_band_low'), data.get('estimate_band_high')
+    if has_band(low, high):
+        ax.fill_between(t, low, high, where=np.isfinite(low) & np.isfinite(high) & (high > low),
+                        color='tab:orange', alpha=0.22, lw=0, zorder=1,
+                        label='estimate band (jaw friction: held inside while the jaw sticks)')
     ax.plot(t, data.get('target_force', nan), label='target grip force', color='black', lw=2)
     ax.plot(t, data.get('estimated_force', nan), label='estimated grip force (model)',
             color='tab:orange', lw=1.2)
@@ -81,6 +88,13 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
         ax.annotate('steady hold', ((a + b) / 2, 0.05), xycoords=('data', 'axes fraction'),
                     ha='center', fontsize=8)
     ax.set_ylabel('force [N]')
+    if has_band(low, high):     # the forces set the scale: the band's far edge may be off it
+        forces = np.concatenate([np.asarray(data.get(k, nan), dtype=float).ravel() for k in
+                                 ('target_force', 'estimated_force', 'measured_force',
+                                  'pull_out_force')])
+        forces = forces[np.isfinite(forces)]
+        if forces.size and forces.max() > 0.0:
+            ax.set_ylim(min(0.0, forces.min()) - 0.05 * forces.max(), 1.6 * forces.max())
     ax.legend(loc='upper left', fontsize=8)
     if metrics:
         ax.text(0.99, 0.97,
@@ -109,6 +123,14 @@ def summary_plot(data: Mapping[str, np.ndarray], windows: Mapping[str, tuple[flo
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def has_band(low, high) -> bool:
+    """Tell whether the series ``low``, ``high`` (N, or None) hold an estimate band of some width."""
+    if low is None or high is None:
+        return False
+    width = np.asarray(high, dtype=float) - np.asarray(low, dtype=float)
+    return bool(np.any(width[np.isfinite(width)] > 0.0))
 
 
 def time_base_note(clocks: Mapping[str, str]) -> str:

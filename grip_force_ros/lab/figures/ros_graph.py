@@ -28,6 +28,7 @@ EDGES = (
 #: Topics read by anyone (monitor, ros2 topic echo, the demo's bag): (topic, publisher, type).
 OUTPUTS = (
     (topics.ESTIMATED_FORCE, 'controller', 'WrenchStamped: grip, pull-out (N)'),
+    (topics.ESTIMATE_BAND, 'controller', 'WrenchStamped: band low, high, grip (N)'),
     (topics.TARGET_FORCE, 'controller', 'WrenchStamped: target grip (N)'),
     (topics.DIAGNOSTICS, 'controller', 'DiagnosticArray (also sim_instrument)'),
     (topics.MEASURED_FORCE, 'sim_instrument', 'WrenchStamped: load cell (N)'),
