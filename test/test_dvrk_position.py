@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grip_force_ros.model.dvrk_jaw import JawEffortConversion, JawPositionLoop
+from grip_force_ros.model.dvrk_jaw import JawEffortConversion, JawPositionLoop, SetpointOrigin
 from grip_force_ros.params import load_params_file
 from grip_force_ros.params.dvrk_tool import strip_comments
 from grip_force_ros.sim import InstrumentSim
@@ -162,3 +162,88 @@ def test_position_mode_holds_the_jaw_where_it_is_and_a_cut_stops_the_loop(params
     assert psm.pid_current == 0.0 and math.isnan(psm.jaw_setpoint)
     _run(psm, sim, 0.1)
     assert abs(sim.truth()['current']) < 1e-6
+
+
+# ---------------------------------------------------------------------- the controller's path
+def test_the_controller_setpoint_tracks_in_free_motion_and_squeezes_in_grip(params):
+    loop = JawPositionLoop.from_params(params)
+    lo, hi = params.jaw_angle_min, params.jaw_angle_max
+    # free motion: the jaw target itself (the PSM's loop tracks it), bounded
+    assert loop.command_setpoint('free', 0.01, 0.5, 0.3, lo, hi) == 0.3
+    assert loop.command_setpoint('free', 0.0, 0.5, 9.0, lo, hi) == hi
+    # grip: the setpoint below the jaw whose loop effort at rest is the step's effort
+    q = loop.command_setpoint('grip', -0.1, 0.04, 0.04, lo, hi)
+    assert q < 0.04 and loop.effort(q, 0.04, 0.0) == pytest.approx(-0.1)
+    # safe: an effort ramping to 0 ends at the measured angle, with no jump on the way
+    ramp = [loop.command_setpoint('safe', e, 0.04, math.nan, lo, hi)
+            for e in np.linspace(-0.1, 0.0, 11)]
+    assert ramp[-1] == 0.04 and max(np.abs(np.diff(ramp))) < 0.0031
+    # the tool's qmin bounds the squeeze
+    assert loop.command_setpoint('grip', -10.0, 0.04, 0.04, lo, hi) == lo
+
+
+def test_dvrk_command_is_position_by_default_and_checked(params):
+    from grip_force_ros.params import ParameterError, make_params
+    assert make_params({}).dvrk_command == 'position'
+    assert params.replace(dvrk_command='effort').dvrk_command == 'effort'
+    with pytest.raises(ParameterError):
+        params.replace(dvrk_command='torque')
+
+
+def _offline_grasp(params, command: str, teleop: bool, seconds: float = 4.0):
+    """The controller's dvrk path offline at 100 Hz (the node's conversions, no ROS)."""
+    from grip_force_ros.control import GripController
+    from grip_force_ros.trajectories import needle_grasp
+    loop = JawPositionLoop.from_params(params)
+    psm, sim = _psm(params)
+    psm.homed()
+    ctrl = GripController(params)
+    inputs = ctrl.new_inputs()
+    traj, period, limit = needle_grasp(), 0.01, params.dvrk_jaw_effort_max
+    held, origin = [], SetpointOrigin()
+    for k in range(int(round(seconds / period))):
+        t = k * period
+        m = sim.measure()
+        start = origin.update(m.jaw_angle, t)
+        inputs.set_master(t, traj.angle(t), t)
+        inputs.set_instrument(t, m.wrist_angle, m.jaw_angle, m.jaw_velocity, t)
+        inputs.set_actuator(t, m.current, stamp=t)
+        inputs.set_force(t, m.grip_force, t)
+        out = ctrl.step(t, inputs)
+        effort = max(-limit, min(limit, loop.conversion.effort(out.current_command)))
+        if command == 'position':
+            psm.jaw_position(loop.command_setpoint(str(out.mode), effort, start,
+                                                   out.target_jaw_angle, params.jaw_angle_min,
+                                                   params.jaw_angle_max))
+        else:
+            psm.jaw_effort()
+        if teleop:
+            psm.arm_cartesian_position()     # servo_cp after our command, every period
+        psm.advance(sim, out.current_command, period)
+        if 2.0 <= t < 2.8:                    # the needle grasp's hold
+            held.append((out.target_force, sim.truth()['grip_force']))
+    return held, psm
+
+
+def test_offline_the_position_path_holds_the_needle_with_the_load_cell(params):
+    p = params.replace(force_sensor_enabled=True)
+    held, psm = _offline_grasp(p, 'position', teleop=True)
+    target = held[0][0]
+    assert target > 1.0
+    assert max(abs(f - target) for _, f in held) < 0.02 * target
+    assert psm.effort_entries == 0 and psm.largest_drift < 1e-9
+
+
+def test_the_setpoint_origin_low_passes_the_jaw_angle():
+    origin = SetpointOrigin(0.02)
+    assert origin.update(0.04, 0.0) == 0.04                          # the first sample
+    assert origin.update(0.05, 0.02) == pytest.approx(0.04 + 0.01 * (1 - math.exp(-1)))
+    assert origin.update(1.0, 0.02) == pytest.approx(0.04 + 0.01 * (1 - math.exp(-1)))   # no time
+
+
+def test_offline_the_effort_path_is_undone_by_teleoperation(params):
+    p = params.replace(force_sensor_enabled=True)
+    held, psm = _offline_grasp(p, 'effort', teleop=True)
+    target = held[0][0]
+    assert max(abs(f - target) for _, f in held) > 0.2 * target    # the grip is not held
+    assert psm.effort_entries > 300                                 # twice every period

@@ -35,6 +35,7 @@ same current. The current loop and the adapter friction are not modelled (docs/d
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -222,3 +223,36 @@ class JawPositionLoop:
             q = target_angle
             return lowest if q < lowest else (highest if q > highest else q)
         return self.setpoint(effort, angle, lowest, highest)
+
+
+#: Time constant of the low-pass on the measured jaw angle that the controller's grip setpoint
+#: starts from (s): the setpoint ``angle + E / K`` passes the jaw sensor's noise into the jaw
+#: effort times ``K``; over the grip's static jaw 20 ms takes most of it out.
+ORIGIN_TIME_CONSTANT = 0.02
+
+
+class SetpointOrigin:
+    """The measured jaw angle, low-passed: where the controller's grip setpoint starts from.
+
+    Parameters
+    ----------
+    time_constant : float
+        First-order time constant (s), > 0.
+    """
+
+    def __init__(self, time_constant: float = ORIGIN_TIME_CONSTANT):
+        if not time_constant > 0.0:
+            raise ValueError(f'time_constant must be > 0 s, got {time_constant!r}')
+        self.time_constant = float(time_constant)
+        self.angle = math.nan         # rad, the filtered angle (nan: no sample yet)
+        self._time = math.nan         # s, the time of the last sample
+
+    def update(self, angle: float, now: float) -> float:
+        """Take the jaw angle ``angle`` (rad) measured at ``now`` (s); return the filtered angle."""
+        if self.angle != self.angle or not now > self._time:
+            self.angle = float(angle) if self.angle != self.angle else self.angle
+        else:
+            share = 1.0 - math.exp(-(now - self._time) / self.time_constant)
+            self.angle += share * (angle - self.angle)
+        self._time = now
+        return self.angle
