@@ -50,6 +50,9 @@ JAW_FRAME = 'jaw'
 DVRK_ARM_JS = 'measured_js'             # the arm's joints by name, wrist_pitch among them
 DVRK_JAW_JS = 'jaw/measured_js'         # jaw: position (rad), velocity (rad/s), effort (N*m)
 DVRK_JAW_SERVO = 'jaw/servo_jf'         # jaw: effort = jaw effort command (N*m, positive opens)
+DVRK_JAW_SERVO_JP = 'jaw/servo_jp'      # jaw: position = jaw setpoint (rad), the PSM's position loop
+DVRK_SERVO_CP = 'servo_cp'              # geometry_msgs/PoseStamped: the arm's Cartesian setpoint
+DVRK_SERVO_JP = 'servo_jp'              # sensor_msgs/JointState: the arm's joint setpoints
 DVRK_GRIPPER_JS = 'gripper/measured_js'  # the master gripper: position (rad)
 DVRK_OPERATING_STATE = 'operating_state'  # crtk_msgs/OperatingState, topic and service
 DVRK_STATE_COMMAND = 'state_command'    # crtk_msgs/StringStamped: enable, disable, home, ...
@@ -81,10 +84,13 @@ class TopicSet:
     measured_force: str
     operating_state: str | None = None
     state_command: str | None = None
+    jaw_servo_jp: str | None = None
+    servo_cp: str | None = None
+    servo_jp: str | None = None
 
     def recorded(self) -> tuple[str, ...]:
         """Every topic a demo of this profile records (its rosbag2), /diagnostics last."""
-        extra = (self.operating_state,) if self.operating_state else ()
+        extra = tuple(t for t in (self.jaw_servo_jp, self.operating_state) if t)
         return (self.master_js, self.instrument_js, self.actuator_js, self.command,
                 self.estimated_force, self.estimate_band, self.target_force,
                 self.measured_force) + extra + (DIAGNOSTICS,)
@@ -132,7 +138,8 @@ def topic_set(interface: str = 'crtk', arm: str = 'PSM1', master: str = 'MTML') 
                         dvrk_topic(arm, ESTIMATED_FORCE), dvrk_topic(arm, ESTIMATE_BAND),
                         dvrk_topic(arm, TARGET_FORCE),
                         dvrk_topic(arm, MEASURED_FORCE), dvrk_topic(arm, DVRK_OPERATING_STATE),
-                        dvrk_topic(arm, DVRK_STATE_COMMAND))
+                        dvrk_topic(arm, DVRK_STATE_COMMAND), dvrk_topic(arm, DVRK_JAW_SERVO_JP),
+                        dvrk_topic(arm, DVRK_SERVO_CP), dvrk_topic(arm, DVRK_SERVO_JP))
     raise ValueError(f"unknown interface {interface!r}: 'crtk' or 'dvrk'")
 
 

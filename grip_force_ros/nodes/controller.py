@@ -384,7 +384,7 @@ class ControllerNode(LifecycleNode):
         entities.append(subscribe(JointState, names.actuator_js,
                                   functools.partial(on_state, io.read_actuator), STATE_SUB_QOS,
                                   raw=raw))
-        self._command_pub = self.create_publisher(JointState, names.command, STATE_PUB_QOS)
+        self._command_pub = self.create_publisher(JointState, io.command_topic, STATE_PUB_QOS)
         self._estimate_pub = self.create_publisher(WrenchStamped, names.estimated_force,
                                                    STATE_PUB_QOS)
         self._band_pub = self.create_publisher(WrenchStamped, names.estimate_band, STATE_PUB_QOS)

@@ -18,9 +18,13 @@ never call the node. Topics:
     ``<master>/gripper/measured_js`` (gripper), ``<arm>/measured_js`` (the wrist picked by
     name among the arm's joints), ``<arm>/jaw/measured_js`` (jaw: position, velocity, effort
     in N*m, turned into the motor current with the dVRK's own conversion,
-    :mod:`grip_force_ros.model.dvrk_jaw`): the step runs on it; command ``<arm>/jaw/servo_jf``
-    (jaw effort, N*m), sent only while ``<arm>/operating_state`` is ENABLED and homed (the
-    step is safe otherwise, with the reason); ``<arm>/state_command`` when asked to enable
+    :mod:`grip_force_ros.model.dvrk_jaw`): the step runs on it; command, by ``dvrk_command``,
+    ``<arm>/jaw/servo_jp`` (``position``, the default: the jaw setpoint, rad, whose PID
+    effort at the measured jaw angle is the step's current,
+    :class:`~grip_force_ros.model.dvrk_jaw.JawPositionLoop`; the arm stays in position mode)
+    or ``<arm>/jaw/servo_jf`` (``effort``: jaw effort, N*m; the whole arm goes to effort
+    mode, said once at start), sent only while ``<arm>/operating_state`` is ENABLED and homed
+    (the step is safe otherwise, with the reason); ``<arm>/state_command`` when asked to enable
     and home (``request_enable``); the grip force topics under ``<arm>/grip/``. The arm's
     operating-state channel (that subscription, its service client, a poll timer and the
     state_command publisher) is the profile's own: :meth:`DvrkControllerIO.attach` creates it
@@ -38,7 +42,7 @@ from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+from grip_force_ros.model.dvrk_jaw import JawEffortConversion, JawPositionLoop, SetpointOrigin
 from grip_force_ros.nodes.common import STATE_PUB_QOS, InputRejected, read_joints, stamp_seconds
 from grip_force_ros.nodes.dvrk_msgs import arm_interlock, crtk_msgs
 from grip_force_ros.nodes.wire import JointStateData, JointStateWriter, read_wrench
@@ -109,6 +113,7 @@ class ControllerIO:
 
     def __init__(self, params, names: topics.TopicSet):
         self.names = names
+        self.command_topic = names.command   # where the node publishes :meth:`command`'s message
         self.rejections: list[str] = []
         self.update_params(params)
         # Messages reused every step: fill, do not rebuild.
@@ -290,6 +295,14 @@ class DvrkControllerIO(ControllerIO):
         super().__init__(params, names)
         self.conversion = JawEffortConversion.from_params(params)
         self.effort_limit = params.dvrk_jaw_effort_max      # N*m
+        self.position = params.dvrk_command == 'position'
+        self.loop = JawPositionLoop.from_params(params)
+        self.setpoint_bounds = (params.jaw_angle_min, params.jaw_angle_max)   # rad: jaw.qmin, qmax
+        if self.position:
+            self.command_topic = names.jaw_servo_jp
+        self.origin = SetpointOrigin()   # the measured jaw angle, low-passed: the setpoint's origin
+        self.jaw = math.nan              # rad, its value at the last state
+        self.setpoint = math.nan         # rad, last jaw/servo_jp sent
         self.wrist = math.nan            # rad, last wrist pitch of <arm>/measured_js
         self.wrist_time = math.nan       # s, its receive time
         self.wrist_joint = None          # the name the arm uses for it
@@ -303,7 +316,8 @@ class DvrkControllerIO(ControllerIO):
         self._last_request = -math.inf   # perf_counter s of the last state_command sent
         self._state_future = None
         self._state_asked = -math.inf    # perf_counter s of the last operating_state request
-        self._servo_msg = JointState(name=[topics.JAW_JOINT], effort=[0.0])
+        self._servo_msg = (JointState(name=[topics.JAW_JOINT], position=[0.0]) if self.position
+                           else JointState(name=[topics.JAW_JOINT], effort=[0.0]))
         self._entities: list = []        # the arm channel (attach)
         self.alive = False               # the arm channel exists: its callbacks take events
         self._log = self._clock = self._state_client = self._command_pub = None
@@ -321,6 +335,13 @@ class DvrkControllerIO(ControllerIO):
                                   STATE_PUB_QOS),
             node.create_timer(ARM_POLL_PERIOD, self._live(self._poll))]
         self._state_client, self._command_pub = self._entities[1], self._entities[2]
+        if not self.position:
+            self._log.warning(
+                f'dvrk_command effort: {self.names.command} puts the whole arm {self.arm} in '
+                'Cartesian effort mode (its joints commanded zero effort, no longer held), and '
+                'any position command (teleoperation servo_cp) sets the jaw effort back to 0: '
+                'only for an arm that is not teleoperated (dvrk_command position uses '
+                f'{self.names.jaw_servo_jp})')
         if self._request_at_start:
             self.request_enable()
 
@@ -378,6 +399,7 @@ class DvrkControllerIO(ControllerIO):
             return None
         header = msg.header.stamp
         stamp = stamp_seconds(header)
+        self.jaw = self.origin.update(jaw[0], now)
         age = now - self.wrist_time
         if age <= self.wrist_timeout:
             why = inputs.set_instrument(now, self.wrist, jaw[0], jaw[2] if len(jaw) > 2 else 0.0,
@@ -462,15 +484,34 @@ class DvrkControllerIO(ControllerIO):
 
     # ------------------------------------------------------------------ outputs
     def command(self, out, stamp_ns: int):
-        """Return the jaw effort (N*m) for ``<arm>/jaw/servo_jf``; None while the arm is not ready."""
+        """Return the step's jaw command; None while the arm is not ready.
+
+        ``position``: the ``<arm>/jaw/servo_jp`` setpoint (rad): in free motion the jaw's
+        target angle; in grip and safe the setpoint at which the PSM's jaw loop gives, at the
+        measured jaw angle (low-passed, :class:`~grip_force_ros.model.dvrk_jaw.SetpointOrigin`),
+        the jaw effort of the step's current (so a current ramping to 0 brings the setpoint to
+        the measured angle, without a jump); bounded by
+        ``jaw_angle_min`` / ``jaw_angle_max`` (the tool's qmin, qmax;
+        :meth:`~grip_force_ros.model.dvrk_jaw.JawPositionLoop.command_setpoint`). ``effort``: the jaw
+        effort (N*m) for ``<arm>/jaw/servo_jf``.
+        """
         if self.interlock() is not None:
-            self.withheld += 1          # a disabled arm gets nothing (servo_jf takes over the jaw)
+            self.withheld += 1          # a disabled arm gets nothing (a command takes over the jaw)
             return None
         effort = self.conversion.effort(out.current_command)
         limit = self.effort_limit       # the current limit already keeps it inside; rounding
+        effort = limit if effort > limit else (-limit if effort < -limit else effort)
         servo = self._servo_msg
         servo.header.stamp.sec, servo.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
-        servo.effort[0] = limit if effort > limit else (-limit if effort < -limit else effort)
+        if not self.position:
+            servo.effort[0] = effort
+            return servo
+        if self.jaw != self.jaw:
+            self.withheld += 1          # no jaw angle yet: no setpoint to start from
+            return None
+        self.setpoint = self.loop.command_setpoint(str(out.mode), effort, self.jaw,
+                                                   out.target_jaw_angle, *self.setpoint_bounds)
+        servo.position[0] = self.setpoint
         return servo
 
     def status(self) -> dict[str, str]:
@@ -479,6 +520,10 @@ class DvrkControllerIO(ControllerIO):
                 'arm_state': self.state or 'unknown', 'arm_homed': str(self.is_homed).lower(),
                 'arm_busy': str(self.is_busy).lower(),
                 'wrist_joint': self.wrist_joint or 'none yet',
+                'dvrk_command': 'position' if self.position else 'effort',
+                'command_topic': self.command_topic,
+                'jaw_setpoint_rad': f'{self.setpoint:.5f}' if self.setpoint == self.setpoint
+                else 'none',
                 'commands_withheld': str(self.withheld),
                 'enable_requested': str(self.requested).lower()}
 

@@ -40,12 +40,12 @@ the instrument file; the controller is not told). A malformed command
 """
 from __future__ import annotations
 
+import functools
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 from rclpy.task import Future
-from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
 from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_SUB_QOS
@@ -98,8 +98,9 @@ class SimInstrumentNode(Node):
         except ValueError:
             self.destroy_node()            # refuse to start: leave nothing in the ROS graph
             raise
-        self.create_subscription(JointState, self.io.names.command, self._on_command,
-                                 STATE_SUB_QOS, raw=self.io.raw_command)
+        for msg_type, topic, raw, read in self.io.command_readers():
+            self.create_subscription(msg_type, topic, functools.partial(self._on_command, read),
+                                     STATE_SUB_QOS, raw=raw)
         self.io.attach(self)               # the sensor publishers (dvrk: the arm's channel)
         self._last = time.monotonic()
         self._started = self._last
@@ -121,10 +122,10 @@ class SimInstrumentNode(Node):
         return time.monotonic()
 
     # ------------------------------------------------------------------ input
-    def _on_command(self, data) -> None:
-        """Take a command message (the profile converts it): hold its current, or refuse it."""
+    def _on_command(self, read, data) -> None:
+        """Take a command message (the profile's ``read`` converts it): hold its current, or refuse it."""
         try:
-            current, stamp_ns = self.io.read_command(data)
+            current, stamp_ns = read(data)
         except CommandRefused as exc:
             self.refuse(str(exc), exc.stamp_ns)
             return
@@ -175,7 +176,7 @@ class SimInstrumentNode(Node):
         self.io.update(now)
         if not self.io.powered():        # dvrk: a disabled arm's drives carry no current
             self.current_command = 0.0
-        self.sim.step(self.current_command, dt)
+        self.io.step(self.sim, self.current_command, dt)
         stamp = self.get_clock().now()
         self.io.publish_state(self.sim.measure(), stamp.nanoseconds)
         self.loop.state_published(stamp.nanoseconds)
@@ -191,7 +192,7 @@ class SimInstrumentNode(Node):
             return
         dt = min(now - self._last, self._max_step)
         if dt > 0.0:
-            self.sim.step(self.current_command, dt)
+            self.io.step(self.sim, self.current_command, dt)
             self._last = now
         self._cut()
 
@@ -212,8 +213,10 @@ class SimInstrumentNode(Node):
         if self._starved and time.monotonic() - self._starved[0] <= self.drive.last_silence:
             starved = (f'; this process was not scheduled for {self._starved[1] * 1e3:.1f} ms '
                        'before the check')
-        held, live = self.current_command, self.current_command != 0.0
+        held = self.io.drive_current(self.current_command)
+        live = held != 0.0
         self.current_command = 0.0       # the cut first, then the words
+        self.io.cut()                    # dvrk: the jaw's position loop stops too
         if live:
             self.live_cuts += 1
         loop_log(self).put(
@@ -238,7 +241,7 @@ class SimInstrumentNode(Node):
                 'object': self.sim.obj,
                 'sim_time_s': f'{self.sim.t:.3f}',
                 'real_time_factor': f'{self.sim.t / wall:.3f}' if wall > 0 else 'n/a',
-                'current_command_A': f'{self.current_command:.4f}',
+                'current_command_A': f'{self.io.drive_current(self.current_command):.4f}',
                 'commands_accepted': str(self.commands),
                 'commands_rejected': str(self.rejected),
                 'last_rejection': self.last_rejection or 'none',

@@ -26,23 +26,30 @@ publishes the sensors:
     ``<arm>/operating_state`` (crtk_msgs/OperatingState: published on every change and in
     answer to every state command, and a service of the same name) driven by
     ``<arm>/state_command`` (crtk_msgs/StringStamped: enable, disable, pause, resume, home,
-    unhome; :class:`grip_force_ros.sim.drive.ArmState`).
+    unhome; :class:`grip_force_ros.sim.drive.ArmState`). The arm's control space and mode
+    as the dVRK keeps them (:class:`grip_force_ros.sim.psm.PsmControl`, reported on
+    /diagnostics): ``<arm>/jaw/servo_jf`` puts the whole arm in Cartesian effort mode (its
+    joints drift, said once in the log); ``<arm>/jaw/servo_jp`` (jaw position, rad),
+    ``<arm>/servo_cp`` (geometry_msgs/PoseStamped) and ``<arm>/servo_jp`` (the arm's joints)
+    put it in position mode (the jaw effort reset to 0); in position mode the jaw follows its
+    setpoint through the disc PIDs at 1.5 kHz inside the step.
 """
 from __future__ import annotations
 
 import time
 
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from grip_force_ros import topics
-from grip_force_ros.model.dvrk_jaw import JawEffortConversion
+from grip_force_ros.model.dvrk_jaw import JawEffortConversion, JawPositionLoop
 from grip_force_ros.nodes.common import STATE_PUB_QOS, STATE_SUB_QOS, InputRejected, read_joints, \
     stamp_nanoseconds
 from grip_force_ros.nodes.dvrk_msgs import crtk_msgs
 from grip_force_ros.nodes.wire import JointStateData, JointStateWriter, WrenchWriter
 from grip_force_ros.sim.drive import ArmState
+from grip_force_ros.sim.psm import ARM_JOINTS, PsmControl
 
 _COMMAND_JOINTS = (topics.DRUM_JOINT,)
 #: The crtk state's joints: the wrist and the jaw, then the drum (combined: one message).
@@ -109,9 +116,28 @@ class SimIO:
         """
         raise NotImplementedError
 
+    def command_readers(self):
+        """Return ``(msg_type, topic, raw, read)`` of each jaw command topic the node takes.
+
+        ``read(msg)`` returns ``(current, stamp_ns)`` (the current to hold, A) or raises
+        :class:`CommandRefused`; every accepted one re-arms the drive's command timeout.
+        """
+        return [(JointState, self.names.command, self.raw_command, self.read_command)]
+
     def powered(self) -> bool:
         """Tell whether the drive may carry a current (the dVRK arm: ENABLED)."""
         return True
+
+    def step(self, plant, current: float, dt: float) -> None:
+        """Advance ``plant`` by ``dt`` (s) with the held ``current`` (A)."""
+        plant.step(current, dt)
+
+    def cut(self) -> None:
+        """The drive's command timeout cut the current (the node already holds 0 A)."""
+
+    def drive_current(self, current: float) -> float:
+        """Return the current command (A) the drive follows now, given the held ``current``."""
+        return current
 
     def update(self, now: float) -> None:
         """Advance the profile's own state to ``now`` (s)."""
@@ -210,6 +236,10 @@ class DvrkSimIO(SimIO):
         self.effort_limit = params.dvrk_jaw_effort_max       # N*m
         self.refused_not_ready = 0       # servo_jf while not ENABLED and homed
         self.refused_effort = 0          # servo_jf beyond the effort limit
+        self.refused_position = 0        # jaw/servo_jp, servo_cp, servo_jp while not ready
+        self.psm = PsmControl(JawPositionLoop.from_params(params), params.jaw_angle_min,
+                              params.jaw_angle_max)
+        self._arm_index = [topics.DVRK_PSM_JOINTS.index(j) for j in ARM_JOINTS]
         self.state_commands = 0
         self._clock = self._state_pub = self._arm_pub = self._jaw_pub = None
         self._arm_msg = JointState(name=list(topics.DVRK_PSM_JOINTS),
@@ -232,6 +262,8 @@ class DvrkSimIO(SimIO):
                             self._on_state_request)
         self._arm_pub = node.create_publisher(JointState, names.instrument_js, STATE_PUB_QOS)
         self._jaw_pub = node.create_publisher(JointState, names.actuator_js, STATE_PUB_QOS)
+        node.create_subscription(PoseStamped, names.servo_cp, self._on_servo_cp, STATE_SUB_QOS)
+        node.create_subscription(JointState, names.servo_jp, self._on_servo_jp, STATE_SUB_QOS)
         self.publish_operating_state()
 
     # ------------------------------------------------------------------ the arm
@@ -271,6 +303,11 @@ class DvrkSimIO(SimIO):
     def update(self, now: float) -> None:
         """Complete a homing in progress; publish the operating state when it changed."""
         self.arm.update(now)
+        if self.arm.ready and self.psm.mode == 'UNDEFINED_MODE':
+            self.psm.homed()             # homed: joint position mode, the arm held
+        notice = self.psm.take_notice()
+        if notice:
+            self._log.warning(f'{self.arm_name}: {notice}')
         if self.arm.key() != self._published_state:
             self._log.info(f'{self.arm_name}: {self.arm.state}, '
                            f'{"homed" if self.arm.is_homed else "not homed"}')
@@ -302,7 +339,75 @@ class DvrkSimIO(SimIO):
             raise CommandRefused(f'servo_jf refused: jaw effort {effort:.4f} N*m beyond the tool '
                                  f'limit +-{self.effort_limit:g} N*m (a current in A on the '
                                  'effort topic?)', stamp)
+        self.psm.jaw_effort()
         return self.conversion.current(effort), stamp
+
+    def command_readers(self):
+        """The jaw's two command topics: ``jaw/servo_jf`` (effort) and ``jaw/servo_jp`` (position)."""
+        return [(JointState, self.names.command, False, self.read_command),
+                (JointState, self.names.jaw_servo_jp, False, self.read_jaw_position)]
+
+    def _not_ready(self, what: str) -> str | None:
+        if self.arm.ready:
+            return None
+        self.refused_position += 1
+        return (f'{what} refused: arm {self.arm_name} is {self.arm.state}'
+                f'{"" if self.arm.is_homed else ", not homed"}'
+                f'{", busy homing" if self.arm.is_busy else ""}')
+
+    def read_jaw_position(self, msg: JointState):
+        """Take a ``<arm>/jaw/servo_jp``: the jaw's setpoint (rad), the arm in position mode.
+
+        Returns ``(0.0, stamp_ns)``: the held jaw effort is 0 (the PID drives the jaw).
+
+        Raises
+        ------
+        CommandRefused
+            Malformed, or the arm not ENABLED and homed.
+        """
+        stamp = stamp_nanoseconds(msg.header.stamp)
+        if not msg.name and len(msg.position) == 1:   # the dVRK's own client names no joint
+            msg = JointState(header=msg.header, name=[topics.JAW_JOINT],
+                             position=list(msg.position))
+        try:
+            (setpoint,), = read_joints(msg, _JAW_JOINTS, ('position',)).values()
+        except InputRejected as exc:
+            raise CommandRefused(f'rejected jaw setpoint: {exc}', stamp) from None
+        why = self._not_ready('jaw/servo_jp')
+        if why is not None:
+            raise CommandRefused(why, stamp)
+        self.psm.jaw_position(setpoint)
+        return 0.0, stamp
+
+    def _on_servo_cp(self, msg) -> None:
+        why = self._not_ready('servo_cp')
+        if why is not None:
+            self._log.warning(why, throttle_duration_sec=1.0)
+            return
+        self.psm.arm_cartesian_position()
+
+    def _on_servo_jp(self, msg: JointState) -> None:
+        why = self._not_ready('servo_jp')
+        if why is None and not all(q == q for q in msg.position):
+            why = 'servo_jp refused: a position is not finite'
+        if why is not None:
+            self._log.warning(why, throttle_duration_sec=1.0)
+            return
+        self.psm.arm_joint_position(list(msg.position))
+
+    def step(self, plant, current: float, dt: float) -> None:
+        """Advance the plant and the arm's joints by ``dt`` (s) in the arm's control mode."""
+        self.psm.advance(plant, current, dt, self.powered())
+
+    def cut(self) -> None:
+        """The command timeout: the jaw's position loop stops too (0 A) until the next command."""
+        self.psm.cut()
+
+    def drive_current(self, current: float) -> float:
+        """The held effort's current in effort mode, the jaw PID's output in position mode (A)."""
+        if not self.powered():
+            return 0.0
+        return current if self.psm.effort_mode else self.psm.pid_current
 
     # ------------------------------------------------------------------ sensors
     def publish_state(self, m, stamp_ns: int) -> None:
@@ -311,6 +416,8 @@ class DvrkSimIO(SimIO):
         arm = self._arm_msg
         arm.header.stamp = stamp
         arm.position[self._wrist_index] = m.wrist_angle
+        for i, q in zip(self._arm_index, self.psm.joints):
+            arm.position[i] = q
         self._arm_pub.publish(arm)
         force = self._force_msg
         force.header.stamp = stamp
@@ -329,7 +436,8 @@ class DvrkSimIO(SimIO):
                 'arm_homed': str(homed).lower(), 'arm_busy': str(busy).lower(),
                 'servo_jf_refused_not_ready': str(self.refused_not_ready),
                 'servo_jf_refused_effort_limit': str(self.refused_effort),
-                'state_commands': str(self.state_commands)}
+                'position_commands_refused_not_ready': str(self.refused_position),
+                'state_commands': str(self.state_commands), **self.psm.status()}
 
 
 def sim_io(params) -> SimIO:

@@ -135,6 +135,20 @@ INSTRUMENT = [
        'actuator torque, 1/(K_t*gear)). Default: the Classic PSM, 1/(0.0438 N*m/A * 11.71) = '
        '1.949705 (sawIntuitiveResearchKit @ 95a7e92, share/jhu-dVRK/sawRobotIO1394-PSM1-28007.xml).',
        min=0.01, max=100.0, read_only=True),
+    # --- the dVRK's jaw position loop (model/dvrk_jaw.py JawPositionLoop, docs/dvrk.md) -------
+    _P('dvrk_disc_p_gain', 'double', 6.0, 'N*m/rad',
+       "Proportional gain of the PSM's tool-disc PIDs (per disc, actuator space): the jaw's "
+       'stiffness in position mode is p / (2 c^2). Default: sawIntuitiveResearchKit '
+       'share/pid/sawControllersPID-PSM.json, disc_1..disc_4 p_gain 6.0.',
+       min=1e-3, max=1000.0, read_only=True),
+    _P('dvrk_disc_d_gain', 'double', 0.09, 'N*m*s/rad',
+       "Derivative gain of the PSM's tool-disc PIDs (per disc): the jaw's damping in position "
+       'mode is d / (2 c^2). Default: share/pid/sawControllersPID-PSM.json, d_gain 0.09.',
+       min=0.0, max=100.0, read_only=True),
+    _P('dvrk_actuator_max_current', 'double', 0.670, 'A',
+       "The drive's current limit of one jaw disc motor (sawRobotIO1394 MaxCurrent). Default: "
+       'the Classic PSM, 0.670 A (share/jhu-dVRK/sawRobotIO1394-PSM1-28007.xml, actuators 3..6).',
+       min=1e-3, max=20.0, read_only=True),
 ]
 
 LIMITS = [

@@ -283,6 +283,25 @@ class InstrumentSim:
         self._lambda = self._efficiency(self._tension_drum)
         self._measurement = None
 
+    def jaw_angle_now(self) -> float:
+        """Return the jaw angle (rad) now, noise-free: what the sim's jaw sensor reads."""
+        return self._phi
+
+    def jaw_state(self) -> tuple[float, float]:
+        """Return the jaw angle (rad) and rate (rad/s) the drum's encoder gives, noise-free.
+
+        The jaw as a drive sees it from the motor side (the dVRK's disc encoders): the drum
+        angle through the drum and drive pulley radii and the wrist coupling,
+        ``c w - r0 theta0 / r_n`` (the true jaw angle at no cable stretch). A loop closed on it
+        is collocated with the motor, as the dVRK's disc PIDs are.
+        """
+        k = self._r0 / self._rn
+        return self._coupling * self._wrist - k * self._theta0, -k * self._w0
+
+    def drum_constants(self) -> tuple[float, float, float]:
+        """Return the drum's inertia (kg*m^2), its torque per A (N*m/A) and ``r0 / r_n`` (-)."""
+        return self._j0, self._gear_k, self._r0 / self._rn
+
     def set_wrist_angle(self, wrist_angle: float) -> None:
         """Set the wrist pitch (rad). The wrist is kinematic: it moves the jaw through the coupling.
 
