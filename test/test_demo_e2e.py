@@ -178,13 +178,13 @@ def test_demo_through_the_dvrk_interface(tmp_path):
     with AnyReader([out / 'bag']) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
     names = topics.topic_set('dvrk', 'PSM1', 'MTML')
-    # the controller's default dvrk_command is position: jaw/servo_jp, no jaw/servo_jf
+    # the controller's default dvrk_command is effort: jaw/servo_jf, no jaw/servo_jp
     want = {'/' + t.lstrip('/') for t in names.recorded()
-            if t not in (names.operating_state, names.command)}
+            if t not in (names.operating_state, names.jaw_servo_jp)}
     assert set(counts) == want, counts
     # the dVRK's 100 Hz over a 4 s task (plus start-up and tail)
     assert 350 < counts['/PSM1/jaw/measured_js'] < 2000, counts
-    assert counts['/PSM1/jaw/servo_jp'] > 300, counts
+    assert counts['/PSM1/jaw/servo_jf'] > 300, counts
     # at 100 Hz a loaded machine does not starve the loop: no retry may be spoiled three times
     assert not result['problems'], result['problems']
     m = result['metrics']

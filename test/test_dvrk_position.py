@@ -182,9 +182,9 @@ def test_the_controller_setpoint_tracks_in_free_motion_and_squeezes_in_grip(para
     assert loop.command_setpoint('grip', -10.0, 0.04, 0.04, lo, hi) == lo
 
 
-def test_dvrk_command_is_position_by_default_and_checked(params):
+def test_dvrk_command_is_effort_by_default_and_checked(params):
     from grip_force_ros.params import ParameterError, make_params
-    assert make_params({}).dvrk_command == 'position'
+    assert make_params({}).dvrk_command == 'effort'
     assert params.replace(dvrk_command='effort').dvrk_command == 'effort'
     with pytest.raises(ParameterError):
         params.replace(dvrk_command='torque')

@@ -45,12 +45,13 @@ INTERFACE = [
 
 #: The controller's part of the dvrk profile (declared by the controller only).
 DVRK_CONTROLLER = [
-    _P('dvrk_command', 'string', 'position', '',
-       "dvrk profile: how the controller drives the jaw. 'position' (the default): "
-       '<arm>/jaw/servo_jp setpoints through the PSM\'s jaw position loop, the arm stays in '
-       "position mode (teleoperation streams servo_cp beside it). 'effort': <arm>/jaw/servo_jf, "
-       'which puts the whole arm in Cartesian effort mode (its joints no longer held): for an '
-       'arm that is not teleoperated (docs/dvrk.md).',
+    _P('dvrk_command', 'string', 'effort', '',
+       "dvrk profile: how the controller drives the jaw. 'position': <arm>/jaw/servo_jp "
+       "setpoints through the PSM's jaw position loop, the arm stays in position mode "
+       "(teleoperation streams servo_cp beside it; with a load cell only for now). 'effort' "
+       '(the default until the position path holds sensorless): <arm>/jaw/servo_jf, which puts '
+       'the whole arm in Cartesian effort mode (its joints no longer held): for an arm that is '
+       'not teleoperated (docs/dvrk.md).',
        choices=('position', 'effort'), read_only=True, group='controller'),
     _P('request_enable', 'bool', False, '',
        'dvrk profile: ask the arm to enable and home (state_command "enable", then "home") when '
