@@ -14,8 +14,8 @@
 #     VENV/ros/install, with a generated rclcpp stub (its CMakeLists asks for rclcpp, which
 #     messages do not need and which has no wheel);
 #   - control_msgs (GripperCommand, ParallelGripperCommand; unless importable already):
-#     colcon, into VENV/ros/install, the way crtk_msgs is built (several minutes on
-#     two cores: its stamp keeps it until its sources or the pins change);
+#     cmake with the ament/rosidl wheels, as crtk_msgs, into VENV's prefix (several
+#     minutes on two cores: its stamp keeps it until its sources or the pins change);
 #   - the CRTK and dVRK Python clients (crtk, dvrk): pip install --no-deps, with PyKDL from
 #     Debian's python3-pykdl + liborocos-kdl1.5 unpacked into VENV/ros/pykdl;
 #   - this package: colcon build --symlink-install into VENV/ros/install, so that
@@ -156,19 +156,27 @@ else
   step crtk_msgs "$(tree_key "$vendor/crtk_msgs")-$pins_key" crtk_msgs
 fi
 
-# 4b. control_msgs (the grippers' actions), likewise unless the environment has it.
+# 4b. control_msgs (the grippers' actions), likewise unless the environment has it: with
+#     the same ament_cmake + rosidl wheels, installed into the venv's prefix (as
+#     composition_interfaces), so that the venv's Python imports it without sourcing
+#     anything (the controller's in-process tests, `.venv/bin/python -c 'import control_msgs'`).
 control_msgs_source=built
 control_msgs() {
-  copy_src control_msgs ws/control_msgs
-  colcon_build --base-paths "$ros/src/ws/control_msgs" --packages-select control_msgs \
-    --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$py"
+  copy_src control_msgs control_msgs
+  local b=$ros/build/control_msgs
+  rm -rf "$b" && mkdir -p "$b"
+  cmake -S "$ros/src/control_msgs/control_msgs" -B "$b" -DCMAKE_INSTALL_PREFIX="$venv" \
+    -DCMAKE_PREFIX_PATH="$venv" -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$py"
+  cmake --build "$b" -j 2
+  cmake --install "$b"
 }
+control_msgs_key="$(tree_key "$vendor/control_msgs")-$pins_key"
 if env -u PYTHONPATH "$py" -c 'import control_msgs.action' 2>/dev/null \
-    && [ ! -d "$ros/install/control_msgs" ]; then
+    && [ ! -f "$ros/build/control_msgs/install_manifest.txt" ]; then
   control_msgs_source=environment
   say "control_msgs is importable already: not built"
 else
-  step control_msgs "$(tree_key "$vendor/control_msgs")-$pins_key" control_msgs
+  step control_msgs "$control_msgs_key" control_msgs
 fi
 
 wait "$python_tools_pid" || exit 1
@@ -221,8 +229,8 @@ case ":\${PYTHONPATH:-}:" in *":$pykdl_py:"*) ;; *)
   export PYTHONPATH=$pykdl_py\${PYTHONPATH:+:\$PYTHONPATH} ;; esac
 case ":\${LD_LIBRARY_PATH:-}:" in *":$pykdl_lib:"*) ;; *)
   export LD_LIBRARY_PATH=$pykdl_lib:$venv/lib\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH} ;; esac
-# colcon's workspace: grip_force_ros (and crtk_msgs, control_msgs when built here: their
-# typesupport libraries go on LD_LIBRARY_PATH, which PYTHONPATH alone would not do).
+# colcon's workspace: grip_force_ros (and crtk_msgs when built here: its typesupport
+# libraries go on LD_LIBRARY_PATH, which PYTHONPATH alone would not do).
 . "$ros/install/setup.bash"
 EOF
 echo "ok: crtk_msgs $crtk_msgs_source, control_msgs $control_msgs_source; setup file $setup_file" > "$status"
