@@ -15,6 +15,7 @@ ROSDEP_KEYS = {
     'rclpy': 'rclpy',
     'crtk_msgs': 'crtk_msgs',           # the dvrk interface profile (imported lazily)
     'control_msgs': 'control_msgs',     # the controller's grasp actions (imported lazily)
+    'action_msgs': 'action_msgs',       # test/test_grip_action.py: GoalStatus
     'builtin_interfaces': 'builtin_interfaces',
     'rcl_interfaces': 'rcl_interfaces',
     'sensor_msgs': 'sensor_msgs',

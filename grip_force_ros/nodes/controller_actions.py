@@ -86,7 +86,7 @@ class ControllerActions:
     def __init__(self, node):
         self.node = node
         self.current: _Goal | None = None   # the goal that runs (not yet answered)
-        self._accepted: dict = {}           # goal handle -> _Goal, until its execute runs
+        self._accepted: dict = {}           # goal id (bytes) -> _Goal, until its execute runs
         self.last_refusal = 'none'
         self.last_outcome = 'none'
         self._next_feedback_ns = 0
@@ -158,7 +158,7 @@ class ControllerActions:
         if previous is not None:
             previous.grasp.abort('preempted by a newer goal')
             self._finish(previous)
-        self._accepted[handle] = entry
+        self._accepted[bytes(handle.goal_id.uuid)] = entry
         if why is not None:             # the node left the active state in between
             grasp.abort(why)
         else:
@@ -174,7 +174,7 @@ class ControllerActions:
         return CancelResponse.ACCEPT
 
     async def _execute(self, handle):
-        entry = self._accepted.pop(handle, None)
+        entry = self._accepted.pop(bytes(handle.goal_id.uuid), None)
         if entry is None:               # not ours (cannot happen): abort
             handle.abort()
             return self.types[0].Result()
@@ -237,9 +237,12 @@ class ControllerActions:
                 handle.abort()
         self.last_outcome = f'{entry.kind} {outcome}'
         log = self.node.get_logger()
-        (log.info if outcome == 'succeeded' or outcome == 'canceled' else log.warning)(
-            f'{entry.kind} goal {outcome} (jaw {self._jaw():.3f} rad, force '
-            f'{self._force(out):.3f} N)')
+        text = (f'{entry.kind} goal {outcome} (jaw {self._jaw():.3f} rad, force '
+                f'{self._force(out):.3f} N)')
+        if outcome in ('succeeded', 'canceled'):     # one severity per call site (rclpy)
+            log.info(text)
+        else:
+            log.warning(text)
         entry.result = result
         entry.finished.set_result(result)
 
@@ -268,8 +271,9 @@ class ControllerActions:
             msg.state.position = [jaw]
             msg.state.velocity = [velocity if velocity == velocity else 0.0]
             msg.state.effort = [force]
-        msg.stalled = grasp.stalled
-        msg.reached_goal = grasp.reached_goal
+        if entry.kind == _GRIPPER or not feedback:   # the parallel feedback has only the state
+            msg.stalled = grasp.stalled
+            msg.reached_goal = grasp.reached_goal
         return msg
 
     def status(self) -> dict[str, str]:
