@@ -314,7 +314,9 @@ class ControllerNode(LifecycleNode):
         deadlock (eProsima/Fast-DDS#6502: ``unregister_timer`` against
         ``check_remote_participant_liveliness``): the whole test process hung.
         """
-        self.actions.destroy()
+        actions = getattr(self, 'actions', None)   # None: construction failed before them
+        if actions is not None:
+            actions.destroy()
         super().destroy_node()
         self._state_machine.destroy_when_not_in_use()
 
