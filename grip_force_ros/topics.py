@@ -36,6 +36,9 @@ DIAGNOSTICS = '/diagnostics'
 SET_OBJECT_SRV = '~/set_object'     # rcl_interfaces/srv/SetParameters: object_kind
 TARE_SRV = '~/tare'                 # std_srvs/srv/Trigger
 CALIBRATE_SRV = '~/calibrate'       # std_srvs/srv/Trigger
+#: The controller's grasp actions (control_msgs; dvrk: under the arm, as its grip topics):
+GRIP_COMMAND_ACTION = 'grip_command'                     # control_msgs/action/GripperCommand
+PARALLEL_GRIP_COMMAND_ACTION = 'parallel_grip_command'   # .../ParallelGripperCommand
 
 MASTER_JOINT = 'gripper'
 WRIST_JOINT = 'wrist_pitch'
@@ -99,6 +102,12 @@ class TopicSet:
 def dvrk_topic(device: str, name: str) -> str:
     """Return the dVRK topic ``name`` of ``device`` (an arm or a master): 'PSM1/jaw/measured_js'."""
     return f'{device}/{name}'
+
+
+def action_names(interface: str = 'crtk', arm: str = 'PSM1') -> tuple[str, str]:
+    """Return the controller's grasp actions (GripperCommand, ParallelGripperCommand) of a profile."""
+    names = (GRIP_COMMAND_ACTION, PARALLEL_GRIP_COMMAND_ACTION)
+    return names if interface == 'crtk' else tuple(dvrk_topic(arm, n) for n in names)
 
 
 #: Prefix of every /diagnostics status name of this package's nodes.

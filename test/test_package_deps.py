@@ -14,6 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 ROSDEP_KEYS = {
     'rclpy': 'rclpy',
     'crtk_msgs': 'crtk_msgs',           # the dvrk interface profile (imported lazily)
+    'control_msgs': 'control_msgs',     # the controller's grasp actions (imported lazily)
+    'action_msgs': 'action_msgs',       # test/test_grip_action.py: GoalStatus
     'builtin_interfaces': 'builtin_interfaces',
     'rcl_interfaces': 'rcl_interfaces',
     'sensor_msgs': 'sensor_msgs',
@@ -42,6 +44,7 @@ NOT_IMPORTED = {
     'python3-pytest-timeout': "pytest.ini's --timeout",
     'python3-colcon-common-extensions': 'test/test_colcon_build.py runs colcon',
     'ros2launch': 'the `ros2 launch` verb of launch/*.launch.py',
+    'ros2action': 'the `ros2 action` verb of test/test_grip_action.py',
 }
 RUNTIME_TAGS = ('depend', 'exec_depend')
 TEST_TAGS = RUNTIME_TAGS + ('test_depend',)

@@ -39,6 +39,11 @@ Public API (stable; the rclpy node in ``nodes/controller.py`` wires it)::
                              # the band ('estimate': 'held in stick, band 0.412 N', ...)
     ctrl.update_params(new_params)  # runtime change (validated ParamSet), bumpless; the node
                                     # refuses read-only parameters first (ParamSpec.read_only)
+    # a grasp goal (control/grasp.py; the node's GripperCommand actions) commands instead of
+    # the master until it ends; the master resumes bumplessly:
+    ctrl.start_goal(GraspGoal(position, force, params, force_rate=..., contact_confirm_time=...))
+    ctrl.commander           # 'master' or 'action (<goal state>)'
+    ctrl.end_goal()
 
 Sources are ``'master'``, ``'instrument'``, ``'actuator'`` and ``'force'`` (the last one
 only required when ``force_sensor_enabled``).

@@ -144,6 +144,10 @@ class GripController:
         if friction is not None and friction.active:
             from grip_force_ros.model.jaw_friction import FrictionState
             self.friction_state = FrictionState(friction.width)
+        #: the grasp goal that commands the jaw instead of the master (control/grasp.py), or
+        #: None: the master commands (set by start_goal, ended by end_goal or the safe state)
+        self.goal = None
+        self._handover = False          # the commander changed: the next step is bumpless
         self._configure(params)
         self.command = 0.0              # A, last output
         self.mode = _SAFE               # starts safe until every input has arrived
@@ -194,6 +198,10 @@ class GripController:
                                 self.timeouts[src])
                                for src in SOURCES
                                if src != 'force' or self.use_sensor)
+        #: a grasp goal commands: the master is not needed (autonomy runs with no master)
+        self._required_goal = tuple(r for r in self._required if r[0] != 'master')
+        self.master_timeout = self.timeouts['master']                 # s
+        self.max_grip_force = float(params.max_grip_force)            # N, a goal's cap
         self.pull_out_per_force = (PULL_OUT_PER_MU * params.needle_friction_coefficient
                                    if params.object_kind == 'needle' else 0.0)
         self.force_map = ForceMap.from_params(params)
@@ -235,7 +243,7 @@ class GripController:
                'periods_with_limit_hit': str(self.limit_steps),
                'consecutive_safe_periods': str(self.safe_steps),
                'reasons': '; '.join(self.last_reasons) or 'ok',
-               'object_kind': self.object_kind,
+               'object_kind': self.object_kind, 'commander': self.commander,
                'feedback': 'force sensor' if self.use_sensor else 'model estimate',
                **self._gain_status}
         out.update(self.band_status())
@@ -280,6 +288,32 @@ class GripController:
         return {'estimate': state, 'estimate_band_N': f'{width:.3f}',
                 'estimate_band_low_N': f'{low:.3f}', 'estimate_band_high_N': f'{high:.3f}'}
 
+    # ------------------------------------------------------------------ who commands
+    @property
+    def commander(self) -> str:
+        """Who commands the jaw: 'master', or 'action' (a grasp goal, with its state)."""
+        goal = self.goal
+        return 'master' if goal is None else f'action ({goal.state})'
+
+    def start_goal(self, goal) -> None:
+        """Let the grasp goal ``goal`` (:class:`~grip_force_ros.control.grasp.GraspGoal`) command.
+
+        It takes over from the master (or preempts the previous goal, aborted with the reason)
+        at the next step, bumplessly: the current continues from its last value.
+        """
+        previous = self.goal
+        if previous is not None and previous is not goal:
+            previous.abort('preempted by a newer goal')
+        self.goal = goal
+        self._handover = True
+
+    def end_goal(self) -> None:
+        """Hand the jaw back to the master, bumplessly (the force target ramps from the present force)."""
+        if self.goal is not None:
+            self.goal = None
+            self.force_map.reset()
+            self._handover = True
+
     def new_inputs(self) -> ControlInputs:
         """Return an empty :class:`ControlInputs` with this instrument's plausibility ranges."""
         return ControlInputs.from_params(self.params)
@@ -291,7 +325,8 @@ class GripController:
             return (f'controller clock {now!r} not finite',)
         reasons = None
         late_now = self._late_now
-        for source, fault_attr, time_attr, interval_attr, timeout in self._required:
+        required = self._required if self.goal is None else self._required_goal
+        for source, fault_attr, time_attr, interval_attr, timeout in required:
             fault = getattr(inputs, fault_attr)
             received = getattr(inputs, time_attr)
             why = None
@@ -399,6 +434,12 @@ class GripController:
             self._after_stall(now, inputs)
         if interlock is not None:
             faults = faults + (interlock,)
+        goal = self.goal
+        if (goal is not None and goal.done and inputs.master_fault is None
+                and now - inputs.master_time <= self.master_timeout   # NaN (none yet): False
+                and goal.master_takes_over(inputs.master_angle)):
+            self.end_goal()                  # the operator moved the master: it commands again
+            goal = None
         if faults:
             return self._safe(faults, inputs)
 
@@ -447,15 +488,22 @@ class GripController:
         if not banded:                       # no band: its edges are the estimate
             low = high = force
 
-        gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity, dt)
+        if goal is None:
+            gripping, target = self.force_map.update(inputs.master_angle, jaw, inputs.jaw_velocity,
+                                                     dt)
+            cap = self.force_max         # N
+        else:                            # a grasp goal commands (control/grasp.py)
+            gripping, target = goal.update(jaw, inputs.jaw_velocity, force, dt)
+            cap = self.max_grip_force    # N (the goal was refused above it)
         previous_mode = self.mode
         retuned, self.retuned = self.retuned, False
+        handover, self._handover = self._handover, False
         feedforward = 0.0
         branch_switch = False
         if gripping:
             mode = _GRIP
-            target_force = target if target < self.force_max else self.force_max
-            if previous_mode is _SAFE:           # resume: ramp up from the present force
+            target_force = target if target < cap else cap
+            if previous_mode is _SAFE or handover:   # resume: ramp up from the present force
                 self.resume_force = force if force > 0.0 else 0.0
             if self.resume_force < target_force:
                 self.resume_force += self.resume_ramp_rate * dt
@@ -515,7 +563,8 @@ class GripController:
             self.resume_force = math.inf
             pid, setpoint, measurement = self.jaw_pid, target, jaw
             target_jaw = target
-        if mode is not previous_mode or branch_switch or retuned:   # bumpless: continue from the last command
+        if mode is not previous_mode or branch_switch or retuned or handover:
+            # bumpless: continue from the last command
             pid.preset(self.command - feedforward, setpoint, measurement)
         unlimited = feedforward + pid.update(setpoint, measurement, dt)
         command, limits_hit = self.limiter.apply(unlimited, self.command, dt)
@@ -549,6 +598,10 @@ class GripController:
         if limits_hit:
             self.limit_steps += 1
         self.force_map.reset()
+        goal = self.goal
+        if goal is not None:             # a safe state ends the goal, with the reasons
+            goal.abort('; '.join(reasons))
+            self.goal = None
         force = self.estimated_force
         self.band_low = self.band_high = force
         self.estimate_held = False

@@ -80,7 +80,9 @@ Lifecycle (``rclpy.lifecycle``; ``ros2 lifecycle get|set /controller``):
 the launch files, the demo, the bench and the fault check run as a plain node did.
 
 Services (:mod:`~grip_force_ros.nodes.controller_services`): ``~/set_object``, ``~/tare``,
-``~/calibrate``.
+``~/calibrate``. Actions (:mod:`~grip_force_ros.nodes.controller_actions`, with control_msgs):
+``grip_command`` (GripperCommand) and ``parallel_grip_command`` (ParallelGripperCommand): a
+goal takes the jaw over from the master, closes it and holds the goal's grip force.
 """
 from __future__ import annotations
 
@@ -100,6 +102,7 @@ from sensor_msgs.msg import JointState
 from grip_force_ros import topics
 from grip_force_ros.control import SOURCES, ControlInputs, GripController, Mode
 from grip_force_ros.nodes.common import DIAGNOSTICS_QOS, STATE_PUB_QOS, STATE_SUB_QOS
+from grip_force_ros.nodes.controller_actions import ControllerActions
 from grip_force_ros.nodes.controller_io import NO_STEP, controller_io
 from grip_force_ros.nodes.controller_services import ControllerServices
 from grip_force_ros.nodes.lifetime import run_node
@@ -178,6 +181,7 @@ class ControllerNode(LifecycleNode):
         self._now_ns = self.get_clock().now
         self._param = declare_node_parameters(self, GROUPS, on_update=self._on_params)
         self.user_services = ControllerServices(self)
+        self.actions = ControllerActions(self)   # the grasp actions (control_msgs), in any state
         self.add_on_set_parameters_callback(self._refuse_unsafe_set)
         self.controller: GripController | None = None
         self.inputs: ControlInputs | None = None
@@ -313,6 +317,9 @@ class ControllerNode(LifecycleNode):
         deadlock (eProsima/Fast-DDS#6502: ``unregister_timer`` against
         ``check_remote_participant_liveliness``): the whole test process hung.
         """
+        actions = getattr(self, 'actions', None)   # None: construction failed before them
+        if actions is not None:
+            actions.destroy()
         super().destroy_node()
         self._state_machine.destroy_when_not_in_use()
 
@@ -348,6 +355,7 @@ class ControllerNode(LifecycleNode):
         if not self.active:
             return
         self.user_services.stop(f'the controller is {reason}')
+        self.actions.stop(f'the controller is {reason}')
         self._running = False
         self._timer.cancel()
         self._fallback.cancel()
@@ -589,6 +597,9 @@ class ControllerNode(LifecycleNode):
             self._estimate_pub.publish(io.estimate_msg)
             self._band_pub.publish(io.band_msg)
             self._target_pub.publish(io.target_msg)
+        actions = self.actions
+        if actions.current is not None and now_ns >= actions.due_ns:   # a goal runs
+            actions.tick(out, now_ns)
 
         if out.limits_hit:
             self._limits_seen.update(out.limits_hit)
@@ -657,6 +668,7 @@ class ControllerNode(LifecycleNode):
         values['steps_on_state'] = str(self.steps['on_state'])   # stepped on an instrument state
         values['steps_on_timer'] = str(self.steps['on_timer'])   # fallback: no fresh state
         values.update(self.io.status())
+        values.update(self.actions.status())
         values['steps_deferred_after_stall'] = str(self.steps['deferred_after_stall'])
         if out is not None:
             values['target_force_N'] = f'{out.target_force:.3f}'

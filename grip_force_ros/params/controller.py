@@ -195,6 +195,29 @@ CONTROLLER = [
        '~/tare refuses (and stops) while the measured jaw angle is below this: the jaw must be '
        'open, touching nothing (above the sim\'s tissue contact, 0.25 rad).',
        min=0.0, max=3.0, group=_G),
+    # --- the grasp actions (grip_command, parallel_grip_command; docs/ros_interface.md) ----
+    _P('action_force_tolerance', 'double', 0.02, '',
+       'A grasp goal is settled (its result goes out) when the grip force has stayed within '
+       'this fraction of the goal force (max_effort) for action_settle_time; the goal then holds '
+       'on. At least 0.01 N.', min=0.001, max=0.5, group=_G),
+    _P('action_settle_time', 'double', 0.1, 's',
+       'How long the force (in contact) or the jaw (no contact) must stay within its tolerance '
+       'before a grasp goal is settled.', min=0.0, max=10.0, group=_G),
+    _P('action_position_tolerance', 'double', 0.02, 'rad',
+       'A grasp goal with no contact is reached when the jaw is within this of the goal '
+       'position; a cancel is done when the jaw is within this of action_release_angle.',
+       min=0.001, max=1.0, group=_G),
+    _P('action_release_angle', 'double', 0.4, 'rad',
+       'A cancelled grasp goal opens the jaw to this angle (at most jaw_angle_max) with no '
+       'grip force, the safe open state.', min=0.0, max=3.0, group=_G),
+    _P('action_takeover_angle', 'double', 0.05, 'rad',
+       'After a grasp goal is done (settled or cancelled) it holds on until the master gripper '
+       'moves more than this from where it was then: the master then commands again, '
+       'bumplessly (the current continues, the force target ramps from the present force).',
+       min=0.001, max=3.0, group=_G),
+    _P('action_feedback_rate', 'double', 10.0, 'Hz',
+       'Rate of the grasp actions\' feedback (jaw position, estimated grip force, stalled, '
+       'reached_goal).', min=1.0, max=100.0, group=_G),
     _P('calibration_file', 'string', '', '',
        'Where ~/calibrate writes the calibrated parameter YAML; empty: '
        '$ROS_HOME/grip_force_ros/<instrument_name>_calibrated.yaml ($ROS_HOME: ~/.ros).',
