@@ -143,6 +143,9 @@ def test_teleop_stand_in_fights_the_effort_path(tmp_path):
     got = _grasp(tmp_path, 'effort')
     last = got['sim'][-1]
     assert int(last['arm_effort_mode_entries']) > 100, last
-    assert float(last['arm_drift_max']) > 1e-4, last
+    assert int(last['arm_mode_changes']) > 200, last
+    # the drift accrues only over the sim steps the arm spends in effort mode: on a quick
+    # machine the next servo_cp comes before the step (drift 0), on a loaded one it shows
+    print(f"arm drift {last['arm_drift_max']} (rad or m), {last['arm_mode_changes']} mode changes")
     target, held, _ = _hold(got)
     assert not held or max(abs(f - target) for f in held) > 0.02 * target

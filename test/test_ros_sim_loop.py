@@ -50,7 +50,8 @@ def _answer(node, stamp_ns, current=0.1):
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
     stamp = node.get_clock().now().to_msg()
     stamp.sec, stamp.nanosec = sec, nanosec
-    node._on_command(serialize_message(joint_state(stamp, [topics.DRUM_JOINT], effort=[current])))
+    read = node.io.command_readers()[0][3]                 # the crtk profile's one command topic
+    node._on_command(read, serialize_message(joint_state(stamp, [topics.DRUM_JOINT], effort=[current])))
 
 
 def test_sensors_first_the_step_finds_the_same_sample(sim):

@@ -165,7 +165,7 @@ class JawPositionLoop:
         return self.max_current / self.conversion.amps_per_newton_metre
 
     def effort(self, setpoint: float, angle: float, velocity: float) -> float:
-        """Return the PID's jaw effort (N*m, + opens) for a setpoint and the jaw's state.
+        """Return the PID's jaw torque command, in N*m (+ opens), for a setpoint and the jaw's state.
 
         ``K (setpoint - angle) - D velocity``; the setpoint's own velocity is 0 (a
         ``jaw/servo_jp`` carries a position only). Angles in rad, velocity in rad/s.
@@ -173,13 +173,13 @@ class JawPositionLoop:
         return self.stiffness * (setpoint - angle) - self.damping * velocity
 
     def current(self, setpoint: float, angle: float, velocity: float) -> float:
-        """Return this package's motor current (A, + closes) the loop drives, drive-limited."""
+        """Return the motor current the loop drives, in A (+ closes), drive-limited."""
         current = self.conversion.current(self.effort(setpoint, angle, velocity))
         limit = self.max_current
         return limit if current > limit else (-limit if current < -limit else current)
 
     def setpoint(self, effort: float, angle: float, lowest: float, highest: float) -> float:
-        """Return the ``jaw/servo_jp`` setpoint (rad) whose PID effort at rest is ``effort``.
+        """Return the ``jaw/servo_jp`` setpoint, in rad, whose PID effort at rest is ``effort``.
 
         ``angle + effort / K``, bounded to ``[lowest, highest]`` (the tool's ``jaw.qmin`` and
         ``jaw.qmax``; the dVRK clips there too). At ``effort`` 0 the setpoint is the

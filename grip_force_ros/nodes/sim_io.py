@@ -133,7 +133,7 @@ class SimIO:
         plant.step(current, dt)
 
     def cut(self) -> None:
-        """The drive's command timeout cut the current (the node already holds 0 A)."""
+        """Take the drive's command timeout: it cut the current (the node already holds 0 A)."""
 
     def drive_current(self, current: float) -> float:
         """Return the current command (A) the drive follows now, given the held ``current``."""
@@ -343,7 +343,7 @@ class DvrkSimIO(SimIO):
         return self.conversion.current(effort), stamp
 
     def command_readers(self):
-        """The jaw's two command topics: ``jaw/servo_jf`` (effort) and ``jaw/servo_jp`` (position)."""
+        """Return the jaw's two command topics: ``jaw/servo_jf`` (effort) and ``jaw/servo_jp`` (position)."""
         return [(JointState, self.names.command, False, self.read_command),
                 (JointState, self.names.jaw_servo_jp, False, self.read_jaw_position)]
 
@@ -400,11 +400,11 @@ class DvrkSimIO(SimIO):
         self.psm.advance(plant, current, dt, self.powered())
 
     def cut(self) -> None:
-        """The command timeout: the jaw's position loop stops too (0 A) until the next command."""
+        """Take the command timeout: the jaw's position loop stops too (0 A) until the next command."""
         self.psm.cut()
 
     def drive_current(self, current: float) -> float:
-        """The held effort's current in effort mode, the jaw PID's output in position mode (A)."""
+        """Return the current (A): the held effort's in effort mode, the jaw PID's output in position mode."""
         if not self.powered():
             return 0.0
         return current if self.psm.effort_mode else self.psm.pid_current

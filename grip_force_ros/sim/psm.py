@@ -116,19 +116,19 @@ class PsmControl:
         return True
 
     def homed(self) -> None:
-        """The arm has homed: joint position mode, holding its goal, the jaw where it is."""
+        """Take the end of homing: joint position mode, holding its goal, the jaw where it is."""
         self._set(JOINT_SPACE, POSITION_MODE)
         self.jaw_setpoint = None
         self.joints = list(self.goal)          # homing brings the arm to its pose
         self.largest_drift = 0.0
 
     def jaw_effort(self) -> None:
-        """A ``jaw/servo_jf`` was taken: the whole arm goes to Cartesian effort mode."""
+        """Take a ``jaw/servo_jf``: the whole arm goes to Cartesian effort mode."""
         self._set(CARTESIAN_SPACE, EFFORT_MODE)
         self.jaw_setpoint = math.nan
 
     def jaw_position(self, setpoint: float) -> None:
-        """A ``jaw/servo_jp`` to ``setpoint`` (rad): position mode in the arm's space, clipped."""
+        """Take a ``jaw/servo_jp`` to ``setpoint`` (rad): position mode in the arm's space, clipped."""
         space = CARTESIAN_SPACE if self.space == CARTESIAN_SPACE else JOINT_SPACE
         if self._set(space, POSITION_MODE):
             self.goal = list(self.joints)      # the other joints: held where they are
@@ -137,13 +137,13 @@ class PsmControl:
             self.jaw_max if q > self.jaw_max else q)
 
     def arm_cartesian_position(self) -> None:
-        """A ``servo_cp``: Cartesian position mode; the arm held at its reference pose."""
+        """Take a ``servo_cp``: Cartesian position mode; the arm held at its reference pose."""
         self._leave_effort()
         self._set(CARTESIAN_SPACE, POSITION_MODE)
         self.goal = list(self.reference)
 
     def arm_joint_position(self, joints) -> None:
-        """A ``servo_jp`` to ``joints`` (:data:`ARM_JOINTS` first; a 7th value is the jaw's)."""
+        """Take a ``servo_jp`` to ``joints`` (:data:`ARM_JOINTS` first; a 7th value is the jaw's)."""
         self._leave_effort()
         self._set(JOINT_SPACE, POSITION_MODE)
         values = [float(q) for q in joints]
@@ -157,7 +157,7 @@ class PsmControl:
             self.jaw_setpoint = None           # the jaw effort is 0: the jaw held where it is
 
     def cut(self) -> None:
-        """The drive's command timeout: the jaw's loop stops (0 A) until the next jaw command."""
+        """Take the drive's command timeout: the jaw's loop stops (0 A) until the next jaw command."""
         self.jaw_setpoint = math.nan
         self._pid_current = 0.0
 
@@ -209,8 +209,10 @@ class PsmControl:
             self._pid_due -= h
 
     def damping_on(self, plant) -> float:
-        """Return the jaw damping (N*m*s/rad) the sim's loop applies on ``plant``: the vendored one,
-        capped so that ``d T / J`` at the drum stays within :data:`DERIVATIVE_CAP`.
+        """Return the jaw damping (N*m*s/rad) the sim's loop applies on ``plant``.
+
+        The vendored one, capped so that ``d T / J`` at the drum stays within
+        :data:`DERIVATIVE_CAP`.
 
         The PID's jaw effort ``E`` drives the drum with ``gear_k c NmToAmps E`` N*m, and a jaw
         rate ``w`` is a drum rate ``w r_n / r0``: the derivative at the drum is

@@ -31,8 +31,6 @@ from typing import Mapping
 
 from grip_force_ros.params import rewrite_instrument_file
 
-#: Effects with instrument terms.
-ADOPTABLE = ('pivot_coulomb_friction', 'position_spring', 'viscous_friction')
 #: First line of an adopted file (an earlier adoption's header is replaced).
 HEADER = '# Adopted from a diagnosis ('
 

@@ -525,14 +525,16 @@ def split_stacks(text: str) -> tuple[str, str]:
 def main_thread_frame(stacks: str) -> str:
     """Return the innermost frame of the main thread in ``faulthandler`` output ('' if none).
 
-    The main thread is the one whose outermost frame is a module's top level.
+    The main thread is the one whose outermost frame is a module's top level (below
+    ``runpy``'s frames when the process runs ``python -m``, as the process harness starts
+    nodes through ``lab/node_process.py``).
     """
     blocks, block = [], []
     for line in stacks.splitlines():
         if STACK_THREAD_HEADER.match(line):
             block = []
             blocks.append(block)
-        elif line.startswith('  File ') and blocks:
+        elif line.startswith('  File ') and blocks and '"<frozen runpy>"' not in line:
             block.append(line.strip())
     for frames in reversed(blocks):
         if frames and frames[-1].endswith('in <module>'):
